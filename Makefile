@@ -1,0 +1,45 @@
+# Two commands on a fresh machine: `make demo` and `make test` (see README.md).
+# Both create .venv with Python 3.11 when it is missing and install the project into it.
+
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed-stamp
+SCENARIO ?= ../shared/examples/scenarios/paper-fig3.json
+
+.PHONY: demo test lint check bench simulate-fig2 simulate-fig3 clean
+
+$(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(PY) manage.py migrate --noinput
+	$(PY) manage.py demo --scenario $(SCENARIO)
+
+lint: $(STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+	$(PY) -m mypy
+
+check: $(STAMP)
+	$(PY) manage.py check
+	$(PY) manage.py makemigrations --check --dry-run
+
+test: lint check
+	$(PY) -m pytest
+
+simulate-fig2: $(STAMP)
+	$(PY) manage.py simulate ../shared/examples/scenarios/paper-fig2.json --speed 0
+
+simulate-fig3: $(STAMP)
+	$(PY) manage.py simulate ../shared/examples/scenarios/paper-fig3.json --speed 0
+
+bench: $(STAMP)
+	$(PY) -m bench
+
+clean:
+	rm -rf $(VENV) var

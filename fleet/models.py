@@ -1,0 +1,155 @@
+"""The fleet: the device catalog (SDC), ground stations and real vehicles (RVs)."""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+from django.core.exceptions import ValidationError
+from django.core.validators import MaxValueValidator, MinValueValidator
+from django.db import models
+from shapely.geometry import Point, Polygon
+
+from fleet.geo import Position
+
+LAT = [MinValueValidator(-90.0), MaxValueValidator(90.0)]
+LNG = [MinValueValidator(-180.0), MaxValueValidator(180.0)]
+
+
+class SensorKind(models.TextChoices):
+    SCALAR = "scalar", "Scalar value"
+    GPS = "gps", "GPS fix"
+    CAMERA = "camera", "Camera picture"
+
+
+class SensorType(models.Model):
+    """An entry of the system-wide device catalog (SDC): an abstract sensor VVs can ask for."""
+
+    name = models.CharField(max_length=80, unique=True)
+    kind = models.CharField(max_length=10, choices=SensorKind.choices)
+    unit = models.CharField(max_length=20, blank=True)
+    params = models.JSONField(default=dict, blank=True)
+    privileged = models.BooleanField(
+        default=False, help_text="Only privileged customers' VVs may use it."
+    )
+    description = models.CharField(max_length=200, blank=True)
+
+    class Meta:
+        ordering = ["name"]
+        verbose_name = "SDC entry"
+        verbose_name_plural = "SDC entries"
+
+    def __str__(self) -> str:
+        return self.name
+
+    def as_catalog_entry(self) -> dict[str, object]:
+        return {"name": self.name, "kind": self.kind, "unit": self.unit, "params": self.params}
+
+
+class GroundStation(models.Model):
+    """A ground station: loads new VVs and receives those that end or cannot be served."""
+
+    name = models.CharField(max_length=80, unique=True)
+    lat = models.FloatField(validators=LAT)
+    lng = models.FloatField(validators=LNG)
+    alt = models.FloatField(default=0.0)
+
+    class Meta:
+        ordering = ["name"]
+
+    def __str__(self) -> str:
+        return self.name
+
+    @property
+    def position(self) -> Position:
+        return Position(self.lat, self.lng, self.alt)
+
+
+class VehicleStatus(models.TextChoices):
+    ACTIVE = "active", "Active"
+    MAINTENANCE = "maintenance", "In maintenance"
+    REMOVED = "removed", "Removed"
+
+
+class Driver(models.TextChoices):
+    SIM = "sim", "Simulated"
+    MAVLINK = "mavlink", "MAVLink autopilot"
+
+
+class Vehicle(models.Model):
+    """A real vehicle (RV): where it may fly, how, which sensors it carries, and its state."""
+
+    name = models.CharField(max_length=80, unique=True)
+    status = models.CharField(
+        max_length=12, choices=VehicleStatus.choices, default=VehicleStatus.ACTIVE
+    )
+    driver = models.CharField(max_length=10, choices=Driver.choices, default=Driver.SIM)
+    driver_url = models.CharField(
+        max_length=200, blank=True, help_text="MAVLink connection, e.g. udpin:0.0.0.0:14550."
+    )
+    depot_lat = models.FloatField(validators=LAT)
+    depot_lng = models.FloatField(validators=LNG)
+    depot_alt = models.FloatField(default=0.0)
+    area = models.JSONField(help_text="Operation area: a closed ring of [lat, lng] points.")
+    min_altitude_m = models.FloatField(default=0.0, validators=[MinValueValidator(0.0)])
+    max_altitude_m = models.FloatField(validators=[MinValueValidator(0.0)])
+    max_speed_mps = models.FloatField(validators=[MinValueValidator(0.1)])
+    climb_rate_mps = models.FloatField(default=3.0, validators=[MinValueValidator(0.1)])
+    battery_s = models.FloatField(null=True, blank=True, help_text="Flight endurance, seconds.")
+    sensors = models.ManyToManyField(SensorType, related_name="vehicles", blank=True)
+    # Live state, written by the vehicle's control loop.
+    lat = models.FloatField(null=True, blank=True)
+    lng = models.FloatField(null=True, blank=True)
+    alt = models.FloatField(null=True, blank=True)
+    phase = models.CharField(max_length=12, default="landed")
+    distance_m = models.FloatField(default=0.0)
+    flight_s = models.FloatField(default=0.0)
+    tasks_done = models.PositiveIntegerField(default=0)
+    planner_state = models.JSONField(default=dict, blank=True)
+    updated = models.DateTimeField(auto_now=True)
+
+    class Meta:
+        ordering = ["name"]
+        constraints = [
+            models.CheckConstraint(
+                condition=models.Q(max_altitude_m__gte=models.F("min_altitude_m")),
+                name="vehicle_altitude_range",
+            ),
+            models.CheckConstraint(
+                condition=models.Q(max_speed_mps__gt=0), name="vehicle_speed_positive"
+            ),
+        ]
+
+    def __str__(self) -> str:
+        return self.name
+
+    @property
+    def depot(self) -> Position:
+        return Position(self.depot_lat, self.depot_lng, self.depot_alt)
+
+    @property
+    def position(self) -> Position:
+        if self.lat is None or self.lng is None:
+            return self.depot
+        return Position(self.lat, self.lng, self.alt or 0.0)
+
+    @cached_property
+    def area_polygon(self) -> Polygon:
+        """The operation area as a shapely polygon in (lng, lat) coordinates."""
+        return Polygon([(float(lng), float(lat)) for lat, lng in self.area])
+
+    def covers(self, position: Position) -> bool:
+        """Whether a position lies in the operation area (its border included)."""
+        return bool(self.area_polygon.covers(Point(position.lng, position.lat)))
+
+    def clean(self) -> None:
+        super().clean()
+        try:
+            ring = [(float(lat), float(lng)) for lat, lng in self.area]
+        except (TypeError, ValueError):
+            raise ValidationError({"area": "a list of [lat, lng] points"}) from None
+        if len(set(ring)) < 3:
+            raise ValidationError({"area": "needs at least 3 distinct points"})
+        if ring[0] != ring[-1]:
+            raise ValidationError({"area": "must be closed: the last point repeats the first"})
+        if not self.area_polygon.is_valid:
+            raise ValidationError({"area": "is not a valid polygon (does it cross itself?)"})

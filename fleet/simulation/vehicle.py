@@ -1,0 +1,322 @@
+"""Kinematic simulation of one unmanned vehicle: take-off, straight legs, hovering, landing.
+
+Pure Python (no Django). Time is whatever clock the caller uses, in seconds; the vehicle never
+reads a clock itself. A ``SimVehicle`` keeps its whole flown history as a list of straight legs,
+so every query (position, phase, odometry, flight time, battery) can be answered for any time,
+past or planned, and the same sequence of commands always gives the same answers.
+
+Commands (``fly_to``, ``return_to_depot``) replace the rest of the plan from the command's time
+on; a leg that is under way is cut at that time and the vehicle continues from where it is.
+Commands must come in non-decreasing time order, otherwise ``ValueError`` is raised.
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from dataclasses import dataclass
+
+from fleet.geo import Position, distance_m, ground_distance_m, interpolate
+
+PHASE_LANDED = "landed"
+PHASE_TAKEOFF = "takeoff"
+PHASE_CRUISE = "cruise"
+PHASE_LANDING = "landing"
+PHASE_HOVERING = "hovering"
+
+
+def _check_positive(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """What the simulated airframe can do.
+
+    ``max_speed_mps``: horizontal cruise speed (> 0). ``climb_rate_mps``: vertical speed for
+    take-off, climbing, descending and landing (> 0). ``takeoff_alt_m``: height above ground the
+    vehicle climbs to at least before leaving its take-off point (>= 0). ``battery_s``: flight
+    endurance in seconds (> 0), or None for unlimited. Raises ValueError on a bad value.
+    """
+
+    max_speed_mps: float
+    climb_rate_mps: float = 3.0
+    takeoff_alt_m: float = 5.0
+    battery_s: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_positive("max_speed_mps", self.max_speed_mps)
+        _check_positive("climb_rate_mps", self.climb_rate_mps)
+        if not (math.isfinite(self.takeoff_alt_m) and self.takeoff_alt_m >= 0.0):
+            raise ValueError(
+                f"takeoff_alt_m must be a non-negative finite number, got {self.takeoff_alt_m!r}"
+            )
+        if self.battery_s is not None:
+            _check_positive("battery_s", self.battery_s)
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One straight segment of a flight plan, flown at constant velocity from start to end.
+
+    ``phase`` is "takeoff", "cruise" or "landing". ``start_s``/``end_s`` are on the caller's clock.
+    """
+
+    start_s: float
+    end_s: float
+    start: Position
+    end: Position
+    phase: str
+
+    @property
+    def duration_s(self) -> float:
+        return self.end_s - self.start_s
+
+    def position_at(self, t: float) -> Position:
+        """Where the vehicle is at time t on this leg (clamped to the leg's ends)."""
+        if self.end_s <= self.start_s or t >= self.end_s:
+            return self.end
+        if t <= self.start_s:
+            return self.start
+        return interpolate(self.start, self.end, (t - self.start_s) / (self.end_s - self.start_s))
+
+
+@dataclass(frozen=True)
+class _Step:
+    """A leg of the history plus the running totals that make queries O(log n)."""
+
+    leg: Leg
+    length_m: float
+    landed_after: bool
+    distance_before_m: float
+    flight_before_s: float
+
+
+class SimVehicle:
+    """A simulated vehicle that starts landed at its depot and flies straight legs.
+
+    ``spec`` says how fast it flies, ``depot`` where it takes off and lands, ``now_s`` the time it
+    comes into existence (no command may be earlier). Queries before the first command answer
+    "landed at the depot".
+    """
+
+    def __init__(self, spec: VehicleSpec, depot: Position, *, now_s: float = 0.0) -> None:
+        if not math.isfinite(now_s):
+            raise ValueError(f"now_s must be a finite number, got {now_s!r}")
+        self.spec = spec
+        self.depot = depot
+        self._command_s = now_s
+        self._steps: list[_Step] = []
+        # Parallel list of leg start times, kept for bisect.
+        self._starts: list[float] = []
+
+    @property
+    def last_command_s(self) -> float:
+        """Time of the last command (or of creation); later commands must not be earlier."""
+        return self._command_s
+
+    @property
+    def plan_end_s(self) -> float:
+        """When the current plan is done (the last command's time if nothing is planned)."""
+        if not self._steps:
+            return self._command_s
+        return max(self._command_s, self._steps[-1].leg.end_s)
+
+    # Commands
+
+    def fly_to(self, target: Position, now_s: float) -> float:
+        """Plan a flight from wherever the vehicle is at ``now_s`` to ``target``.
+
+        Replaces the rest of the plan. From landed: a vertical take-off to
+        ``max(target.alt, takeoff_alt_m)``, then one straight cruise leg; airborne: one straight
+        cruise leg. A leg lasts ``max(horizontal / max_speed, vertical / climb_rate)``, so the
+        vehicle arrives exactly at ``target``. Returns the arrival time (``now_s`` if already
+        there). Raises ValueError if ``now_s`` is not finite or earlier than the last command.
+        """
+        here, landed = self._begin_command(now_s)
+        if here == target:
+            return now_s
+        t = now_s
+        if landed:
+            climb_to = max(target.alt, self.spec.takeoff_alt_m)
+            if climb_to > here.alt:
+                top = here.with_alt(climb_to)
+                t = self._append(t, here, top, PHASE_TAKEOFF)
+                here = top
+        return self._append(t, here, target, PHASE_CRUISE)
+
+    def return_to_depot(self, now_s: float) -> float:
+        """Plan the way home: cruise to above the depot, then land vertically on it.
+
+        Replaces the rest of the plan. The cruise keeps the current altitude (at least
+        ``takeoff_alt_m``); the landing leg ends at the depot, after which the vehicle is landed.
+        Returns the landing time (``now_s`` if already landed). Raises ValueError like ``fly_to``.
+        """
+        here, landed = self._begin_command(now_s)
+        if landed:
+            return now_s
+        cruise_alt = max(here.alt, self.spec.takeoff_alt_m, self.depot.alt)
+        above = self.depot.with_alt(cruise_alt)
+        t = now_s
+        if here != above:
+            t = self._append(t, here, above, PHASE_CRUISE)
+        # Appended even with zero length: it is what marks the vehicle as landed.
+        return self._append(t, above, self.depot, PHASE_LANDING, landed_after=True)
+
+    # Queries
+
+    def position_at(self, t: float) -> Position:
+        """Where the vehicle is (or will be, if no other command comes) at time t."""
+        i = self._index_at(t)
+        if i < 0:
+            return self.depot
+        return self._steps[i].leg.position_at(t)
+
+    def phase_at(self, t: float) -> str:
+        """One of "landed", "takeoff", "cruise", "landing", "hovering" at time t.
+
+        At the instant one leg ends and the next begins, the next leg's phase is reported.
+        """
+        i = self._index_at(t)
+        if i < 0:
+            return PHASE_LANDED
+        step = self._steps[i]
+        if t < step.leg.end_s:
+            return step.leg.phase
+        return PHASE_LANDED if step.landed_after else PHASE_HOVERING
+
+    def is_landed_at(self, t: float) -> bool:
+        """True when the vehicle sits on the ground at its depot at time t."""
+        return self.phase_at(t) == PHASE_LANDED
+
+    def planned_legs(self, from_s: float) -> list[Leg]:
+        """The legs not yet finished at ``from_s``, in order: the rest of the plan.
+
+        A leg under way at ``from_s`` is returned cut to start at ``from_s`` from the vehicle's
+        position then, so the list draws the path still ahead. Empty when hovering or landed.
+        """
+        legs: list[Leg] = []
+        for step in reversed(self._steps):
+            leg = step.leg
+            if leg.end_s <= from_s:
+                break
+            if leg.end_s <= leg.start_s:
+                continue
+            if leg.start_s < from_s:
+                leg = Leg(from_s, leg.end_s, leg.position_at(from_s), leg.end, leg.phase)
+            legs.append(leg)
+        legs.reverse()
+        return legs
+
+    def distance_m(self, t: float) -> float:
+        """Total 3-D path length flown from creation up to time t, in metres."""
+        i = self._index_at(t)
+        if i < 0:
+            return 0.0
+        step = self._steps[i]
+        return step.distance_before_m + step.length_m * self._fraction(step.leg, t)
+
+    def flight_s(self, t: float) -> float:
+        """Total time spent airborne (moving or hovering) from creation up to time t, in seconds."""
+        i = self._index_at(t)
+        if i < 0:
+            return 0.0
+        step = self._steps[i]
+        leg = step.leg
+        flown = step.flight_before_s + (min(t, leg.end_s) - leg.start_s)
+        if not step.landed_after and t > leg.end_s:
+            flown += t - leg.end_s
+        return flown
+
+    def battery_remaining_s(self, t: float) -> float | None:
+        """Endurance left at time t in seconds (never below 0), or None if unlimited.
+
+        Only reported: the simulator does not stop a vehicle whose battery is empty.
+        """
+        if self.spec.battery_s is None:
+            return None
+        return max(0.0, self.spec.battery_s - self.flight_s(t))
+
+    # Internals
+
+    def _index_at(self, t: float) -> int:
+        """Index of the last step started at or before t, or -1."""
+        return bisect_right(self._starts, t) - 1
+
+    @staticmethod
+    def _fraction(leg: Leg, t: float) -> float:
+        if t >= leg.end_s or leg.end_s <= leg.start_s:
+            return 1.0
+        return max(0.0, (t - leg.start_s) / (leg.end_s - leg.start_s))
+
+    def _begin_command(self, now_s: float) -> tuple[Position, bool]:
+        """Validate the time, drop the plan after ``now_s``; return the position and landed flag."""
+        if not math.isfinite(now_s):
+            raise ValueError(f"now_s must be a finite number, got {now_s!r}")
+        if now_s < self._command_s:
+            raise ValueError(
+                f"now_s={now_s!r} is earlier than the previous command at {self._command_s!r} s; "
+                "commands must come in time order"
+            )
+        self._truncate(now_s)
+        self._command_s = now_s
+        return self.position_at(now_s), self.is_landed_at(now_s)
+
+    def _truncate(self, now_s: float) -> None:
+        # Legs that had not begun by now_s were never flown: drop them entirely.
+        while self._steps and (
+            self._starts[-1] > now_s
+            or (self._starts[-1] == now_s and self._steps[-1].leg.end_s > now_s)
+        ):
+            self._steps.pop()
+            self._starts.pop()
+        if not self._steps:
+            return
+        step = self._steps[-1]
+        leg = step.leg
+        if leg.start_s < now_s < leg.end_s:
+            fraction = (now_s - leg.start_s) / (leg.end_s - leg.start_s)
+            cut = Leg(leg.start_s, now_s, leg.start, leg.position_at(now_s), leg.phase)
+            # Scaling the stored length (rather than re-measuring) keeps the odometer continuous.
+            self._steps[-1] = _Step(
+                leg=cut,
+                length_m=step.length_m * fraction,
+                landed_after=False,
+                distance_before_m=step.distance_before_m,
+                flight_before_s=step.flight_before_s,
+            )
+
+    def _append(
+        self,
+        start_s: float,
+        start: Position,
+        end: Position,
+        phase: str,
+        *,
+        landed_after: bool = False,
+    ) -> float:
+        """Add one leg starting at start_s; return its end time."""
+        horizontal = ground_distance_m(start, end)
+        vertical = abs(end.alt - start.alt)
+        duration = max(horizontal / self.spec.max_speed_mps, vertical / self.spec.climb_rate_mps)
+        end_s = start_s + duration
+        if self._steps:
+            prev = self._steps[-1]
+            hover_s = 0.0 if prev.landed_after else start_s - prev.leg.end_s
+            distance_before = prev.distance_before_m + prev.length_m
+            flight_before = prev.flight_before_s + prev.leg.duration_s + hover_s
+        else:
+            distance_before = 0.0
+            flight_before = 0.0
+        self._steps.append(
+            _Step(
+                leg=Leg(start_s, end_s, start, end, phase),
+                length_m=distance_m(start, end),
+                landed_after=landed_after,
+                distance_before_m=distance_before,
+                flight_before_s=flight_before,
+            )
+        )
+        self._starts.append(start_s)
+        return end_s

@@ -1,0 +1,188 @@
+"""Virtual vehicles (VVs): their programs, checkpoints, tasks, storage, logs and migrations."""
+
+from __future__ import annotations
+
+import uuid
+
+from django.db import models
+
+from accounts.models import Customer
+from fleet.geo import Position
+from fleet.models import GroundStation, Vehicle
+
+
+class VVStatus(models.TextChoices):
+    QUEUED = "queued", "Queued"
+    RUNNING = "running", "Running"
+    MIGRATING = "migrating", "Migrating"
+    FINISHED = "finished", "Finished"
+    FAILED = "failed", "Failed"
+    KILLED = "killed", "Killed"
+    CANCELLED = "cancelled", "Cancelled"
+
+
+ACTIVE_STATUSES = (VVStatus.RUNNING, VVStatus.MIGRATING)
+ENDED_STATUSES = (VVStatus.FINISHED, VVStatus.FAILED, VVStatus.KILLED, VVStatus.CANCELLED)
+
+
+class VirtualVehicle(models.Model):
+    """A customer's VV: its program and its checkpoint (journal), where it runs, how it ended.
+
+    Times ending in ``_s`` are seconds on the platform clock (the Unix epoch in a live system,
+    the scenario's simulated time in ``simulate``).
+    """
+
+    id = models.UUIDField(primary_key=True, default=uuid.uuid4, editable=False)
+    customer = models.ForeignKey(Customer, on_delete=models.CASCADE, related_name="vvs")
+    name = models.CharField(max_length=120)
+    program = models.TextField()
+    status = models.CharField(max_length=10, choices=VVStatus.choices, default=VVStatus.QUEUED)
+    host_gs = models.ForeignKey(
+        GroundStation, null=True, blank=True, on_delete=models.SET_NULL, related_name="vvs"
+    )
+    host_rv = models.ForeignKey(
+        Vehicle, null=True, blank=True, on_delete=models.SET_NULL, related_name="vvs"
+    )
+    # The checkpoint: program + journal of every answer the VVM-API gave, and how many of the
+    # program's effects are applied (DESIGN.md section 2, deterministic replay).
+    seed = models.BigIntegerField()
+    start_ms = models.BigIntegerField(help_text="Logical time before the first answer.")
+    catalog = models.JSONField(default=list, help_text="SDC entries this VV may use.")
+    journal = models.JSONField(default=list, blank=True)
+    effects_applied = models.PositiveIntegerField(default=0)
+    pending = models.JSONField(null=True, blank=True, help_text="The request it is blocked in.")
+    steps = models.PositiveIntegerField(default=0)
+    last_step_s = models.FloatField(default=0.0)
+    storage_bytes = models.PositiveBigIntegerField(default=0)
+    error = models.TextField(blank=True)
+    error_line = models.PositiveIntegerField(null=True, blank=True)
+    error_column = models.PositiveIntegerField(null=True, blank=True)
+    submitted_s = models.FloatField()
+    started_s = models.FloatField(null=True, blank=True)
+    finished_s = models.FloatField(null=True, blank=True)
+    created = models.DateTimeField(auto_now_add=True)
+    finished = models.DateTimeField(null=True, blank=True)
+    updated = models.DateTimeField(auto_now=True)
+
+    class Meta:
+        ordering = ["submitted_s", "created"]
+        verbose_name = "virtual vehicle"
+        constraints = [
+            models.CheckConstraint(
+                condition=~(models.Q(host_gs__isnull=False) & models.Q(host_rv__isnull=False)),
+                name="vv_one_host",
+            ),
+        ]
+        indexes = [models.Index(fields=["customer", "status"])]
+
+    def __str__(self) -> str:
+        return f"{self.name} ({self.customer})"
+
+    @property
+    def host_name(self) -> str | None:
+        host = self.host_rv or self.host_gs
+        return host.name if host else None
+
+    @property
+    def is_ended(self) -> bool:
+        return self.status in ENDED_STATUSES
+
+
+class TaskStatus(models.TextChoices):
+    OPEN = "open", "Open"
+    DONE = "done", "Done"
+    REJECTED = "rejected", "Rejected"
+    CANCELLED = "cancelled", "Cancelled"
+
+
+class Task(models.Model):
+    """A point task a VV asked for: go there within the tolerance and read these sensors."""
+
+    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="tasks")
+    q = models.PositiveIntegerField(help_text="Ordinal of the VVM-API request.")
+    index = models.PositiveIntegerField(default=0, help_text="Index in an executeAll batch.")
+    lat = models.FloatField()
+    lng = models.FloatField()
+    alt = models.FloatField()
+    tolerance_m = models.FloatField()
+    sensors = models.JSONField()
+    status = models.CharField(max_length=10, choices=TaskStatus.choices, default=TaskStatus.OPEN)
+    vehicle = models.ForeignKey(
+        Vehicle, null=True, blank=True, on_delete=models.SET_NULL, related_name="tasks"
+    )
+    requested_s = models.FloatField()
+    done_s = models.FloatField(null=True, blank=True)
+    readings = models.JSONField(null=True, blank=True)
+    message = models.TextField(blank=True)
+
+    class Meta:
+        ordering = ["vv", "q", "index"]
+        constraints = [
+            models.UniqueConstraint(fields=["vv", "q", "index"], name="task_unique_per_request"),
+        ]
+        indexes = [models.Index(fields=["vehicle", "status"])]
+
+    def __str__(self) -> str:
+        return f"task {self.q}.{self.index} of {self.vv.name}"
+
+    @property
+    def position(self) -> Position:
+        return Position(self.lat, self.lng, self.alt)
+
+
+class StorageDocument(models.Model):
+    """One key of a VV's private storage and its JSON value."""
+
+    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="storage")
+    key = models.CharField(max_length=128)
+    value = models.JSONField()
+    size_bytes = models.PositiveIntegerField()
+    updated_s = models.FloatField()
+
+    class Meta:
+        ordering = ["vv", "key"]
+        constraints = [models.UniqueConstraint(fields=["vv", "key"], name="storage_unique_key")]
+
+    def __str__(self) -> str:
+        return self.key
+
+
+class LogEntry(models.Model):
+    """A line of a VV's log, shown to its owner."""
+
+    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="log")
+    seq = models.PositiveIntegerField(help_text="The program's effect number.")
+    at_s = models.FloatField()
+    level = models.CharField(max_length=10, default="info")
+    message = models.TextField()
+
+    class Meta:
+        ordering = ["vv", "seq"]
+        verbose_name_plural = "log entries"
+        constraints = [models.UniqueConstraint(fields=["vv", "seq"], name="log_unique_seq")]
+
+    def __str__(self) -> str:
+        return self.message[:80]
+
+
+class HostKind(models.TextChoices):
+    GS = "gs", "Ground station"
+    RV = "rv", "Real vehicle"
+
+
+class Migration(models.Model):
+    """A VV moving with its whole state from one host to another."""
+
+    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="migrations")
+    from_kind = models.CharField(max_length=2, choices=HostKind.choices)
+    from_name = models.CharField(max_length=80)
+    to_kind = models.CharField(max_length=2, choices=HostKind.choices)
+    to_name = models.CharField(max_length=80)
+    at_s = models.FloatField()
+    reason = models.CharField(max_length=200, blank=True)
+
+    class Meta:
+        ordering = ["at_s", "id"]
+
+    def __str__(self) -> str:
+        return f"{self.vv.name}: {self.from_name} -> {self.to_name}"

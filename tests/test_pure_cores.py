@@ -1,0 +1,30 @@
+"""The pure cores import no Django (STYLE.md: tested in milliseconds without a database)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PURE = [
+    "fleet.geo",
+    "fleet.simulation",
+    "vvm_worker.runtime",
+    "vvm_worker.planning",
+    "vvm_worker.scenario",
+    "vvm_worker.mapping",
+]
+
+
+def test_pure_cores_do_not_import_django() -> None:
+    code = (
+        "import importlib, sys\n"
+        f"for name in {PURE!r}: importlib.import_module(name)\n"
+        "loaded = sorted(m for m in sys.modules if m == 'django' or m.startswith('django.'))\n"
+        "print(','.join(loaded))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == ""

@@ -1,0 +1,6 @@
+from django.apps import AppConfig
+
+
+class VvmWorkerConfig(AppConfig):
+    name = "vvm_worker"
+    verbose_name = "Virtual vehicle monitor"

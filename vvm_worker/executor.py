@@ -1,0 +1,158 @@
+"""The task executor: one RV's control loop (plan, fly, read sensors, resume VVs).
+
+The loop keeps the route over the open tasks of every VV aboard with its planner, flies to
+the next task through its driver, reads the sensors there for every task within tolerance
+and resumes those VVs (``task_complete``). With nothing left to do it flies home and lands.
+Time comes from a scheduler: the discrete-event queue of ``simulate``, or real time in a
+worker.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from fleet.geo import Position, distance_m
+from fleet.models import SensorType, Vehicle, VehicleStatus
+from missions.models import Task, TaskStatus
+from vvm_worker.planning import Planner, PlanTask
+from vvm_worker.sensing import read_sensors
+from vvm_worker.services import VVM, task_complete
+
+logger = logging.getLogger("cpcc.executor")
+
+# A vehicle at its target serves every open task within the task's tolerance plus this much
+# (floating-point slack of the kinematics).
+_REACH_SLACK_M = 1e-3
+
+
+class Scheduler(Protocol):
+    def call_at(self, t_s: float, fn: Callable[[], None]) -> None:
+        """Run fn when the platform clock reaches t_s."""
+        ...
+
+
+class Driver(Protocol):
+    """The vehicle link: a simulated vehicle or a MAVLink autopilot."""
+
+    def fly_to(self, target: Position, now_s: float) -> float: ...
+    def return_to_depot(self, now_s: float) -> float: ...
+    def position_at(self, t: float) -> Position: ...
+    def phase_at(self, t: float) -> str: ...
+    def is_landed_at(self, t: float) -> bool: ...
+    def distance_m(self, t: float) -> float: ...
+    def flight_s(self, t: float) -> float: ...
+    def battery_remaining_s(self, t: float) -> float | None: ...
+
+
+class VehicleLoop:
+    """The control loop of one RV."""
+
+    def __init__(
+        self,
+        *,
+        vehicle_id: int,
+        driver: Driver,
+        planner: Planner,
+        vvm: VVM,
+        scheduler: Scheduler,
+        battery_s: float | None = None,
+    ) -> None:
+        self.vehicle_id = vehicle_id
+        self.driver = driver
+        self.planner = planner
+        self.vvm = vvm
+        self.scheduler = scheduler
+        self.battery_s = battery_s
+        self.target: int | None = None  # the task the vehicle is flying to
+        self.returning = False
+        self._token = 0  # invalidates the arrival of a leg that was replaced
+
+    # --- events ------------------------------------------------------------------------------
+
+    def wake(self) -> None:
+        """The vehicle's tasks or status changed: re-plan unless its target still stands."""
+        if self.target is not None and self._assigned().filter(pk=self.target).exists():
+            return
+        self._plan(self.vvm.clock.now_s())
+
+    def _arrive(self, token: int) -> None:
+        if token != self._token:
+            return
+        now = self.vvm.clock.now_s()
+        self.target = None
+        here = self.driver.position_at(now)
+        served = [
+            t
+            for t in self._assigned().order_by("requested_s", "id")
+            if distance_m(here, t.position) <= t.tolerance_m + _REACH_SLACK_M
+        ]
+        catalog = self._catalog()
+        for task in served:
+            readings = read_sensors(
+                field=self.vvm.field,
+                sensors=[catalog[name] for name in task.sensors],
+                position=here,
+                time_s=now,
+                epoch_ms=self.vvm.clock.epoch_ms(now),
+                battery_fraction=self._battery_fraction(now),
+                seed=self.vvm.world_seed,
+            )
+            task_complete(task_id=task.pk, readings=readings, vvm=self.vvm)
+        self._plan(now)
+
+    def _landed(self, token: int) -> None:
+        if token != self._token:
+            return
+        self.returning = False
+        self._save_state(self.vvm.clock.now_s())
+
+    # --- planning ------------------------------------------------------------------------------
+
+    def _assigned(self) -> Any:
+        return Task.objects.filter(vehicle_id=self.vehicle_id, status=TaskStatus.OPEN)
+
+    def _plan(self, now: float) -> None:
+        status = Vehicle.objects.values_list("status", flat=True).get(pk=self.vehicle_id)
+        tasks = list(self._assigned()) if status == VehicleStatus.ACTIVE else []
+        here = self.driver.position_at(now)
+        choice = None
+        if tasks:
+            plan = [PlanTask(t.pk, t.position, t.requested_s) for t in tasks]
+            choice = self.planner.next_task(here, plan)
+        self._token += 1
+        token = self._token
+        if choice is not None:
+            self.target = choice.id
+            self.returning = False
+            arrival = self.driver.fly_to(choice.position, now)
+            self.scheduler.call_at(arrival, lambda: self._arrive(token))
+        else:
+            self.target = None
+            if not self.driver.is_landed_at(now):
+                self.returning = True
+                landing = self.driver.return_to_depot(now)
+                self.scheduler.call_at(landing, lambda: self._landed(token))
+        self._save_state(now)
+
+    def _catalog(self) -> dict[str, dict[str, Any]]:
+        return {s.name: s.as_catalog_entry() for s in SensorType.objects.all()}
+
+    def _battery_fraction(self, now: float) -> float | None:
+        remaining = self.driver.battery_remaining_s(now)
+        if remaining is None or not self.battery_s:
+            return None
+        return max(0.0, min(1.0, remaining / self.battery_s))
+
+    def _save_state(self, now: float) -> None:
+        here = self.driver.position_at(now)
+        Vehicle.objects.filter(pk=self.vehicle_id).update(
+            lat=here.lat,
+            lng=here.lng,
+            alt=here.alt,
+            phase=self.driver.phase_at(now),
+            distance_m=self.driver.distance_m(now),
+            flight_s=self.driver.flight_s(now),
+            planner_state=self.planner.state(),
+        )

@@ -1,0 +1,52 @@
+"""``manage.py loadscenario SCENARIO.json``: put a scenario into the configured database."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from django.core.management.base import BaseCommand, CommandError, CommandParser
+
+from fleet.simulation import SensorField
+from vvm_worker.clock import SystemClock
+from vvm_worker.dispatch import Dispatcher, NullDispatcher
+from vvm_worker.scenario import ScenarioError, load_scenario
+from vvm_worker.scenario_loader import PASSWORD_ENV, scenario_apply, scenario_submit_all
+from vvm_worker.services import VVM
+
+
+def platform_dispatcher() -> Dispatcher:
+    """The dispatcher of the running platform's workers (none yet: VVs wait queued)."""
+    return NullDispatcher()
+
+
+class Command(BaseCommand):
+    help = (
+        "Put a scenario's SDC additions, ground stations, vehicles and customers (with a login "
+        f"user each; password from {PASSWORD_ENV} or generated) into the configured database "
+        "(idempotent) and submit its VVs."
+    )
+
+    def add_arguments(self, parser: CommandParser) -> None:
+        parser.add_argument("scenario", help="scenario file (JSON)")
+        parser.add_argument(
+            "--no-vvs", action="store_true", help="load the fleet and customers only"
+        )
+
+    def handle(self, *args: Any, **options: Any) -> None:
+        try:
+            scenario = load_scenario(options["scenario"])
+            loaded = scenario_apply(scenario)
+        except ScenarioError as exc:
+            raise CommandError(f"scenario error: {exc}") from None
+        self.stdout.write(
+            f"Loaded {scenario.name!r}: {len(loaded.ground_stations)} ground station(s), "
+            f"{len(loaded.vehicles)} vehicle(s), {len(loaded.customers)} customer(s)."
+        )
+        for username, password in loaded.logins:
+            shown = password if password is not None else "(unchanged)"
+            self.stdout.write(f"  login {username} / {shown}")
+        if options["no_vvs"]:
+            return
+        vvm = VVM(clock=SystemClock(), dispatcher=platform_dispatcher(), field=SensorField(0))
+        vvs = scenario_submit_all(scenario, loaded, vvm=vvm)
+        self.stdout.write(f"Submitted {len(vvs)} VV(s).")

@@ -1,0 +1,158 @@
+"""``manage.py simulate SCENARIO.json``: run a scenario's whole fleet to its end in one process."""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from django.conf import settings
+from django.core.management import call_command
+from django.core.management.base import BaseCommand, CommandError, CommandParser
+from django.db import connections
+
+from vvm_worker.planning import DEFAULT_PLANNER, PLANNER_NAMES
+from vvm_worker.scenario import ScenarioError, load_scenario
+from vvm_worker.simulation import Progress, Simulation
+
+
+def use_fresh_database(directory: Path) -> None:
+    """Point the default database at a new SQLite file in ``directory`` and migrate it."""
+    connections["default"].close()
+    conf = connections.settings["default"]
+    conf.update(
+        {
+            "ENGINE": "django.db.backends.sqlite3",
+            "NAME": str(directory / "simulate.sqlite3"),
+            "HOST": "",
+            "PORT": "",
+            "USER": "",
+            "PASSWORD": "",
+            "OPTIONS": {},
+            "CONN_MAX_AGE": 0,
+        }
+    )
+    connections["default"] = connections.create_connection("default")
+    call_command("migrate", verbosity=0, interactive=False)
+
+
+class Command(BaseCommand):
+    help = (
+        "Load a scenario into a fresh database (or the configured one with --keep), run the "
+        "whole fleet to the end in one process and print progress and a summary."
+    )
+
+    def add_arguments(self, parser: CommandParser) -> None:
+        parser.add_argument("scenario", help="scenario file (JSON)")
+        parser.add_argument(
+            "--speed",
+            type=float,
+            default=None,
+            help="time acceleration: 0 = discrete-event time, no sleeping (default: "
+            "CPCC_SIM_SPEED, 1 = real time)",
+        )
+        parser.add_argument(
+            "--planner",
+            choices=PLANNER_NAMES,
+            default=DEFAULT_PLANNER,
+            help=f"route planner of every RV (default: {DEFAULT_PLANNER})",
+        )
+        parser.add_argument("--seed", type=int, default=1, help="seed of VVs and sensors")
+        parser.add_argument(
+            "--json", action="store_true", help="print the summary as JSON on the last line"
+        )
+        parser.add_argument(
+            "--keep",
+            action="store_true",
+            help="use the configured database and keep the results there",
+        )
+
+    def handle(self, *args: Any, **options: Any) -> None:
+        speed = settings.CPCC_SIM_SPEED if options["speed"] is None else options["speed"]
+        if speed < 0:
+            raise CommandError("--speed must be 0 (discrete-event) or positive")
+        try:
+            scenario = load_scenario(options["scenario"])
+        except ScenarioError as exc:
+            raise CommandError(f"scenario error: {exc}") from None
+        with tempfile.TemporaryDirectory(prefix="cpcc-simulate-") as tmp:
+            if options["keep"]:
+                call_command("migrate", verbosity=0, interactive=False)
+            else:
+                use_fresh_database(Path(tmp))
+            simulation = Simulation(
+                scenario, planner=options["planner"], seed=options["seed"], speed=speed
+            )
+            try:
+                summary = self._run(simulation)
+            except ScenarioError as exc:
+                raise CommandError(f"scenario error: {exc}") from None
+            finally:
+                connections["default"].close()
+        if options["json"]:
+            self.stdout.write(json.dumps(summary, ensure_ascii=False))
+        else:
+            self._print_summary(summary)
+
+    def _run(self, simulation: Simulation) -> dict[str, Any]:
+        if not sys.stderr.isatty():
+            return simulation.run()
+        from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
+        from rich.progress import Progress as Bar
+
+        with Bar(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total} VVs ended"),
+            TextColumn("· {task.fields[tasks]} tasks done · t = {task.fields[sim_s]:.1f} s"),
+            TimeElapsedColumn(),
+            transient=False,
+        ) as bar:
+            job = bar.add_task(simulation.scenario.name, total=None, tasks=0, sim_s=0.0)
+
+            def report(p: Progress) -> None:
+                bar.update(
+                    job,
+                    total=p.vvs_total,
+                    completed=p.vvs_ended,
+                    tasks=p.tasks_done,
+                    sim_s=p.time_s,
+                )
+
+            return simulation.run(progress=report)
+
+    def _print_summary(self, summary: dict[str, Any]) -> None:
+        from rich.console import Console
+        from rich.table import Table
+
+        console = Console(file=self.stdout._out, highlight=False)  # type: ignore[attr-defined]
+        vvs = Table(title=f"Virtual vehicles (planner {summary['planner']})")
+        for column in ("VV", "customer", "status", "tasks", "finished at (s)", "error"):
+            vvs.add_column(column)
+        for vv in summary["vvs"]:
+            finished = "" if vv["finished_s"] is None else f"{vv['finished_s']:.1f}"
+            vvs.add_row(
+                vv["name"],
+                vv["customer"],
+                vv["status"],
+                str(vv["tasks_done"]),
+                finished,
+                vv["error"] or "",
+            )
+        console.print(vvs)
+        rvs = Table(title="Vehicles")
+        for column in ("RV", "tasks", "distance (m)", "flight (s)"):
+            rvs.add_column(column)
+        for rv in summary["vehicles"]:
+            rvs.add_row(
+                rv["name"],
+                str(rv["tasks_done"]),
+                f"{rv['distance_m']:.0f}",
+                f"{rv['flight_s']:.0f}",
+            )
+        console.print(rvs)
+        console.print(
+            f"{len(summary['migrations'])} migrations; makespan {summary['makespan_s']:.1f} s"
+        )

@@ -1,0 +1,45 @@
+"""The V8 runtime of virtual vehicles: the VVM-API, deterministic replay, quotas.
+
+Pure Python over mini-racer; no Django import (tests check this).
+"""
+
+from vvm_worker.runtime.engine import (
+    SyntaxProblem,
+    answer_part,
+    answer_reject,
+    answer_task,
+    check_syntax,
+    run_step,
+)
+from vvm_worker.runtime.instrument import ReservedNameError, instrument
+from vvm_worker.runtime.types import (
+    Effect,
+    ErrorKind,
+    Limits,
+    Outcome,
+    PendingRequest,
+    StepInput,
+    StepResult,
+    TaskRequest,
+    VVError,
+)
+
+__all__ = [
+    "Effect",
+    "ErrorKind",
+    "Limits",
+    "Outcome",
+    "PendingRequest",
+    "ReservedNameError",
+    "StepInput",
+    "StepResult",
+    "SyntaxProblem",
+    "TaskRequest",
+    "VVError",
+    "answer_part",
+    "answer_reject",
+    "answer_task",
+    "check_syntax",
+    "instrument",
+    "run_step",
+]

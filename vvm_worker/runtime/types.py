@@ -1,0 +1,146 @@
+"""What goes into a VV step and what comes out of it (plain data, no Django)."""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+JSON = Any
+
+
+class Outcome(enum.StrEnum):
+    """How a step ended."""
+
+    SUSPENDED = "suspended"  # waiting for the answer to `pending`
+    FINISHED = "finished"  # the program ran to its end
+    FAILED = "failed"  # the program threw, has a syntax error, or is not deterministic
+    KILLED = "killed"  # the program went over a quota
+
+
+class ErrorKind(enum.StrEnum):
+    SYNTAX = "syntax"
+    RUNTIME = "runtime"
+    QUOTA = "quota"
+    NONDETERMINISM = "nondeterminism"
+    PLATFORM = "platform"
+
+
+@dataclass(frozen=True, slots=True)
+class Limits:
+    """The quotas a step enforces (DESIGN.md section 2)."""
+
+    cpu_s: float = 2.0  # CPU time of the new work in one step
+    heap_bytes: int = 64 * 1024 * 1024
+    storage_bytes: int = 10 * 1024 * 1024
+    max_tasks: int = 10_000
+    allowed_calls: frozenset[str] | None = None  # None: every VVM-API call
+
+    def __post_init__(self) -> None:
+        if self.cpu_s <= 0 or self.heap_bytes <= 0 or self.storage_bytes < 0 or self.max_tasks < 0:
+            raise ValueError(f"invalid limits: {self!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class StepInput:
+    """Everything a step needs: the checkpoint (program + journal) and the VV's context.
+
+    ``journal`` holds the answers the VVM-API gave so far, in order; ``effects_applied`` is how
+    many of the program's effects (storage writes, log lines) the platform has already applied.
+    ``start_ms`` is the VV's logical time before its first answer; ``previous_step_s`` the
+    duration of the last step, which bounds how long the replay part of this one may take.
+    """
+
+    vv_id: str
+    vv_name: str
+    source: str
+    seed: int
+    start_ms: int
+    catalog: Sequence[Mapping[str, JSON]]
+    journal: Sequence[Mapping[str, JSON]] = ()
+    effects_applied: int = 0
+    limits: Limits = field(default_factory=Limits)
+    previous_step_s: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class TaskRequest:
+    """One point task as the program asked for it."""
+
+    lat: float
+    lng: float
+    alt: float
+    tolerance_m: float
+    sensors: tuple[str, ...]
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, JSON]) -> TaskRequest:
+        pos = data["position"]
+        return cls(
+            lat=float(pos["lat"]),
+            lng=float(pos["lng"]),
+            alt=float(pos["alt"]),
+            tolerance_m=float(data["tolerance"]),
+            sensors=tuple(str(s) for s in data["sensors"]),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class PendingRequest:
+    """The VVM-API call the program is blocked in.
+
+    ``kind`` is "task" (``VV.task.execute``) or "batch" (``VV.task.executeAll``); ``q`` the
+    request's ordinal, which its journal answers carry; ``fingerprint`` the request as the
+    program made it, kept in the journal to detect a non-deterministic program on replay (None
+    when a batch already has answers); ``open`` the batch indexes still without an answer.
+    """
+
+    kind: str
+    q: int
+    fingerprint: str | None
+    tasks: tuple[TaskRequest, ...]
+    open: tuple[int, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Effect:
+    """Something the program did that the platform must apply once: store, remove or log."""
+
+    seq: int
+    op: str
+    time_ms: int
+    key: str | None = None
+    value_json: str | None = None
+    message: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class VVError:
+    """Why a VV failed or was killed, with the place in the user's program when known."""
+
+    kind: ErrorKind
+    message: str
+    line: int | None = None
+    column: int | None = None
+    quota: str | None = None
+
+    def __str__(self) -> str:
+        if self.line is None:
+            return self.message
+        where = f"line {self.line}" + (f", column {self.column}" if self.column else "")
+        return f"{self.message} ({where})"
+
+
+@dataclass(frozen=True, slots=True)
+class StepResult:
+    """What a step did: how it ended, what it is waiting for and the effects to apply."""
+
+    outcome: Outcome
+    pending: PendingRequest | None = None
+    effects: tuple[Effect, ...] = ()
+    effects_total: int = 0
+    error: VVError | None = None
+    duration_s: float = 0.0
+    requests: int = 0
+    storage_bytes: int = 0

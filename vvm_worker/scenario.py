@@ -1,0 +1,729 @@
+"""Scenario files: parse and validate the JSON contract of DESIGN.md section 5.
+
+Pure Python (no Django). A scenario describes ground stations, vehicles, customers, the VVs
+they submit, optional SDC additions and optional fleet events. `load_scenario` reads a file,
+`parse_scenario` checks already-decoded JSON; both return a frozen `Scenario` or raise the
+first problem found as a `ScenarioError` that names the place (`vehicles[1].area`) and, when
+known, the file. Nothing here touches the database: sensor names given to vehicles are only
+checked to be non-empty strings, because the catalog they refer to is the database's SDC plus
+the scenario's own `sensors`, which the loader knows.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Final
+
+from shapely.geometry import Polygon
+from shapely.validation import explain_validity
+
+from fleet.geo import Position
+
+__all__ = [
+    "CustomerSpec",
+    "FleetEvent",
+    "GroundStationSpec",
+    "Scenario",
+    "ScenarioError",
+    "SensorSpecEntry",
+    "VVSpec",
+    "VehicleSpec",
+    "load_scenario",
+    "parse_scenario",
+    "vv_instances",
+]
+
+DRIVERS: Final = ("sim", "mavlink")
+SENSOR_KINDS: Final = ("scalar", "gps", "camera")
+VEHICLE_ACTIONS: Final = ("remove", "maintenance", "return")
+ADD_ACTION: Final = "add"
+
+
+class ScenarioError(ValueError):
+    """What is wrong in a scenario and where.
+
+    `path` locates the value inside the document (`"vehicles[1].area"`, `"vvs[0].program"`;
+    `""` for the document itself), `message` says what is wrong, `file` is the scenario file
+    when known. `line` and `column` are set (1-based) for JSON syntax errors only.
+    `str(err)` is `"FILE: PATH: MESSAGE"`, leaving out the parts that are unknown or empty.
+    """
+
+    def __init__(
+        self,
+        path: str,
+        message: str,
+        *,
+        file: str | None = None,
+        line: int | None = None,
+        column: int | None = None,
+    ) -> None:
+        self.path = path
+        self.message = message
+        self.file = file
+        self.line = line
+        self.column = column
+        super().__init__(self._text())
+
+    def _text(self) -> str:
+        parts = [part for part in (self.file, self.path) if part]
+        return ": ".join([*parts, self.message])
+
+    def __str__(self) -> str:
+        return self._text()
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Keyword-only fields would be lost by ValueError's pickling (Celery pickles errors).
+        return (_rebuild_error, (self.path, self.message, self.file, self.line, self.column))
+
+    def in_file(self, file: str | None) -> ScenarioError:
+        """The same error attributed to `file` (unchanged when `file` is None)."""
+        if file is None:
+            return self
+        return ScenarioError(self.path, self.message, file=file, line=self.line, column=self.column)
+
+
+def _rebuild_error(
+    path: str, message: str, file: str | None, line: int | None, column: int | None
+) -> ScenarioError:
+    return ScenarioError(path, message, file=file, line=line, column=column)
+
+
+@dataclass(frozen=True)
+class GroundStationSpec:
+    """A ground station: where VVs are loaded and where they return."""
+
+    name: str
+    position: Position
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """A real vehicle, its operation area (closed ring of (lat, lng), first == last) and limits."""
+
+    name: str
+    depot: Position
+    area: tuple[tuple[float, float], ...]
+    min_altitude_m: float
+    max_altitude_m: float
+    max_speed_mps: float
+    sensors: tuple[str, ...]
+    driver: str = "sim"
+    battery_s: float | None = None
+    climb_rate_mps: float | None = None
+    driver_url: str | None = None
+
+
+@dataclass(frozen=True)
+class CustomerSpec:
+    """A customer (tenant) and its quotas; a quota left as None keeps the platform default."""
+
+    name: str
+    max_parallel_vvs: int
+    privileged: bool = False
+    max_tasks_per_vv: int | None = None
+    storage_bytes: int | None = None
+    cpu_ms_per_step: int | None = None
+    heap_bytes: int | None = None
+
+
+@dataclass(frozen=True)
+class VVSpec:
+    """A VV to submit: its program text, and the resolved file it came from (None if inline)."""
+
+    customer: str
+    name: str
+    source: str
+    program_path: Path | None
+    submit_at_s: float = 0.0
+    copies: int = 1
+
+
+@dataclass(frozen=True)
+class SensorSpecEntry:
+    """An SDC entry the scenario adds; `kind` is one of SENSOR_KINDS, `params` is read-only."""
+
+    name: str
+    kind: str
+    unit: str
+    params: Mapping[str, Any] = field(hash=False)
+    privileged: bool = False
+    description: str | None = None
+
+
+@dataclass(frozen=True)
+class FleetEvent:
+    """A change to the fleet at simulated time `at_s`.
+
+    `action` is one of VEHICLE_ACTIONS, acting on `vehicle`, or ADD_ACTION, adding
+    `add_vehicle` (then `vehicle` is the added vehicle's name).
+    """
+
+    at_s: float
+    action: str
+    vehicle: str | None
+    add_vehicle: VehicleSpec | None
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A whole validated scenario; `events` are sorted by `at_s` (stable)."""
+
+    name: str
+    ground_stations: tuple[GroundStationSpec, ...]
+    vehicles: tuple[VehicleSpec, ...]
+    customers: tuple[CustomerSpec, ...]
+    vvs: tuple[VVSpec, ...]
+    sensors: tuple[SensorSpecEntry, ...]
+    events: tuple[FleetEvent, ...]
+    path: Path | None
+    description: str | None = None
+
+
+# --- public functions --------------------------------------------------------------------------
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file.
+
+    Input: the path of a UTF-8 JSON file; `program` paths inside it are relative to its
+    directory. Output: the `Scenario`, with `path` set to the file's resolved path.
+    Errors: `ScenarioError` (with `file` set) when the file cannot be read, is not valid JSON
+    (the message and the `line`/`column` attributes say where), or breaks the contract.
+    """
+    file_path = Path(path)
+    file = str(path)
+    try:
+        text = file_path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ScenarioError("", f"no such file: {file_path.resolve()}", file=file) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError("", f"cannot read the scenario: {exc}", file=file) from exc
+    try:
+        data = json.loads(text, object_pairs_hook=_JsonObject.from_pairs)
+    except json.JSONDecodeError as exc:
+        raise ScenarioError(
+            "",
+            f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}",
+            file=file,
+            line=exc.lineno,
+            column=exc.colno,
+        ) from None
+    resolved = file_path.resolve()
+    scenario = parse_scenario(data, base_dir=resolved.parent, file=file)
+    return replace(scenario, path=resolved)
+
+
+def parse_scenario(data: Any, *, base_dir: Path, file: str | None = None) -> Scenario:
+    """Validate decoded scenario JSON and build a `Scenario`.
+
+    Inputs: `data` as `json.loads` gives it; `base_dir`, the directory that `program` paths
+    are relative to (program files are read here, as UTF-8); `file`, a name for messages.
+    Output: the `Scenario` (`path` is None; `load_scenario` sets it). A missing `name` becomes
+    the file's stem, or "scenario". Events are sorted by `at_s`, keeping file order for ties.
+    Errors: `ScenarioError` for the first problem found, with its path and message.
+    """
+    try:
+        return _Parser(base_dir, default_name=_default_scenario_name(file)).scenario(data)
+    except ScenarioError as exc:
+        raise exc.in_file(file) from None
+
+
+def _default_scenario_name(file: str | None) -> str:
+    """The name a scenario without `name` gets: the file's stem, or "scenario"."""
+    return Path(file).stem if file else "scenario"
+
+
+def vv_instances(scenario: Scenario) -> list[tuple[VVSpec, str]]:
+    """Expand `copies`: one (spec, instance name) per VV to submit, in file order.
+
+    A spec with copies=1 keeps its name; copies=3 gives "NAME #1", "NAME #2", "NAME #3".
+    Instance names are unique per customer (`parse_scenario` checks it).
+    """
+    return [(spec, name) for spec in scenario.vvs for name in _instance_names(spec)]
+
+
+# --- internals ---------------------------------------------------------------------------------
+
+
+class _JsonObject(dict[str, Any]):
+    """A decoded JSON object that remembers keys the text gave more than once."""
+
+    duplicates: tuple[str, ...] = ()
+
+    @classmethod
+    def from_pairs(cls, pairs: list[tuple[str, Any]]) -> _JsonObject:
+        obj = cls(pairs)
+        seen: set[str] = set()
+        dups: list[str] = []
+        for key, _ in pairs:
+            if key in seen and key not in dups:
+                dups.append(key)
+            seen.add(key)
+        obj.duplicates = tuple(dups)
+        return obj
+
+
+_TOP_REQUIRED = ("ground_stations", "vehicles", "customers", "vvs")
+_TOP_OPTIONAL = ("name", "description", "sensors", "events")
+_GS_REQUIRED = ("name", "position")
+_VEHICLE_REQUIRED = (
+    "name",
+    "depot",
+    "area",
+    "min_altitude_m",
+    "max_altitude_m",
+    "max_speed_mps",
+    "sensors",
+)
+_VEHICLE_OPTIONAL = ("driver", "battery_s", "climb_rate_mps", "driver_url")
+_CUSTOMER_REQUIRED = ("name", "max_parallel_vvs")
+_CUSTOMER_QUOTAS = ("max_tasks_per_vv", "storage_bytes", "cpu_ms_per_step", "heap_bytes")
+_CUSTOMER_OPTIONAL = ("privileged", *_CUSTOMER_QUOTAS)
+_VV_REQUIRED = ("customer", "name")
+_VV_OPTIONAL = ("program", "source", "submit_at_s", "copies")
+_SENSOR_REQUIRED = ("name", "kind", "unit")
+_SENSOR_OPTIONAL = ("params", "privileged", "description")
+_EVENT_REQUIRED = ("at_s",)
+_EVENT_OPTIONAL = ("vehicle", "action", "add_vehicle")
+
+
+def _json_type(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int | float):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list | tuple):
+        return "an array"
+    if isinstance(value, Mapping):
+        return "an object"
+    return type(value).__name__
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else key
+
+
+def _instance_names(spec: VVSpec) -> list[str]:
+    if spec.copies == 1:
+        return [spec.name]
+    return [f"{spec.name} #{k}" for k in range(1, spec.copies + 1)]
+
+
+def _object(
+    value: Any, path: str, required: Sequence[str], optional: Sequence[str]
+) -> Mapping[str, Any]:
+    """`value` as an object whose keys are all allowed and whose required keys are there."""
+    if not isinstance(value, Mapping):
+        raise ScenarioError(path, f"must be an object, got {_json_type(value)}")
+    duplicates: tuple[str, ...] = getattr(value, "duplicates", ())
+    if duplicates:
+        raise ScenarioError(path, f"key {duplicates[0]!r} is given more than once")
+    allowed = set(required) | set(optional)
+    for key in value:
+        if key not in allowed:
+            raise ScenarioError(
+                path, f"unknown key {key!r} (allowed: {', '.join(sorted(allowed))})"
+            )
+    for key in required:
+        if key not in value:
+            raise ScenarioError(path, f"missing required key {key!r}")
+    return value
+
+
+def _list(value: Any, path: str) -> list[Any]:
+    if not isinstance(value, list):
+        raise ScenarioError(path, f"must be an array, got {_json_type(value)}")
+    return value
+
+
+def _string(value: Any, path: str, *, allow_blank: bool = False) -> str:
+    if not isinstance(value, str):
+        raise ScenarioError(path, f"must be a string, got {_json_type(value)}")
+    if not allow_blank and not value.strip():
+        raise ScenarioError(path, "must not be empty")
+    return value
+
+
+def _bool(value: Any, path: str) -> bool:
+    if not isinstance(value, bool):
+        raise ScenarioError(path, f"must be true or false, got {_json_type(value)}")
+    return value
+
+
+def _number(value: Any, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ScenarioError(path, f"must be a number, got {_json_type(value)}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise ScenarioError(path, f"must be a finite number, got {value!r}")
+    return number
+
+
+def _positive(value: Any, path: str) -> float:
+    number = _number(value, path)
+    if number <= 0:
+        raise ScenarioError(path, f"must be greater than 0, got {value!r}")
+    return number
+
+
+def _non_negative(value: Any, path: str) -> float:
+    number = _number(value, path)
+    if number < 0:
+        raise ScenarioError(path, f"must not be negative, got {value!r}")
+    return number
+
+
+def _integer(value: Any, path: str, *, minimum: int) -> int:
+    number = _number(value, path)
+    if not number.is_integer():
+        raise ScenarioError(path, f"must be a whole number, got {value!r}")
+    if number < minimum:
+        raise ScenarioError(path, f"must be at least {minimum}, got {value!r}")
+    return int(value)
+
+
+def _position(value: Any, path: str) -> Position:
+    items = _list(value, path)
+    if len(items) != 3:
+        raise ScenarioError(path, f"must be [lat, lng, alt], got {len(items)} values")
+    lat, lng, alt = (_number(item, f"{path}[{i}]") for i, item in enumerate(items))
+    try:
+        return Position(lat, lng, alt)
+    except ValueError as exc:
+        raise ScenarioError(path, str(exc)) from None
+
+
+def _area(value: Any, path: str) -> tuple[tuple[float, float], ...]:
+    items = _list(value, path)
+    ring: list[tuple[float, float]] = []
+    for i, item in enumerate(items):
+        point_path = f"{path}[{i}]"
+        pair = _list(item, point_path)
+        if len(pair) != 2:
+            raise ScenarioError(point_path, f"must be [lat, lng], got {len(pair)} values")
+        lat, lng = (_number(x, f"{point_path}[{k}]") for k, x in enumerate(pair))
+        try:
+            Position(lat, lng)
+        except ValueError as exc:
+            raise ScenarioError(point_path, str(exc)) from None
+        ring.append((lat, lng))
+    if len(set(ring)) < 3:
+        raise ScenarioError(
+            path, f"a polygon needs at least 3 distinct points, got {len(set(ring))}"
+        )
+    if ring[0] != ring[-1]:
+        raise ScenarioError(
+            path,
+            f"the polygon is not closed: the first point {list(ring[0])} "
+            f"differs from the last {list(ring[-1])} (repeat the first point at the end)",
+        )
+    # Validity does not depend on the axis order, and keeping (lat, lng) makes the
+    # coordinates that explain_validity reports read like the file.
+    polygon = Polygon(ring)
+    if not polygon.is_valid:
+        raise ScenarioError(path, f"invalid polygon: {explain_validity(polygon)}")
+    return tuple(ring)
+
+
+def _check_unique(names: Iterable[tuple[str, str]], what: str) -> None:
+    """Raise at the second of two equal names; `names` yields (name, path of the name)."""
+    first_at: dict[str, str] = {}
+    for name, path in names:
+        if name in first_at:
+            raise ScenarioError(path, f"duplicate {what} name {name!r} (also at {first_at[name]})")
+        first_at[name] = path
+
+
+class _Parser:
+    """One validation pass over a scenario document; raises at the first problem."""
+
+    def __init__(self, base_dir: Path, *, default_name: str) -> None:
+        self.base_dir = base_dir
+        self.default_name = default_name
+
+    def scenario(self, data: Any) -> Scenario:
+        doc = _object(data, "", _TOP_REQUIRED, _TOP_OPTIONAL)
+        name = _string(doc["name"], "name") if "name" in doc else self.default_name
+        description = (
+            _string(doc["description"], "description", allow_blank=True)
+            if "description" in doc
+            else None
+        )
+        ground_stations = tuple(
+            self.ground_station(item, f"ground_stations[{i}]")
+            for i, item in enumerate(_list(doc["ground_stations"], "ground_stations"))
+        )
+        _check_unique(
+            ((gs.name, f"ground_stations[{i}].name") for i, gs in enumerate(ground_stations)),
+            "ground station",
+        )
+        vehicles = tuple(
+            self.vehicle(item, f"vehicles[{i}]")
+            for i, item in enumerate(_list(doc["vehicles"], "vehicles"))
+        )
+        _check_unique(((v.name, f"vehicles[{i}].name") for i, v in enumerate(vehicles)), "vehicle")
+        customers = tuple(
+            self.customer(item, f"customers[{i}]")
+            for i, item in enumerate(_list(doc["customers"], "customers"))
+        )
+        _check_unique(
+            ((c.name, f"customers[{i}].name") for i, c in enumerate(customers)), "customer"
+        )
+        sensors = tuple(
+            self.sensor(item, f"sensors[{i}]")
+            for i, item in enumerate(_list(doc.get("sensors", []), "sensors"))
+        )
+        _check_unique(((s.name, f"sensors[{i}].name") for i, s in enumerate(sensors)), "sensor")
+        vvs = self.vvs(_list(doc["vvs"], "vvs"), {c.name for c in customers})
+        if vvs and not ground_stations:
+            raise ScenarioError(
+                "ground_stations", "at least one ground station is required when there are VVs"
+            )
+        events = self.events(_list(doc.get("events", []), "events"), vehicles)
+        return Scenario(
+            name=name,
+            ground_stations=ground_stations,
+            vehicles=vehicles,
+            customers=customers,
+            vvs=vvs,
+            sensors=sensors,
+            events=events,
+            path=None,
+            description=description,
+        )
+
+    def ground_station(self, value: Any, path: str) -> GroundStationSpec:
+        obj = _object(value, path, _GS_REQUIRED, ())
+        return GroundStationSpec(
+            name=_string(obj["name"], _join(path, "name")),
+            position=_position(obj["position"], _join(path, "position")),
+        )
+
+    def vehicle(self, value: Any, path: str) -> VehicleSpec:
+        obj = _object(value, path, _VEHICLE_REQUIRED, _VEHICLE_OPTIONAL)
+        name = _string(obj["name"], _join(path, "name"))
+        depot = _position(obj["depot"], _join(path, "depot"))
+        area = _area(obj["area"], _join(path, "area"))
+        min_alt = _non_negative(obj["min_altitude_m"], _join(path, "min_altitude_m"))
+        max_alt = _non_negative(obj["max_altitude_m"], _join(path, "max_altitude_m"))
+        if min_alt > max_alt:
+            raise ScenarioError(
+                _join(path, "min_altitude_m"),
+                f"min_altitude_m ({obj['min_altitude_m']!r}) is above "
+                f"max_altitude_m ({obj['max_altitude_m']!r})",
+            )
+        max_speed = _positive(obj["max_speed_mps"], _join(path, "max_speed_mps"))
+        sensors_path = _join(path, "sensors")
+        sensors = tuple(
+            _string(item, f"{sensors_path}[{i}]")
+            for i, item in enumerate(_list(obj["sensors"], sensors_path))
+        )
+        if not sensors:
+            raise ScenarioError(sensors_path, "a vehicle needs at least one sensor")
+        driver = _string(obj.get("driver", "sim"), _join(path, "driver"))
+        if driver not in DRIVERS:
+            raise ScenarioError(
+                _join(path, "driver"),
+                f"unknown driver {driver!r} (one of: {', '.join(DRIVERS)})",
+            )
+        battery_s = (
+            _positive(obj["battery_s"], _join(path, "battery_s")) if "battery_s" in obj else None
+        )
+        climb_rate = (
+            _positive(obj["climb_rate_mps"], _join(path, "climb_rate_mps"))
+            if "climb_rate_mps" in obj
+            else None
+        )
+        driver_url = (
+            _string(obj["driver_url"], _join(path, "driver_url")) if "driver_url" in obj else None
+        )
+        return VehicleSpec(
+            name=name,
+            depot=depot,
+            area=area,
+            min_altitude_m=min_alt,
+            max_altitude_m=max_alt,
+            max_speed_mps=max_speed,
+            sensors=sensors,
+            driver=driver,
+            battery_s=battery_s,
+            climb_rate_mps=climb_rate,
+            driver_url=driver_url,
+        )
+
+    def customer(self, value: Any, path: str) -> CustomerSpec:
+        obj = _object(value, path, _CUSTOMER_REQUIRED, _CUSTOMER_OPTIONAL)
+        quotas = {
+            key: _integer(obj[key], _join(path, key), minimum=1)
+            for key in _CUSTOMER_QUOTAS
+            if key in obj
+        }
+        return CustomerSpec(
+            name=_string(obj["name"], _join(path, "name")),
+            max_parallel_vvs=_integer(
+                obj["max_parallel_vvs"], _join(path, "max_parallel_vvs"), minimum=1
+            ),
+            privileged=_bool(obj.get("privileged", False), _join(path, "privileged")),
+            **quotas,
+        )
+
+    def sensor(self, value: Any, path: str) -> SensorSpecEntry:
+        obj = _object(value, path, _SENSOR_REQUIRED, _SENSOR_OPTIONAL)
+        kind = _string(obj["kind"], _join(path, "kind"))
+        if kind not in SENSOR_KINDS:
+            raise ScenarioError(
+                _join(path, "kind"),
+                f"unknown sensor kind {kind!r} (one of: {', '.join(SENSOR_KINDS)})",
+            )
+        params = obj.get("params", {})
+        if not isinstance(params, Mapping):
+            raise ScenarioError(
+                _join(path, "params"), f"must be an object, got {_json_type(params)}"
+            )
+        description = (
+            _string(obj["description"], _join(path, "description"), allow_blank=True)
+            if "description" in obj
+            else None
+        )
+        return SensorSpecEntry(
+            name=_string(obj["name"], _join(path, "name")),
+            kind=kind,
+            unit=_string(obj["unit"], _join(path, "unit"), allow_blank=True),
+            # Round-tripping through JSON copies the params deeply and keeps them plain JSON.
+            params=MappingProxyType(json.loads(json.dumps(params))),
+            privileged=_bool(obj.get("privileged", False), _join(path, "privileged")),
+            description=description,
+        )
+
+    def vvs(self, items: list[Any], customers: set[str]) -> tuple[VVSpec, ...]:
+        specs: list[VVSpec] = []
+        # Instance names (after expanding copies) must be unique per customer, so that
+        # "X" with copies 2 and a separate "X #1" are refused too.
+        first_at: dict[tuple[str, str], str] = {}
+        for i, item in enumerate(items):
+            path = f"vvs[{i}]"
+            spec = self.vv(item, path)
+            if spec.customer not in customers:
+                raise ScenarioError(
+                    _join(path, "customer"),
+                    f"unknown customer {spec.customer!r} (not in customers)",
+                )
+            for instance in _instance_names(spec):
+                key = (spec.customer, instance)
+                if key in first_at:
+                    raise ScenarioError(
+                        _join(path, "name"),
+                        f"duplicate VV name {instance!r} for customer {spec.customer!r} "
+                        f"(also at {first_at[key]})",
+                    )
+                first_at[key] = _join(path, "name")
+            specs.append(spec)
+        return tuple(specs)
+
+    def vv(self, value: Any, path: str) -> VVSpec:
+        obj = _object(value, path, _VV_REQUIRED, _VV_OPTIONAL)
+        customer = _string(obj["customer"], _join(path, "customer"))
+        name = _string(obj["name"], _join(path, "name"))
+        if ("program" in obj) == ("source" in obj):
+            raise ScenarioError(
+                path, "give exactly one of 'program' (a file) and 'source' (inline JavaScript)"
+            )
+        program_path: Path | None
+        if "program" in obj:
+            program_path, source = self.program(obj["program"], _join(path, "program"))
+        else:
+            program_path = None
+            source = _string(obj["source"], _join(path, "source"), allow_blank=True)
+        return VVSpec(
+            customer=customer,
+            name=name,
+            source=source,
+            program_path=program_path,
+            submit_at_s=_non_negative(obj.get("submit_at_s", 0.0), _join(path, "submit_at_s")),
+            copies=_integer(obj.get("copies", 1), _join(path, "copies"), minimum=1),
+        )
+
+    def program(self, value: Any, path: str) -> tuple[Path, str]:
+        relative = _string(value, path)
+        resolved = (self.base_dir / relative).resolve()
+        if not resolved.is_file():
+            raise ScenarioError(path, f"program file not found: {resolved}")
+        try:
+            return resolved, resolved.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ScenarioError(path, f"cannot read program file {resolved}: {exc}") from exc
+
+    def events(self, items: list[Any], vehicles: tuple[VehicleSpec, ...]) -> tuple[FleetEvent, ...]:
+        parsed = [
+            (self.event(item, f"events[{i}]"), f"events[{i}]") for i, item in enumerate(items)
+        ]
+        # sorted() is stable: events at the same time keep their file order.
+        parsed.sort(key=lambda pair: pair[0].at_s)
+        # Top-level names are unique already (checked by the caller).
+        names: dict[str, str] = {v.name: f"vehicles[{i}].name" for i, v in enumerate(vehicles)}
+        removed: dict[str, float] = {}
+        for event, path in parsed:
+            if event.add_vehicle is not None:
+                added = event.add_vehicle.name
+                name_path = _join(path, "add_vehicle.name")
+                if added in names:
+                    raise ScenarioError(
+                        name_path, f"duplicate vehicle name {added!r} (also at {names[added]})"
+                    )
+                names[added] = name_path
+                continue
+            assert event.vehicle is not None
+            if event.vehicle not in names:
+                raise ScenarioError(
+                    _join(path, "vehicle"),
+                    f"unknown vehicle {event.vehicle!r} (not in vehicles, "
+                    "nor added by an earlier event)",
+                )
+            if event.vehicle in removed:
+                raise ScenarioError(
+                    _join(path, "vehicle"),
+                    f"vehicle {event.vehicle!r} was already removed at "
+                    f"{removed[event.vehicle]:g} s",
+                )
+            if event.action == "remove":
+                removed[event.vehicle] = event.at_s
+        return tuple(event for event, _ in parsed)
+
+    def event(self, value: Any, path: str) -> FleetEvent:
+        obj = _object(value, path, _EVENT_REQUIRED, _EVENT_OPTIONAL)
+        at_s = _non_negative(obj["at_s"], _join(path, "at_s"))
+        if "add_vehicle" in obj:
+            if "vehicle" in obj:
+                raise ScenarioError(
+                    path, "an event has either 'add_vehicle' or 'vehicle' and 'action', not both"
+                )
+            if "action" in obj and obj["action"] != ADD_ACTION:
+                raise ScenarioError(
+                    _join(path, "action"),
+                    f"an 'add_vehicle' event takes no action other than {ADD_ACTION!r}, "
+                    f"got {obj['action']!r}",
+                )
+            spec = self.vehicle(obj["add_vehicle"], _join(path, "add_vehicle"))
+            return FleetEvent(at_s=at_s, action=ADD_ACTION, vehicle=spec.name, add_vehicle=spec)
+        for key in ("vehicle", "action"):
+            if key not in obj:
+                raise ScenarioError(
+                    path, f"missing required key {key!r} (or give 'add_vehicle' instead)"
+                )
+        vehicle = _string(obj["vehicle"], _join(path, "vehicle"))
+        action = _string(obj["action"], _join(path, "action"))
+        if action not in VEHICLE_ACTIONS:
+            raise ScenarioError(
+                _join(path, "action"),
+                f"unknown action {action!r} (one of: {', '.join(VEHICLE_ACTIONS)})",
+            )
+        return FleetEvent(at_s=at_s, action=action, vehicle=vehicle, add_vehicle=None)

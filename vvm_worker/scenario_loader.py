@@ -1,0 +1,197 @@
+"""Putting a scenario's catalog additions, ground stations, vehicles and customers into the
+database (idempotent), and submitting its VVs."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import secrets
+import uuid
+from dataclasses import dataclass, field
+
+from django.db import transaction
+from django.utils.text import slugify
+
+from accounts.models import Customer, User
+from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
+from missions.models import VirtualVehicle
+from vvm_worker.scenario import (
+    CustomerSpec,
+    Scenario,
+    ScenarioError,
+    VehicleSpec,
+    VVSpec,
+    vv_instances,
+)
+from vvm_worker.services import VVM, vv_submit
+
+PASSWORD_ENV = "CPCC_SCENARIO_PASSWORD"
+
+
+@dataclass
+class LoadedScenario:
+    """What a scenario put into the database; ``logins`` holds (username, password or None
+    when an existing user kept its password)."""
+
+    customers: dict[str, Customer] = field(default_factory=dict)
+    vehicles: dict[str, Vehicle] = field(default_factory=dict)
+    ground_stations: dict[str, GroundStation] = field(default_factory=dict)
+    logins: list[tuple[str, str | None]] = field(default_factory=list)
+
+
+def _check_sensors(scenario: Scenario) -> None:
+    known = set(SensorType.objects.values_list("name", flat=True)) | {
+        s.name for s in scenario.sensors
+    }
+    specs = [(f"vehicles[{i}]", v) for i, v in enumerate(scenario.vehicles)]
+    specs += [
+        (f"events[{i}].add_vehicle", e.add_vehicle)
+        for i, e in enumerate(scenario.events)
+        if e.add_vehicle is not None
+    ]
+    for path, spec in specs:
+        for k, name in enumerate(spec.sensors):
+            if name not in known:
+                raise ScenarioError(
+                    f"{path}.sensors[{k}]",
+                    f"unknown SDC entry {name!r} (known: {', '.join(sorted(known))})",
+                    file=str(scenario.path) if scenario.path else None,
+                )
+
+
+def vehicle_upsert(spec: VehicleSpec) -> Vehicle:
+    """Create or update an RV from its scenario description (in service, at its depot)."""
+    vehicle, _ = Vehicle.objects.update_or_create(
+        name=spec.name,
+        defaults={
+            "status": VehicleStatus.ACTIVE,
+            "driver": spec.driver,
+            "driver_url": spec.driver_url or "",
+            "depot_lat": spec.depot.lat,
+            "depot_lng": spec.depot.lng,
+            "depot_alt": spec.depot.alt,
+            "area": [list(p) for p in spec.area],
+            "min_altitude_m": spec.min_altitude_m,
+            "max_altitude_m": spec.max_altitude_m,
+            "max_speed_mps": spec.max_speed_mps,
+            "climb_rate_mps": spec.climb_rate_mps or 3.0,
+            "battery_s": spec.battery_s,
+            "lat": spec.depot.lat,
+            "lng": spec.depot.lng,
+            "alt": spec.depot.alt,
+            "phase": "landed",
+        },
+    )
+    vehicle.sensors.set(SensorType.objects.filter(name__in=spec.sensors))
+    return vehicle
+
+
+def _customer_upsert(spec: CustomerSpec) -> Customer:
+    quotas = {
+        "max_parallel_vvs": spec.max_parallel_vvs,
+        "privileged": spec.privileged,
+    }
+    for name in ("max_tasks_per_vv", "storage_bytes", "cpu_ms_per_step", "heap_bytes"):
+        value = getattr(spec, name)
+        if value is not None:
+            quotas[name] = value
+    customer, _ = Customer.objects.update_or_create(
+        name=spec.name, defaults={"slug": slugify(spec.name), **quotas}
+    )
+    return customer
+
+
+def _login_for(customer: Customer) -> tuple[str, str | None]:
+    username = customer.slug
+    password = os.environ.get(PASSWORD_ENV) or None
+    user = User.objects.filter(username=username).first()
+    if user is None:
+        password = password or secrets.token_urlsafe(9)
+        user = User(username=username, customer=customer)
+        user.set_password(password)
+        user.save()
+        return username, password
+    user.customer = customer
+    if password is not None:
+        user.set_password(password)
+    user.save()
+    return username, password
+
+
+def scenario_apply(scenario: Scenario) -> LoadedScenario:
+    """Put the scenario's SDC additions, ground stations, RVs and customers (with a login user
+    each) into the database. Running it twice changes nothing the second time.
+
+    Raises ScenarioError for a vehicle sensor that is in neither the SDC nor the scenario.
+    """
+    loaded = LoadedScenario()
+    with transaction.atomic():
+        for entry in scenario.sensors:
+            SensorType.objects.update_or_create(
+                name=entry.name,
+                defaults={
+                    "kind": entry.kind,
+                    "unit": entry.unit,
+                    "params": dict(entry.params),
+                    "privileged": entry.privileged,
+                    "description": entry.description or entry.name,
+                },
+            )
+        _check_sensors(scenario)
+        for gs in scenario.ground_stations:
+            loaded.ground_stations[gs.name], _ = GroundStation.objects.update_or_create(
+                name=gs.name,
+                defaults={"lat": gs.position.lat, "lng": gs.position.lng, "alt": gs.position.alt},
+            )
+        for spec in scenario.vehicles:
+            loaded.vehicles[spec.name] = vehicle_upsert(spec)
+        for customer_spec in scenario.customers:
+            customer = _customer_upsert(customer_spec)
+            loaded.customers[customer_spec.name] = customer
+            loaded.logins.append(_login_for(customer))
+    return loaded
+
+
+def derived_seed(seed: int, *parts: str) -> int:
+    """A 31-bit seed from the run's seed and names, the same on every run."""
+    digest = hashlib.sha256(":".join([str(seed), *parts]).encode()).digest()
+    return int.from_bytes(digest[:4], "big") & 0x7FFFFFFF
+
+
+def derived_uuid(seed: int, *parts: str) -> uuid.UUID:
+    digest = hashlib.sha256(":".join(["vv", str(seed), *parts]).encode()).digest()
+    return uuid.UUID(bytes=digest[:16], version=4)
+
+
+def scenario_submit_vv(
+    *,
+    spec: VVSpec,
+    instance_name: str,
+    customer: Customer,
+    vvm: VVM,
+    seed: int | None = None,
+) -> VirtualVehicle:
+    """Submit one VV of a scenario; a syntax error lets it end ``failed`` when it is loaded."""
+    vv_seed = None if seed is None else derived_seed(seed, customer.name, instance_name)
+    vv_id = None if seed is None else derived_uuid(seed, customer.name, instance_name)
+    return vv_submit(
+        customer=customer,
+        name=instance_name,
+        program=spec.source,
+        vvm=vvm,
+        seed=vv_seed,
+        vv_id=vv_id,
+        refuse_syntax_errors=False,
+    )
+
+
+def scenario_submit_all(
+    scenario: Scenario, loaded: LoadedScenario, *, vvm: VVM
+) -> list[VirtualVehicle]:
+    """Submit every VV of the scenario now (``submit_at_s`` is for ``simulate``)."""
+    return [
+        scenario_submit_vv(
+            spec=spec, instance_name=name, customer=loaded.customers[spec.customer], vvm=vvm
+        )
+        for spec, name in vv_instances(scenario)
+    ]

@@ -1,0 +1,77 @@
+"""Turning a vehicle's sensor samples into readings a VV receives (DESIGN.md section 2).
+
+A reading is ``{sensor, kind, time, position}`` plus ``value`` and ``unit`` for a scalar
+sensor, ``lat``, ``lng``, ``alt`` (and ``satellites``, ``hdop``) for GPS, and ``image``,
+``width``, ``height``, ``format`` for a camera. ``time`` is ISO 8601 UTC; ``image`` is a
+reference to a file the platform keeps (a path under MEDIA_ROOT), never the bytes.
+Readings never name the vehicle that took them.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from django.core.files.base import ContentFile
+from django.core.files.storage import default_storage
+
+from fleet.geo import Position
+from fleet.simulation import SensorField, SensorSpec, render_camera
+
+IMAGE_DIR = "readings"
+
+
+def sensor_spec(entry: Mapping[str, Any]) -> SensorSpec:
+    return SensorSpec(
+        name=str(entry["name"]),
+        kind=str(entry["kind"]),
+        unit=str(entry.get("unit") or ""),
+        params=dict(entry.get("params") or {}),
+    )
+
+
+def iso_time(epoch_ms: int) -> str:
+    moment = dt.datetime.fromtimestamp(epoch_ms / 1000, tz=dt.UTC)
+    return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def save_image(data: bytes, extension: str) -> str:
+    """Keep an image under MEDIA_ROOT, named by its content, and return its reference."""
+    digest = hashlib.sha256(data).hexdigest()
+    name = f"{IMAGE_DIR}/{digest[:2]}/{digest[:32]}.{extension}"
+    if not default_storage.exists(name):
+        saved = default_storage.save(name, ContentFile(data))
+        if saved != name:  # another process stored the same content at the same moment
+            default_storage.delete(saved)
+    return name
+
+
+def read_sensors(
+    *,
+    field: SensorField,
+    sensors: Sequence[Mapping[str, Any]],
+    position: Position,
+    time_s: float,
+    epoch_ms: int,
+    battery_fraction: float | None = None,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """One reading per sensor, in the order asked, taken at ``position`` at ``time_s``."""
+    readings = []
+    for entry in sensors:
+        spec = sensor_spec(entry)
+        reading: dict[str, Any] = {
+            "sensor": spec.name,
+            "kind": spec.kind,
+            "time": iso_time(epoch_ms),
+            "position": {"lat": position.lat, "lng": position.lng, "alt": position.alt},
+        }
+        reading.update(field.sample(spec, position, time_s, battery_fraction=battery_fraction))
+        if spec.kind == "camera":
+            fmt = str(spec.params.get("format", "png")).lower()
+            image = render_camera(spec, position, time_s, seed=seed)
+            reading["image"] = save_image(image, "jpg" if fmt in ("jpeg", "jpg") else "png")
+        readings.append(reading)
+    return readings

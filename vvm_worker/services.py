@@ -1,0 +1,541 @@
+"""The virtual vehicle monitor (VVM): loader, vehicle mapper, migrator and VV steps.
+
+Every function here changes state in one transaction and then tells the dispatcher which host
+must act next (DESIGN.md section 3). A VV moves through its life like this:
+
+- ``vv_submit`` queues it; ``vv_admit_queued`` starts as many as the customer's quota of
+  parallel VVs allows, each on a ground station (the loader).
+- ``vv_advance`` is what the host holding a VV does with it: run the program to its next
+  blocking call (a *step*, by replay of the journal), then route the pending task: keep it on
+  this RV, migrate to an RV that can serve it, park on a ground station while only RVs in
+  maintenance could, or, on a ground station, reject it so the program gets a
+  TaskRejectedError. A VV that ends goes back to a ground station.
+- ``task_complete`` records the readings an RV took as the answer in the VV's journal and
+  resumes the VV on that RV.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import secrets
+import uuid
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from django.db import transaction
+from django.db.models import Count, F, Q
+
+from accounts.models import Customer
+from accounts.selectors import customer_catalog, customer_limits
+from fleet.geo import Position, distance_m
+from fleet.models import GroundStation, Vehicle, VehicleStatus
+from fleet.simulation import SensorField
+from missions.models import (
+    ACTIVE_STATUSES,
+    ENDED_STATUSES,
+    HostKind,
+    LogEntry,
+    Migration,
+    StorageDocument,
+    Task,
+    TaskStatus,
+    VirtualVehicle,
+    VVStatus,
+)
+from vvm_worker.clock import Clock
+from vvm_worker.dispatch import Dispatcher
+from vvm_worker.mapping import MapDecision, VehicleCaps, map_task
+from vvm_worker.runtime import (
+    Outcome,
+    PendingRequest,
+    StepInput,
+    StepResult,
+    SyntaxProblem,
+    TaskRequest,
+    answer_part,
+    answer_reject,
+    answer_task,
+    check_syntax,
+    run_step,
+)
+
+logger = logging.getLogger("cpcc.vvm")
+
+
+@dataclass
+class VVM:
+    """What the services need from the process they run in."""
+
+    clock: Clock
+    dispatcher: Dispatcher
+    field: SensorField
+    world_seed: int = 0
+
+
+class ProgramRejected(ValueError):
+    """A program that cannot be accepted (a syntax error), with where the problem is."""
+
+    def __init__(self, problem: SyntaxProblem) -> None:
+        super().__init__(str(problem))
+        self.problem = problem
+
+
+# --- submission and admission (the loader) ---------------------------------------------------
+
+
+def vv_submit(
+    *,
+    customer: Customer,
+    name: str,
+    program: str,
+    vvm: VVM,
+    seed: int | None = None,
+    vv_id: uuid.UUID | None = None,
+    refuse_syntax_errors: bool = True,
+) -> VirtualVehicle:
+    """Queue a new VV for the customer and admit it if the customer's quota allows.
+
+    Raises ProgramRejected for a syntax error unless ``refuse_syntax_errors`` is False (a
+    scenario's VV then ends ``failed`` with the line and column when it is loaded).
+    """
+    if refuse_syntax_errors:
+        problem = check_syntax(program)
+        if problem is not None:
+            raise ProgramRejected(problem)
+    now = vvm.clock.now_s()
+    vv = VirtualVehicle.objects.create(
+        id=vv_id or uuid.uuid4(),
+        customer=customer,
+        name=name,
+        program=program,
+        seed=secrets.randbits(31) if seed is None else seed,
+        start_ms=vvm.clock.epoch_ms(now),
+        catalog=customer_catalog(customer=customer),
+        submitted_s=now,
+    )
+    logger.info("vv submitted", extra={"vv": str(vv.id), "customer": customer.slug})
+    vv_admit_queued(customer_id=customer.pk, vvm=vvm)
+    vv.refresh_from_db()
+    return vv
+
+
+def _ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> GroundStation | None:
+    stations = list(
+        GroundStation.objects.annotate(load=Count("vvs", filter=Q(vvs__status__in=ACTIVE_STATUSES)))
+    )
+    if not stations:
+        return None
+    if near is not None:
+        return min(stations, key=lambda gs: (distance_m(near, gs.position), gs.name))
+    return min(stations, key=lambda gs: (gs.load, gs.name))
+
+
+def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
+    """Start the customer's oldest queued VVs while it runs fewer than its quota allows."""
+    with transaction.atomic():
+        customer = Customer.objects.select_for_update().get(pk=customer_id)
+        running = VirtualVehicle.objects.filter(customer=customer, status__in=ACTIVE_STATUSES)
+        free = customer.max_parallel_vvs - running.count()
+        if free <= 0:
+            return []
+        queued = VirtualVehicle.objects.filter(customer=customer, status=VVStatus.QUEUED)
+        admitted = []
+        for vv in queued.order_by("submitted_s", "created", "id")[:free]:
+            gs = _ground_station_for(vv)
+            if gs is None:
+                logger.warning("no ground station: VV stays queued", extra={"vv": str(vv.id)})
+                break
+            vv.status = VVStatus.RUNNING
+            vv.host_gs = gs
+            vv.started_s = vvm.clock.now_s()
+            vv.save(update_fields=["status", "host_gs", "started_s", "updated"])
+            admitted.append(vv)
+            vvm.dispatcher.vv_arrived(vv.id)
+        return admitted
+
+
+# --- steps -----------------------------------------------------------------------------------
+
+
+def _pending_json(p: PendingRequest) -> dict[str, Any]:
+    return {
+        "kind": p.kind,
+        "q": p.q,
+        "r": p.fingerprint,
+        "tasks": [
+            {
+                "position": {"lat": t.lat, "lng": t.lng, "alt": t.alt},
+                "tolerance": t.tolerance_m,
+                "sensors": list(t.sensors),
+            }
+            for t in p.tasks
+        ],
+        "open": list(p.open),
+    }
+
+
+def _pending_of(vv: VirtualVehicle) -> PendingRequest | None:
+    data = vv.pending
+    if not data:
+        return None
+    return PendingRequest(
+        kind=data["kind"],
+        q=int(data["q"]),
+        fingerprint=data.get("r"),
+        tasks=tuple(TaskRequest.from_json(t) for t in data["tasks"]),
+        open=tuple(data.get("open", ())),
+    )
+
+
+def _step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
+    step = StepInput(
+        vv_id=str(vv.id),
+        vv_name=vv.name,
+        source=vv.program,
+        seed=vv.seed,
+        start_ms=vv.start_ms,
+        catalog=vv.catalog,
+        journal=vv.journal,
+        effects_applied=vv.effects_applied,
+        limits=customer_limits(customer=vv.customer),
+        previous_step_s=vv.last_step_s,
+    )
+    result = run_step(step)
+    _apply_effects(vv, result, vvm)
+    vv.steps += 1
+    vv.last_step_s = result.duration_s
+    if result.outcome is Outcome.SUSPENDED and result.pending is not None:
+        vv.pending = _pending_json(result.pending)
+        _create_tasks(vv, result.pending, vvm)
+    return result
+
+
+def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
+    if not result.effects:
+        return
+    for effect in result.effects:
+        at_s = vvm.clock.from_epoch_ms(effect.time_ms)
+        if effect.op == "store" and effect.key is not None and effect.value_json is not None:
+            StorageDocument.objects.update_or_create(
+                vv=vv,
+                key=effect.key,
+                defaults={
+                    "value": json.loads(effect.value_json),
+                    "size_bytes": len(effect.key) + len(effect.value_json),
+                    "updated_s": at_s,
+                },
+            )
+        elif effect.op == "remove" and effect.key is not None:
+            StorageDocument.objects.filter(vv=vv, key=effect.key).delete()
+        elif effect.op == "log" and effect.message is not None:
+            LogEntry.objects.update_or_create(
+                vv=vv, seq=effect.seq, defaults={"at_s": at_s, "message": effect.message}
+            )
+    vv.effects_applied = max(vv.effects_applied, result.effects_total)
+    vv.storage_bytes = result.storage_bytes
+
+
+def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None:
+    existing = set(vv.tasks.filter(q=pending.q).values_list("index", flat=True))
+    now = vvm.clock.now_s()
+    Task.objects.bulk_create(
+        Task(
+            vv=vv,
+            q=pending.q,
+            index=i,
+            lat=t.lat,
+            lng=t.lng,
+            alt=t.alt,
+            tolerance_m=t.tolerance_m,
+            sensors=list(t.sensors),
+            requested_s=now,
+        )
+        for i, t in enumerate(pending.tasks)
+        if i in pending.open and i not in existing
+    )
+
+
+def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
+    """What the host holding a VV does with it: step it, then route its pending task.
+
+    Safe to call twice: a VV that waits for an RV, has ended or is queued is left alone.
+    """
+    with transaction.atomic():
+        vv = (
+            VirtualVehicle.objects.select_for_update()
+            .select_related("customer", "host_gs", "host_rv")
+            .get(pk=vv_id)
+        )
+        if vv.is_ended or vv.status == VVStatus.QUEUED:
+            return
+        if vv.status == VVStatus.MIGRATING:
+            vv.status = VVStatus.RUNNING
+        while True:
+            if vv.pending is None:
+                result = _step(vv, vvm)
+                if result.outcome is not Outcome.SUSPENDED:
+                    _end(vv, result, vvm)
+                    break
+            if not _route(vv, vvm):
+                break
+        vv.save()
+
+
+def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
+    now = vvm.clock.now_s()
+    if vv.host_rv is not None:
+        gs = _ground_station_for(vv, near=vv.host_rv.position)
+        reason = "finished" if result.outcome is Outcome.FINISHED else str(result.outcome)
+        if gs is not None:
+            _record_migration(vv, to=gs, reason=reason, vvm=vvm)
+    vv.status = {
+        Outcome.FINISHED: VVStatus.FINISHED,
+        Outcome.FAILED: VVStatus.FAILED,
+        Outcome.KILLED: VVStatus.KILLED,
+    }[result.outcome]
+    vv.pending = None
+    if result.error is not None:
+        vv.error = str(result.error)
+        vv.error_line = result.error.line
+        vv.error_column = result.error.column
+    vv.finished_s = now
+    vv.finished = dt.datetime.fromtimestamp(vvm.clock.epoch_ms(now) / 1000, tz=dt.UTC)
+    _release_tasks(vv, vvm)
+    vv.tasks.filter(status=TaskStatus.OPEN).update(status=TaskStatus.CANCELLED)
+    logger.info(
+        "vv ended",
+        extra={"vv": str(vv.id), "customer": vv.customer.slug, "status": vv.status},
+    )
+    vvm.dispatcher.customer_slot_freed(vv.customer_id)
+
+
+# --- routing and migration (the vehicle mapper and the migrator) -----------------------------
+
+
+def fleet_caps(*, exclude_removed: bool = True) -> list[VehicleCaps]:
+    """The mapper's view of the fleet: every RV that is in service or in maintenance."""
+    vehicles = Vehicle.objects.prefetch_related("sensors").annotate(
+        open_count=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN))
+    )
+    if exclude_removed:
+        vehicles = vehicles.exclude(status=VehicleStatus.REMOVED)
+    return [
+        VehicleCaps(
+            id=v.pk,
+            name=v.name,
+            area=v.area_polygon,
+            min_altitude_m=v.min_altitude_m,
+            max_altitude_m=v.max_altitude_m,
+            sensors=frozenset(s.name for s in v.sensors.all()),
+            active=v.status == VehicleStatus.ACTIVE,
+            position=v.position,
+            max_speed_mps=v.max_speed_mps,
+            open_tasks=v.open_count,
+        )
+        for v in vehicles
+    ]
+
+
+def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
+    """Find who serves the pending request. True when the VV must step again right here."""
+    pending = _pending_of(vv)
+    assert pending is not None
+    open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
+    fleet = fleet_caps()
+    decisions = {t.pk: map_task(_request(t), fleet) for t in open_tasks}
+    rejected = [(t, d) for t, d in ((t, decisions[t.pk]) for t in open_tasks) if d.rejected]
+    answered_before = any(e.get("q") == pending.q for e in vv.journal[-1:])
+    if rejected and not answered_before:
+        if vv.host_rv is not None:
+            _migrate_to_ground_station(vv, reason="no vehicle can serve its task", vvm=vvm)
+            return False
+        _reject(vv, pending, rejected, vvm)
+        return True
+
+    host = vv.host_rv
+    if host is not None and host.status == VehicleStatus.ACTIVE:
+        mine = [t for t in open_tasks if any(c.id == host.pk for c in decisions[t.pk].candidates)]
+        if mine:
+            _assign(mine, host, vvm)
+            return False
+        if any(t.vehicle_id == host.pk for t in open_tasks):
+            return False
+
+    best = _best_vehicle(open_tasks, decisions)
+    if best is not None:
+        vehicle = Vehicle.objects.get(pk=best.id)
+        _release_tasks(vv, vvm)
+        _record_migration(vv, to=vehicle, reason="its next task", vvm=vvm)
+        vv.status = VVStatus.MIGRATING
+        vvm.dispatcher.vv_arrived(vv.id)
+        return False
+    # Only RVs in maintenance could serve it: park on a ground station until one returns.
+    if vv.host_rv is not None:
+        _migrate_to_ground_station(vv, reason="waiting for a vehicle", vvm=vvm)
+    return False
+
+
+def _request(task: Task) -> TaskRequest:
+    return TaskRequest(task.lat, task.lng, task.alt, task.tolerance_m, tuple(task.sensors))
+
+
+def _best_vehicle(tasks: Sequence[Task], decisions: dict[int, MapDecision]) -> VehicleCaps | None:
+    """The active RV serving most of the tasks; among equals the best ranked for the first."""
+    score: dict[int, int] = {}
+    rank: dict[int, tuple[int, int]] = {}
+    by_id: dict[int, VehicleCaps] = {}
+    for order, task in enumerate(tasks):
+        for position, caps in enumerate(decisions[task.pk].candidates):
+            score[caps.id] = score.get(caps.id, 0) + 1
+            rank.setdefault(caps.id, (order, position))
+            by_id[caps.id] = caps
+    if not score:
+        return None
+    best = min(score, key=lambda vid: (-score[vid], rank[vid], by_id[vid].name))
+    return by_id[best]
+
+
+def _assign(tasks: Iterable[Task], vehicle: Vehicle, vvm: VVM) -> None:
+    ids = [t.pk for t in tasks if t.vehicle_id != vehicle.pk]
+    if ids:
+        Task.objects.filter(pk__in=ids).update(vehicle=vehicle)
+        vvm.dispatcher.vehicle_changed(vehicle.pk)
+
+
+def _release_tasks(vv: VirtualVehicle, vvm: VVM) -> None:
+    """Take the VV's open tasks off the RVs they were planned on."""
+    held = vv.tasks.filter(status=TaskStatus.OPEN, vehicle__isnull=False)
+    vehicles = set(held.values_list("vehicle_id", flat=True))
+    held.update(vehicle=None)
+    for vehicle_id in sorted(vehicles):
+        vvm.dispatcher.vehicle_changed(vehicle_id)
+
+
+def _reject(
+    vv: VirtualVehicle, pending: PendingRequest, rejected: list[tuple[Task, MapDecision]], vvm: VVM
+) -> None:
+    now = vvm.clock.now_s()
+    task, decision = rejected[0]
+    message = decision.reason or "no vehicle can serve the task"
+    if pending.kind == "batch":
+        message = f"task {task.index} of the batch: {message}"
+    vv.journal = [
+        *vv.journal,
+        answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message),
+    ]
+    vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).update(
+        status=TaskStatus.REJECTED, message=message, done_s=now
+    )
+    vv.pending = None
+    logger.info("task rejected", extra={"vv": str(vv.id), "reason": message})
+
+
+def _record_migration(
+    vv: VirtualVehicle, *, to: GroundStation | Vehicle, reason: str, vvm: VVM
+) -> None:
+    source: GroundStation | Vehicle | None = vv.host_rv or vv.host_gs
+    to_kind = HostKind.RV if isinstance(to, Vehicle) else HostKind.GS
+    if source is not None:
+        Migration.objects.create(
+            vv=vv,
+            from_kind=HostKind.RV if isinstance(source, Vehicle) else HostKind.GS,
+            from_name=source.name,
+            to_kind=to_kind,
+            to_name=to.name,
+            at_s=vvm.clock.now_s(),
+            reason=reason,
+        )
+    if isinstance(to, Vehicle):
+        vv.host_rv, vv.host_gs = to, None
+    else:
+        vv.host_rv, vv.host_gs = None, to
+    logger.info(
+        "vv migrated",
+        extra={"vv": str(vv.id), "from": getattr(source, "name", None), "to": to.name},
+    )
+
+
+def _migrate_to_ground_station(vv: VirtualVehicle, *, reason: str, vvm: VVM) -> None:
+    near = vv.host_rv.position if vv.host_rv is not None else None
+    gs = _ground_station_for(vv, near=near)
+    if gs is None:
+        return
+    _release_tasks(vv, vvm)
+    _record_migration(vv, to=gs, reason=reason, vvm=vvm)
+    vv.status = VVStatus.MIGRATING
+    vvm.dispatcher.vv_arrived(vv.id)
+
+
+# --- task completion (the task executor's answer) -------------------------------------------
+
+
+def task_complete(*, task_id: int, readings: list[dict[str, Any]], vvm: VVM) -> bool:
+    """Record an RV's readings as the answer to a task and resume the VV on that RV.
+
+    Returns False (and changes nothing) when the task is no longer open: a duplicate
+    delivery, or a VV that was cancelled or moved on meanwhile.
+    """
+    with transaction.atomic():
+        task = Task.objects.select_for_update().select_related("vv").get(pk=task_id)
+        vv = VirtualVehicle.objects.select_for_update().get(pk=task.vv_id)
+        pending = _pending_of(vv)
+        if task.status != TaskStatus.OPEN or pending is None or pending.q != task.q:
+            return False
+        now = vvm.clock.now_s()
+        time_ms = vvm.clock.epoch_ms(now)
+        if pending.kind == "batch":
+            entry = answer_part(pending, index=task.index, time_ms=time_ms, data=readings)
+        else:
+            entry = answer_task(pending, time_ms=time_ms, data=readings)
+        task.status = TaskStatus.DONE
+        task.done_s = now
+        task.readings = readings
+        task.save(update_fields=["status", "done_s", "readings"])
+        if task.vehicle_id is not None:
+            Vehicle.objects.filter(pk=task.vehicle_id).update(tasks_done=F("tasks_done") + 1)
+        vv.journal = [*vv.journal, entry]
+        vv.pending = None
+        vv.save(update_fields=["journal", "pending", "updated"])
+    vv_advance(vv_id=vv.pk, vvm=vvm)
+    return True
+
+
+# --- fleet changes -----------------------------------------------------------------------------
+
+
+def vehicle_set_status(*, vehicle: Vehicle, status: VehicleStatus, vvm: VVM) -> None:
+    """Put an RV into service, into maintenance, or remove it, without disturbing customers.
+
+    The VVs aboard an RV that leaves service move to RVs that can serve their tasks, or wait
+    on a ground station until one can; VVs waiting on a ground station are looked at again
+    whenever an RV comes into service.
+    """
+    with transaction.atomic():
+        vehicle = Vehicle.objects.select_for_update().get(pk=vehicle.pk)
+        if vehicle.status == status:
+            return
+        vehicle.status = status
+        vehicle.save(update_fields=["status", "updated"])
+        if status != VehicleStatus.ACTIVE:
+            aboard = list(
+                vehicle.vvs.exclude(status__in=ENDED_STATUSES).values_list("pk", flat=True)
+            )
+            Task.objects.filter(vehicle=vehicle, status=TaskStatus.OPEN).update(vehicle=None)
+            for vv_id in aboard:
+                vvm.dispatcher.vv_arrived(vv_id)
+        logger.info("vehicle status", extra={"vehicle": vehicle.name, "status": status})
+        vvm.dispatcher.vehicle_changed(vehicle.pk)
+    if status == VehicleStatus.ACTIVE:
+        vvs_reroute_waiting(vvm=vvm)
+
+
+def vvs_reroute_waiting(*, vvm: VVM) -> None:
+    """Look again at every VV waiting on a ground station for an RV (after a fleet change)."""
+    waiting = VirtualVehicle.objects.filter(
+        status=VVStatus.RUNNING, host_gs__isnull=False, pending__isnull=False
+    ).order_by("submitted_s", "id")
+    for vv_id in waiting.values_list("pk", flat=True):
+        vvm.dispatcher.vv_arrived(vv_id)

@@ -1,0 +1,295 @@
+"""The whole platform in one process on discrete-event time: what ``manage.py simulate`` runs.
+
+The same services run as in the distributed platform (loader, mapper, migrator, steps, the
+RVs' control loops); only the dispatcher differs: instead of sending a Celery task to a host's
+queue, it puts an event on one priority queue ordered by (simulated time, arrival order).
+With ``speed`` 0 the clock jumps from event to event; with ``speed`` N an event at simulated
+time t waits until t / N seconds of wall time have passed since the start.
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from django.conf import settings
+
+from fleet.models import Vehicle, VehicleStatus
+from fleet.simulation import SensorField, SimVehicle
+from fleet.simulation import VehicleSpec as KinematicSpec
+from missions.models import Migration, Task, TaskStatus, VirtualVehicle, VVStatus
+from vvm_worker.clock import SimulatedClock
+from vvm_worker.executor import VehicleLoop
+from vvm_worker.planning import DEFAULT_PLANNER, make_planner
+from vvm_worker.scenario import FleetEvent, Scenario, vv_instances
+from vvm_worker.scenario_loader import (
+    LoadedScenario,
+    scenario_apply,
+    scenario_submit_vv,
+    vehicle_upsert,
+)
+from vvm_worker.services import (
+    VVM,
+    vehicle_set_status,
+    vv_admit_queued,
+    vv_advance,
+    vvs_reroute_waiting,
+)
+
+logger = logging.getLogger("cpcc.simulation")
+
+ProgressFn = Callable[["Progress"], None]
+_PROGRESS_EVERY_S = 0.1
+
+
+@dataclass(frozen=True)
+class Progress:
+    """Where a running simulation is, for a progress bar."""
+
+    time_s: float
+    vvs_total: int
+    vvs_ended: int
+    tasks_done: int
+    events: int
+
+
+class EventQueue:
+    """Callbacks ordered by (time, order of scheduling): the same order on every run."""
+
+    def __init__(self, clock: SimulatedClock) -> None:
+        self.clock = clock
+        self._heap: list[tuple[float, int, Callable[[], None]]] = []
+        self._seq = 0
+
+    def call_at(self, t_s: float, fn: Callable[[], None]) -> None:
+        self._seq += 1
+        heapq.heappush(self._heap, (max(t_s, self.clock.t), self._seq, fn))
+
+    def call_now(self, fn: Callable[[], None]) -> None:
+        self.call_at(self.clock.t, fn)
+
+    def pop(self) -> tuple[float, Callable[[], None]] | None:
+        if not self._heap:
+            return None
+        t, _, fn = heapq.heappop(self._heap)
+        return t, fn
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+
+class _QueueDispatcher:
+    def __init__(self, sim: Simulation) -> None:
+        self.sim = sim
+
+    def vv_arrived(self, vv_id: uuid.UUID) -> None:
+        self.sim.queue.call_now(lambda: vv_advance(vv_id=vv_id, vvm=self.sim.vvm))
+
+    def vehicle_changed(self, vehicle_id: int) -> None:
+        loop = self.sim.loops.get(vehicle_id)
+        if loop is not None:
+            self.sim.queue.call_now(loop.wake)
+
+    def customer_slot_freed(self, customer_id: int) -> None:
+        self.sim.queue.call_now(lambda: vv_admit_queued(customer_id=customer_id, vvm=self.sim.vvm))
+
+
+class Simulation:
+    """A scenario run to its end on discrete-event time. Use ``run()`` once."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        planner: str = DEFAULT_PLANNER,
+        seed: int = 1,
+        speed: float = 0.0,
+    ) -> None:
+        make_planner(planner)  # an unknown name fails here, before anything is loaded
+        self.scenario = scenario
+        self.planner_name = planner
+        self.seed = seed
+        self.speed = speed
+        self.clock = SimulatedClock()
+        self.queue = EventQueue(self.clock)
+        self.vvm = VVM(
+            clock=self.clock,
+            dispatcher=_QueueDispatcher(self),
+            field=SensorField(seed),
+            world_seed=seed,
+        )
+        self.loops: dict[int, VehicleLoop] = {}
+        self.drivers: dict[int, SimVehicle] = {}
+        self.loaded: LoadedScenario | None = None
+        self.events_run = 0
+
+    # --- set-up --------------------------------------------------------------------------------
+
+    def _add_loop(self, vehicle: Vehicle) -> None:
+        driver = SimVehicle(
+            KinematicSpec(
+                max_speed_mps=vehicle.max_speed_mps,
+                climb_rate_mps=vehicle.climb_rate_mps,
+                battery_s=vehicle.battery_s,
+            ),
+            vehicle.depot,
+            now_s=self.clock.t,
+        )
+        self.drivers[vehicle.pk] = driver
+        self.loops[vehicle.pk] = VehicleLoop(
+            vehicle_id=vehicle.pk,
+            driver=driver,
+            planner=make_planner(self.planner_name),
+            vvm=self.vvm,
+            scheduler=self.queue,
+            battery_s=vehicle.battery_s,
+        )
+
+    def _fleet_event(self, event: FleetEvent) -> None:
+        assert self.loaded is not None
+        if event.add_vehicle is not None:
+            vehicle = vehicle_upsert(event.add_vehicle)
+            self.loaded.vehicles[vehicle.name] = vehicle
+            self._add_loop(vehicle)
+            vvs_reroute_waiting(vvm=self.vvm)
+            return
+        assert event.vehicle is not None
+        vehicle = Vehicle.objects.get(name=event.vehicle)
+        status = {
+            "remove": VehicleStatus.REMOVED,
+            "maintenance": VehicleStatus.MAINTENANCE,
+            "return": VehicleStatus.ACTIVE,
+        }[event.action]
+        vehicle_set_status(vehicle=vehicle, status=status, vvm=self.vvm)
+
+    def _setup(self) -> None:
+        self.loaded = scenario_apply(self.scenario)
+        for vehicle in self.loaded.vehicles.values():
+            self._add_loop(vehicle)
+        for spec, name in vv_instances(self.scenario):
+            customer = self.loaded.customers[spec.customer]
+
+            def submit(spec: Any = spec, name: str = name, customer: Any = customer) -> None:
+                scenario_submit_vv(
+                    spec=spec, instance_name=name, customer=customer, vvm=self.vvm, seed=self.seed
+                )
+
+            self.queue.call_at(spec.submit_at_s, submit)
+        for event in self.scenario.events:
+            self.queue.call_at(event.at_s, lambda event=event: self._fleet_event(event))
+
+    # --- running -------------------------------------------------------------------------------
+
+    def run(self, *, progress: ProgressFn | None = None) -> dict[str, Any]:
+        """Run the scenario until nothing is left to happen; returns the summary."""
+        self._setup()
+        total = len(vv_instances(self.scenario))
+        wall_start = time.monotonic()
+        next_report = 0.0
+        while (item := self.queue.pop()) is not None:
+            t, fn = item
+            if self.speed > 0:
+                delay = wall_start + t / self.speed - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            self.clock.t = t
+            fn()
+            self.events_run += 1
+            if progress is not None and time.monotonic() >= next_report:
+                progress(self._progress(total))
+                next_report = time.monotonic() + _PROGRESS_EVERY_S
+        if progress is not None:
+            progress(self._progress(total))
+        return self.summary()
+
+    def _progress(self, total: int) -> Progress:
+        ended = VirtualVehicle.objects.exclude(
+            status__in=(VVStatus.QUEUED, VVStatus.RUNNING, VVStatus.MIGRATING)
+        )
+        return Progress(
+            time_s=self.clock.t,
+            vvs_total=total,
+            vvs_ended=ended.count(),
+            tasks_done=Task.objects.filter(status=TaskStatus.DONE).count(),
+            events=self.events_run,
+        )
+
+    # --- the summary (DESIGN.md section 5) --------------------------------------------------
+
+    def summary(self) -> dict[str, Any]:
+        end = self.clock.t
+        vvs = []
+        for vv in VirtualVehicle.objects.select_related("customer").order_by(
+            "submitted_s", "customer__name", "name"
+        ):
+            tasks = [
+                {
+                    "position": [t.lat, t.lng, t.alt],
+                    "vehicle": t.vehicle.name if t.vehicle is not None else None,
+                    "requested_s": _r(t.requested_s),
+                    "done_s": _r(t.done_s),
+                    "status": t.status,
+                }
+                for t in vv.tasks.select_related("vehicle").order_by("q", "index")
+            ]
+            vvs.append(
+                {
+                    "name": vv.name,
+                    "customer": vv.customer.name,
+                    "status": vv.status,
+                    "error": vv.error or None,
+                    "submitted_s": _r(vv.submitted_s),
+                    "finished_s": _r(vv.finished_s),
+                    "tasks_done": sum(1 for t in tasks if t["status"] == TaskStatus.DONE),
+                    "storage": {
+                        d.key: _resolve_images(d.value) for d in vv.storage.order_by("key")
+                    },
+                    "tasks": tasks,
+                }
+            )
+        vehicles = []
+        for vehicle in Vehicle.objects.order_by("name"):
+            driver = self.drivers.get(vehicle.pk)
+            vehicles.append(
+                {
+                    "name": vehicle.name,
+                    "distance_m": _r(driver.distance_m(end)) if driver else 0.0,
+                    "tasks_done": vehicle.tasks_done,
+                    "flight_s": _r(driver.flight_s(end)) if driver else 0.0,
+                }
+            )
+        migrations = [
+            {"vv": m.vv.name, "from": m.from_name, "to": m.to_name, "at_s": _r(m.at_s)}
+            for m in Migration.objects.select_related("vv").order_by("at_s", "id")
+        ]
+        finished = [v["finished_s"] for v in vvs if v["finished_s"] is not None]
+        return {
+            "makespan_s": max(finished) if finished else 0.0,
+            "planner": self.planner_name,
+            "vvs": vvs,
+            "vehicles": vehicles,
+            "migrations": migrations,
+        }
+
+
+def _r(value: float | None) -> float | None:
+    """Times and distances in the summary, to the millisecond and millimetre."""
+    return None if value is None else round(value, 3)
+
+
+def _resolve_images(value: Any) -> Any:
+    """Camera readings in the summary name their image by its absolute file path."""
+    if isinstance(value, dict):
+        out = {k: _resolve_images(v) for k, v in value.items()}
+        if value.get("kind") == "camera" and isinstance(value.get("image"), str):
+            out["image"] = str(Path(settings.MEDIA_ROOT) / value["image"])
+        return out
+    if isinstance(value, list):
+        return [_resolve_images(v) for v in value]
+    return value
