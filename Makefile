@@ -5,7 +5,7 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
-SCENARIO ?= ../shared/examples/scenarios/paper-fig3.json
+SCENARIO ?= examples/scenarios/paper-fig3.json
 
 .PHONY: demo test lint check bench simulate-fig2 simulate-fig3 clean
 
@@ -33,10 +33,10 @@ test: lint check
 	$(PY) -m pytest
 
 simulate-fig2: $(STAMP)
-	$(PY) manage.py simulate ../shared/examples/scenarios/paper-fig2.json --speed 0
+	$(PY) manage.py simulate examples/scenarios/paper-fig2.json --speed 0
 
 simulate-fig3: $(STAMP)
-	$(PY) manage.py simulate ../shared/examples/scenarios/paper-fig3.json --speed 0
+	$(PY) manage.py simulate examples/scenarios/paper-fig3.json --speed 0
 
 bench: $(STAMP)
 	$(PY) -m bench

@@ -265,7 +265,7 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
     """
     with transaction.atomic():
         vv = (
-            VirtualVehicle.objects.select_for_update()
+            VirtualVehicle.objects.select_for_update(of=("self",))
             .select_related("customer", "host_gs", "host_rv")
             .get(pk=vv_id)
         )
@@ -479,8 +479,11 @@ def task_complete(*, task_id: int, readings: list[dict[str, Any]], vvm: VVM) -> 
     delivery, or a VV that was cancelled or moved on meanwhile.
     """
     with transaction.atomic():
-        task = Task.objects.select_for_update().select_related("vv").get(pk=task_id)
-        vv = VirtualVehicle.objects.select_for_update().get(pk=task.vv_id)
+        # Lock the VV before its task, in the same order as vv_advance, so two workers
+        # cannot deadlock.
+        vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
+        vv = VirtualVehicle.objects.select_for_update().get(pk=vv_id)
+        task = Task.objects.select_for_update().get(pk=task_id)
         pending = _pending_of(vv)
         if task.status != TaskStatus.OPEN or pending is None or pending.q != task.q:
             return False

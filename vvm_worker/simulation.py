@@ -23,7 +23,7 @@ from django.conf import settings
 from fleet.models import Vehicle, VehicleStatus
 from fleet.simulation import SensorField, SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
-from missions.models import Migration, Task, TaskStatus, VirtualVehicle, VVStatus
+from missions.models import ENDED_STATUSES, Migration, Task, TaskStatus, VirtualVehicle
 from vvm_worker.clock import SimulatedClock
 from vvm_worker.executor import VehicleLoop
 from vvm_worker.planning import DEFAULT_PLANNER, make_planner
@@ -105,7 +105,7 @@ class Simulation:
 
     def __init__(
         self,
-        scenario: Scenario,
+        scenario: Scenario | None = None,
         *,
         planner: str = DEFAULT_PLANNER,
         seed: int = 1,
@@ -128,10 +128,12 @@ class Simulation:
         self.drivers: dict[int, SimVehicle] = {}
         self.loaded: LoadedScenario | None = None
         self.events_run = 0
+        self.vv_ids: list[uuid.UUID] = []  # the VVs this run submitted
 
     # --- set-up --------------------------------------------------------------------------------
 
-    def _add_loop(self, vehicle: Vehicle) -> None:
+    def add_vehicle_loop(self, vehicle: Vehicle) -> VehicleLoop:
+        """Give an RV a simulated vehicle and a control loop (its worker, in one process)."""
         driver = SimVehicle(
             KinematicSpec(
                 max_speed_mps=vehicle.max_speed_mps,
@@ -142,7 +144,7 @@ class Simulation:
             now_s=self.clock.t,
         )
         self.drivers[vehicle.pk] = driver
-        self.loops[vehicle.pk] = VehicleLoop(
+        loop = VehicleLoop(
             vehicle_id=vehicle.pk,
             driver=driver,
             planner=make_planner(self.planner_name),
@@ -150,13 +152,15 @@ class Simulation:
             scheduler=self.queue,
             battery_s=vehicle.battery_s,
         )
+        self.loops[vehicle.pk] = loop
+        return loop
 
     def _fleet_event(self, event: FleetEvent) -> None:
         assert self.loaded is not None
         if event.add_vehicle is not None:
             vehicle = vehicle_upsert(event.add_vehicle)
             self.loaded.vehicles[vehicle.name] = vehicle
-            self._add_loop(vehicle)
+            self.add_vehicle_loop(vehicle)
             vvs_reroute_waiting(vvm=self.vvm)
             return
         assert event.vehicle is not None
@@ -168,17 +172,25 @@ class Simulation:
         }[event.action]
         vehicle_set_status(vehicle=vehicle, status=status, vvm=self.vvm)
 
+    def start(self) -> LoadedScenario:
+        """Load the scenario and schedule its VVs and fleet events (``run`` does this too)."""
+        self._setup()
+        assert self.loaded is not None
+        return self.loaded
+
     def _setup(self) -> None:
+        assert self.scenario is not None
         self.loaded = scenario_apply(self.scenario)
         for vehicle in self.loaded.vehicles.values():
-            self._add_loop(vehicle)
+            self.add_vehicle_loop(vehicle)
         for spec, name in vv_instances(self.scenario):
             customer = self.loaded.customers[spec.customer]
 
             def submit(spec: Any = spec, name: str = name, customer: Any = customer) -> None:
-                scenario_submit_vv(
+                vv = scenario_submit_vv(
                     spec=spec, instance_name=name, customer=customer, vvm=self.vvm, seed=self.seed
                 )
+                self.vv_ids.append(vv.pk)
 
             self.queue.call_at(spec.submit_at_s, submit)
         for event in self.scenario.events:
@@ -188,8 +200,17 @@ class Simulation:
 
     def run(self, *, progress: ProgressFn | None = None) -> dict[str, Any]:
         """Run the scenario until nothing is left to happen; returns the summary."""
-        self._setup()
-        total = len(vv_instances(self.scenario))
+        if self.loaded is None:
+            self._setup()
+        self.drain(progress=progress, total=self.vv_count)
+        return self.summary()
+
+    @property
+    def vv_count(self) -> int:
+        return len(vv_instances(self.scenario)) if self.scenario is not None else 0
+
+    def drain(self, *, progress: ProgressFn | None = None, total: int = 0) -> None:
+        """Process events until none is left (every VV ended, every RV landed)."""
         wall_start = time.monotonic()
         next_report = 0.0
         while (item := self.queue.pop()) is not None:
@@ -206,17 +227,14 @@ class Simulation:
                 next_report = time.monotonic() + _PROGRESS_EVERY_S
         if progress is not None:
             progress(self._progress(total))
-        return self.summary()
 
     def _progress(self, total: int) -> Progress:
-        ended = VirtualVehicle.objects.exclude(
-            status__in=(VVStatus.QUEUED, VVStatus.RUNNING, VVStatus.MIGRATING)
-        )
+        mine = VirtualVehicle.objects.filter(pk__in=self.vv_ids)
         return Progress(
             time_s=self.clock.t,
             vvs_total=total,
-            vvs_ended=ended.count(),
-            tasks_done=Task.objects.filter(status=TaskStatus.DONE).count(),
+            vvs_ended=mine.filter(status__in=ENDED_STATUSES).count(),
+            tasks_done=Task.objects.filter(vv__in=self.vv_ids, status=TaskStatus.DONE).count(),
             events=self.events_run,
         )
 
@@ -225,9 +243,8 @@ class Simulation:
     def summary(self) -> dict[str, Any]:
         end = self.clock.t
         vvs = []
-        for vv in VirtualVehicle.objects.select_related("customer").order_by(
-            "submitted_s", "customer__name", "name"
-        ):
+        mine = VirtualVehicle.objects.filter(pk__in=self.vv_ids).select_related("customer")
+        for vv in mine.order_by("submitted_s", "customer__name", "name"):
             tasks = [
                 {
                     "position": [t.lat, t.lng, t.alt],
@@ -254,7 +271,7 @@ class Simulation:
                 }
             )
         vehicles = []
-        for vehicle in Vehicle.objects.order_by("name"):
+        for vehicle in Vehicle.objects.filter(pk__in=list(self.drivers)).order_by("name"):
             driver = self.drivers.get(vehicle.pk)
             vehicles.append(
                 {
@@ -266,7 +283,9 @@ class Simulation:
             )
         migrations = [
             {"vv": m.vv.name, "from": m.from_name, "to": m.to_name, "at_s": _r(m.at_s)}
-            for m in Migration.objects.select_related("vv").order_by("at_s", "id")
+            for m in Migration.objects.filter(vv__in=self.vv_ids)
+            .select_related("vv")
+            .order_by("at_s", "id")
         ]
         finished = [v["finished_s"] for v in vvs if v["finished_s"] is not None]
         return {

@@ -21,8 +21,7 @@ from vvm_worker.scenario import (
     vv_instances,
 )
 
-SHARED = Path(__file__).resolve().parents[2] / ".." / "shared"
-EXAMPLES = SHARED / "examples" / "scenarios"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "scenarios"
 
 DELETE = object()
 
@@ -115,7 +114,7 @@ def test_paper_examples_load(file: str, vehicles: list[str]) -> None:
     ]
     for k, vv in enumerate(scenario.vvs, start=1):
         assert "VV.task.execute" in vv.source
-        assert vv.program_path == (SHARED / "examples" / "vv" / f"vv{k}-paper.js").resolve()
+        assert vv.program_path == (EXAMPLES.parent / "vv" / f"vv{k}-paper.js").resolve()
     assert scenario.events == ()
     assert scenario.sensors == ()
 

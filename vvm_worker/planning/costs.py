@@ -54,7 +54,9 @@ def costs_from(cost: CostFn, origin: Position, positions: Sequence[Position]) ->
 
     Raises ValueError when the cost function returns a negative or non-finite value.
     """
-    values = np.fromiter((cost(origin, p) for p in positions), dtype=np.float64, count=len(positions))
+    values = np.fromiter(
+        (cost(origin, p) for p in positions), dtype=np.float64, count=len(positions)
+    )
     _check_values(values, lambda k: (origin, positions[k]))
     return values
 
@@ -155,4 +157,3 @@ def _check_values(values: FloatArray, pair_of: Callable[[int], tuple[Position, P
             f"cost function returned {float(values[k])!r} from {a} to {b}; "
             "costs must be finite and not negative"
         )
-

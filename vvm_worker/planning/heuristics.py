@@ -57,7 +57,9 @@ def first_cheapest(costs: FloatArray) -> int:
     return int(np.flatnonzero(costs <= best + tie_tolerance(best))[0])
 
 
-def neighbour_lists(matrix: CostMatrix, k: int = NEIGHBOURS) -> tuple[list[list[int]], list[list[float]]]:
+def neighbour_lists(
+    matrix: CostMatrix, k: int = NEIGHBOURS
+) -> tuple[list[list[int]], list[list[float]]]:
     """For every node, its k cheapest partners (either direction) and those costs, ascending.
 
     Node 0 is a partner of every task with the cost of flying there from the vehicle, so that

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
+from tests.conftest import PROGRAMS
 from tests.vvm_worker.runtime.harness import (
     START_MS,
     Run,
@@ -14,8 +13,6 @@ from tests.vvm_worker.runtime.harness import (
     through_json,
 )
 from vvm_worker.runtime import ErrorKind, Limits, Outcome, answer_task, check_syntax
-
-SHARED = Path(__file__).resolve().parents[3].parent / "shared"
 
 PAPER_LOOP = """
 var co2 = VV.sensor.get('CO2');
@@ -52,7 +49,7 @@ def test_paper_loop_callback_sees_its_own_iteration() -> None:
 
 def test_paper_example_programs_ask_for_four_tasks_each_and_store_twelve_keys() -> None:
     for name in ("vv1-paper.js", "vv2-paper.js", "vv3-paper.js"):
-        run = Run((SHARED / "examples" / "vv" / name).read_text())
+        run = Run((PROGRAMS / name).read_text())
         assert run.run().outcome is Outcome.FINISHED
         assert len(run.journal) == 4
         assert sorted(run.storage) == sorted(f"p{n}.{k}" for n in range(4) for k in range(3))

@@ -1,0 +1,95 @@
+"""Shared fixtures: always two customers, so every test can show the second one is refused."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.factories import CustomerFactory, GroundStationFactory, UserFactory, VehicleFactory
+
+# The paper's examples (../shared/examples), kept in the repository so a clone is complete.
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+SCENARIOS = EXAMPLES / "scenarios"
+PROGRAMS = EXAMPLES / "vv"
+
+
+@pytest.fixture(autouse=True)
+def _media_root(settings, tmp_path: Path) -> None:
+    """Images of a test go to its own folder, not to var/media."""
+    settings.MEDIA_ROOT = tmp_path / "media"
+
+
+@pytest.fixture
+def customer_a(db):
+    return CustomerFactory(name="Customer A")
+
+
+@pytest.fixture
+def customer_b(db):
+    return CustomerFactory(name="Customer B")
+
+
+@pytest.fixture
+def user_a(customer_a):
+    return UserFactory(username="customer-a", customer=customer_a)
+
+
+@pytest.fixture
+def user_b(customer_b):
+    return UserFactory(username="customer-b", customer=customer_b)
+
+
+@pytest.fixture
+def staff(db):
+    return UserFactory(username="operator", is_staff=True, is_superuser=True)
+
+
+@pytest.fixture
+def ground_station(db):
+    return GroundStationFactory(name="GS Base")
+
+
+@pytest.fixture
+def heli_one(db):
+    return VehicleFactory(name="Heli One")
+
+
+@pytest.fixture
+def platform(db):
+    """The whole platform in one process on discrete-event time, with no scenario loaded:
+    add vehicles with ``platform.add_vehicle_loop``, submit VVs with ``platform.vvm`` and run
+    everything with ``platform.drain()``."""
+    from vvm_worker.simulation import Simulation
+
+    return Simulation(planner="nearest", seed=1)
+
+
+class RecordingDispatcher:
+    """Remembers who the services told to act, and does nothing."""
+
+    def __init__(self) -> None:
+        self.arrived: list = []
+        self.vehicles: list[int] = []
+        self.slots: list[int] = []
+
+    def vv_arrived(self, vv_id) -> None:
+        self.arrived.append(vv_id)
+
+    def vehicle_changed(self, vehicle_id: int) -> None:
+        self.vehicles.append(vehicle_id)
+
+    def customer_slot_freed(self, customer_id: int) -> None:
+        self.slots.append(customer_id)
+
+
+@pytest.fixture
+def vvm_factory(db):
+    from fleet.simulation import SensorField
+    from vvm_worker.clock import SimulatedClock
+    from vvm_worker.services import VVM
+
+    def make() -> VVM:
+        return VVM(clock=SimulatedClock(), dispatcher=RecordingDispatcher(), field=SensorField(1))
+
+    return make

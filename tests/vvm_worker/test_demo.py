@@ -1,0 +1,65 @@
+"""``manage.py demo``: the whole local system runs and stops cleanly."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+from cpcc_site.embedded_redis import answers
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_path: Path) -> None:
+    port = free_port()
+    env = {
+        **os.environ,
+        "CPCC_VAR_DIR": str(tmp_path),
+        "DATABASE_URL": f"sqlite:///{tmp_path / 'db.sqlite3'}",
+        "CPCC_SCENARIO_PASSWORD": "demo-pass-123",
+    }
+    env.pop("REDIS_URL", None)  # the demo's own embedded Redis
+    demo = subprocess.Popen(
+        [sys.executable, "manage.py", "demo", "--speed", "0", "--port", str(port)],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    lines: list[str] = []
+    try:
+        deadline = time.monotonic() + 120
+        assert demo.stdout is not None
+        while time.monotonic() < deadline:
+            line = demo.stdout.readline()
+            assert line, "the demo exited early:\n" + "".join(lines)
+            lines.append(line)
+            if "The scenario has ended" in line:
+                break
+        output = "".join(lines)
+        assert f"CPCC is running at http://127.0.0.1:{port}/" in output
+        assert "customer: customer-a / demo-pass-123" in output
+        assert "VVs ended 3/3" in output
+        assert answers(tmp_path / "redis" / "redis.sock")
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/accounts/login/", timeout=10) as page:
+            assert page.status == 200
+    finally:
+        demo.send_signal(signal.SIGINT)
+        demo.wait(timeout=30)
+    assert demo.returncode == 0
+    assert not answers(tmp_path / "redis" / "redis.sock")
+    with socket.socket() as s:
+        assert s.connect_ex(("127.0.0.1", port)) != 0  # the web server is gone too

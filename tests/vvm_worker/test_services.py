@@ -1,0 +1,225 @@
+"""The VVM services: loader, mapper, migrator and steps, on discrete-event time."""
+
+from __future__ import annotations
+
+import pytest
+
+from fleet.models import VehicleStatus
+from missions.models import Migration, Task, TaskStatus, VirtualVehicle, VVStatus
+from tests.factories import AREA_TWO, GroundStationFactory, VehicleFactory
+from vvm_worker.services import ProgramRejected, task_complete, vehicle_set_status, vv_submit
+
+ONE_TASK = """
+var co2 = VV.sensor.get('CO2');
+var d = VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(%s, %s, 50), tolerance: 2,
+                         sensors: [co2]});
+VV.storage.store('co2', d[0]);
+"""
+
+
+def program(lat: float = 48.1111, lng: float = 12.8619) -> str:
+    return ONE_TASK % (lat, lng)
+
+
+@pytest.fixture
+def fleet(platform, ground_station):
+    one = VehicleFactory(name="Heli One")
+    platform.add_vehicle_loop(one)
+    return one
+
+
+def test_a_syntax_error_is_refused_at_submission_with_line_and_column(
+    customer_a, vvm_factory
+) -> None:
+    with pytest.raises(ProgramRejected, match=r"line 2, column 9: SyntaxError: Unexpected token"):
+        vv_submit(
+            customer=customer_a, name="bad", program="var a = 1;\nvar b = ;", vvm=vvm_factory()
+        )
+    assert not VirtualVehicle.objects.exists()
+
+
+def test_a_new_vv_is_loaded_on_a_ground_station(customer_a, ground_station, vvm_factory) -> None:
+    vvm = vvm_factory()
+    vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=vvm)
+    assert vv.status == VVStatus.RUNNING
+    assert vv.host_gs == ground_station
+    assert vvm.dispatcher.arrived == [vv.pk]
+    assert vv.catalog and "Battery" not in [e["name"] for e in vv.catalog]
+
+
+def test_a_vv_flies_to_the_rv_that_serves_its_task_and_comes_back(
+    platform, fleet, customer_a
+) -> None:
+    vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED
+    assert vv.host_gs is not None and vv.host_rv is None
+    moves = [(m.from_name, m.to_name) for m in Migration.objects.filter(vv=vv)]
+    assert moves == [("GS Base", "Heli One"), ("Heli One", "GS Base")]
+    reading = vv.storage.get(key="co2").value
+    assert reading["sensor"] == "CO2" and reading["unit"] == "ppm"
+    assert 300 < reading["value"] < 2000
+    assert "Heli One" not in str(reading)  # readings never name the vehicle
+    task = vv.tasks.get()
+    assert task.status == TaskStatus.DONE and task.vehicle == fleet
+    assert task.done_s > task.requested_s
+
+
+def test_the_parallel_vv_quota_queues_extra_vvs(platform, fleet, customer_a) -> None:
+    customer_a.max_parallel_vvs = 1
+    customer_a.save()
+    first = vv_submit(customer=customer_a, name="first", program=program(), vvm=platform.vvm)
+    second = vv_submit(
+        customer=customer_a, name="second", program=program(48.112), vvm=platform.vvm
+    )
+    assert second.status == VVStatus.QUEUED
+    platform.drain()
+    first.refresh_from_db()
+    second.refresh_from_db()
+    assert first.status == second.status == VVStatus.FINISHED
+    assert second.started_s >= first.finished_s
+
+
+def test_a_task_no_rv_can_serve_is_rejected_and_the_program_goes_on(
+    platform, fleet, customer_a
+) -> None:
+    source = """
+    var gps = VV.sensor.get('GPS');
+    try {
+      VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(10, 10, 50), tolerance: 2, sensors: [gps]});
+    } catch (e) { VV.storage.store('rejected', [e.name, e.message]); }
+    VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(48.1111, 12.8619, 50), tolerance: 2, sensors: [gps]});
+    VV.storage.store('done', true);
+    """
+    vv = vv_submit(customer=customer_a, name="VV", program=source, vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED
+    name, message = vv.storage.get(key="rejected").value
+    assert name == "TaskRejectedError"
+    assert "outside every operation area" in message
+    statuses = list(vv.tasks.order_by("q").values_list("status", flat=True))
+    assert statuses == [TaskStatus.REJECTED, TaskStatus.DONE]
+
+
+def test_a_rejected_task_after_a_flight_sends_the_vv_back_to_a_ground_station(
+    platform, fleet, customer_a
+) -> None:
+    source = (
+        program()
+        + "VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(48.1111, 12.8619, 500), tolerance: 2, sensors: [co2]});"
+    )
+    vv = vv_submit(customer=customer_a, name="VV", program=source, vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FAILED
+    assert "TaskRejectedError" in vv.error and "altitude" in vv.error
+    moves = [(m.from_name, m.to_name, m.reason) for m in Migration.objects.filter(vv=vv)]
+    assert moves[-1] == ("Heli One", "GS Base", "no vehicle can serve its task")
+
+
+def test_a_failing_vv_does_not_disturb_another_customers_vv(
+    platform, fleet, customer_a, customer_b
+) -> None:
+    source = program() + "\nundefinedFunction();\n"
+    bad = vv_submit(customer=customer_a, name="bad", program=source, vvm=platform.vvm)
+    good = vv_submit(customer=customer_b, name="good", program=program(48.112), vvm=platform.vvm)
+    platform.drain()
+    bad.refresh_from_db()
+    good.refresh_from_db()
+    assert bad.status == VVStatus.FAILED
+    assert "ReferenceError: undefinedFunction is not defined" in bad.error
+    assert bad.error_line == source.splitlines().index("undefinedFunction();") + 1
+    assert bad.storage.filter(key="co2").exists()  # its work before the error is kept
+    assert good.status == VVStatus.FINISHED
+
+
+def test_a_vv_over_its_cpu_quota_is_killed_and_others_finish(
+    platform, fleet, customer_a, customer_b
+) -> None:
+    customer_a.cpu_ms_per_step = 100
+    customer_a.save()
+    hog = vv_submit(customer=customer_a, name="hog", program="while (true) {}", vvm=platform.vvm)
+    good = vv_submit(customer=customer_b, name="good", program=program(), vvm=platform.vvm)
+    platform.drain()
+    hog.refresh_from_db()
+    good.refresh_from_db()
+    assert hog.status == VVStatus.KILLED
+    assert "CPU time" in hog.error
+    assert good.status == VVStatus.FINISHED
+
+
+def test_completing_a_task_twice_changes_nothing_the_second_time(
+    fleet, customer_a, platform
+) -> None:
+    vv = vv_submit(
+        customer=customer_a, name="VV", program=program() + program(48.112), vvm=platform.vvm
+    )
+    while not Task.objects.filter(vv=vv).exists():
+        item = platform.queue.pop()
+        assert item is not None
+        item[1]()
+    task = Task.objects.get(vv=vv)
+    assert task_complete(task_id=task.pk, readings=[{"value": 1}], vvm=platform.vvm)
+    journal = VirtualVehicle.objects.get(pk=vv.pk).journal
+    assert not task_complete(task_id=task.pk, readings=[{"value": 2}], vvm=platform.vvm)
+    assert VirtualVehicle.objects.get(pk=vv.pk).journal == journal
+    assert len(journal) == 1
+
+
+def test_a_vv_migrates_to_the_rv_of_its_next_area(platform, fleet, customer_a) -> None:
+    two = VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.8675)
+    platform.add_vehicle_loop(two)
+    vv = vv_submit(
+        customer=customer_a,
+        name="VV",
+        program=program() + program(48.1116, 12.8667),
+        vvm=platform.vvm,
+    )
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED
+    moves = [(m.from_name, m.to_name) for m in Migration.objects.filter(vv=vv)]
+    assert moves == [("GS Base", "Heli One"), ("Heli One", "Heli Two"), ("Heli Two", "GS Base")]
+    assert [t.vehicle.name for t in vv.tasks.order_by("q")] == ["Heli One", "Heli Two"]
+
+
+def test_an_rv_in_maintenance_hands_its_vvs_to_another_that_can_serve_them(
+    platform, fleet, customer_a
+) -> None:
+    spare = VehicleFactory(name="Spare", depot_lat=48.1139, depot_lng=12.8591)
+    platform.add_vehicle_loop(spare)
+    vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=platform.vvm)
+    # Run until the VV is aboard Heli One, then take Heli One out of service.
+    while not VirtualVehicle.objects.filter(pk=vv.pk, host_rv=fleet).exists():
+        item = platform.queue.pop()
+        assert item is not None
+        platform.clock.t = item[0]
+        item[1]()
+    vehicle_set_status(vehicle=fleet, status=VehicleStatus.MAINTENANCE, vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED
+    assert vv.tasks.get().vehicle == spare
+    assert [m.to_name for m in Migration.objects.filter(vv=vv)] == ["Heli One", "Spare", "GS Base"]
+
+
+def test_a_vv_waits_on_a_ground_station_while_its_only_rv_is_in_maintenance(
+    platform, fleet, customer_a
+) -> None:
+    vehicle_set_status(vehicle=fleet, status=VehicleStatus.MAINTENANCE, vvm=platform.vvm)
+    vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.RUNNING and vv.host_gs is not None and vv.pending is not None
+    vehicle_set_status(vehicle=fleet, status=VehicleStatus.ACTIVE, vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED
+
+
+def test_without_ground_station_a_vv_stays_queued(customer_a, vvm_factory) -> None:
+    vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=vvm_factory())
+    assert vv.status == VVStatus.QUEUED
+    GroundStationFactory(name="Late GS")

@@ -1,0 +1,200 @@
+"""The paper's experiments (Figures 2 and 3) and fleet events, run in one process."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import pytest
+from PIL import Image
+
+from tests.conftest import SCENARIOS
+from vvm_worker.planning import PLANNER_NAMES
+from vvm_worker.scenario import load_scenario, parse_scenario
+from vvm_worker.simulation import Simulation
+
+KEYS = {f"p{n}.{k}" for n in range(4) for k in range(3)}
+
+
+def run(path: Path, **kw) -> dict:
+    return Simulation(load_scenario(path), **kw).run()
+
+
+def rv_to_rv(summary: dict) -> list[dict]:
+    rvs = {v["name"] for v in summary["vehicles"]}
+    return [m for m in summary["migrations"] if m["from"] in rvs and m["to"] in rvs]
+
+
+@pytest.mark.django_db
+def test_figure_2_one_rv_serves_three_vvs() -> None:
+    summary = run(SCENARIOS / "paper-fig2.json")
+    assert [v["name"] for v in summary["vvs"]] == ["VV 1", "VV 2", "VV 3"]
+    for vv in summary["vvs"]:
+        assert vv["status"] == "finished", vv["error"]
+        assert vv["tasks_done"] == 4 and len(vv["tasks"]) == 4
+        assert set(vv["storage"]) == KEYS
+        for n in range(4):
+            co2, temp, picture = (vv["storage"][f"p{n}.{k}"] for k in range(3))
+            assert (co2["sensor"], co2["unit"]) == ("CO2", "ppm") and 350 < co2["value"] < 2000
+            assert (temp["sensor"], temp["unit"]) == ("Thermometer", "°C") and -30 < temp[
+                "value"
+            ] < 45
+            assert picture["kind"] == "camera"
+            with Image.open(picture["image"]) as image:
+                assert image.size == (640, 480)
+                assert image.format == "PNG"
+    assert summary["vehicles"] == [
+        {
+            "name": "Heli One",
+            "distance_m": summary["vehicles"][0]["distance_m"],
+            "tasks_done": 12,
+            "flight_s": summary["vehicles"][0]["flight_s"],
+        }
+    ]
+    assert summary["vehicles"][0]["distance_m"] > 1000
+    assert rv_to_rv(summary) == []
+    assert summary["makespan_s"] == max(v["finished_s"] for v in summary["vvs"])
+
+
+@pytest.mark.django_db
+def test_figure_3_each_vv_migrates_once_from_heli_one_to_heli_two() -> None:
+    summary = run(SCENARIOS / "paper-fig3.json")
+    for vv in summary["vvs"]:
+        assert vv["status"] == "finished", vv["error"]
+        assert set(vv["storage"]) == KEYS
+        assert [t["vehicle"] for t in vv["tasks"]] == [
+            "Heli One",
+            "Heli One",
+            "Heli Two",
+            "Heli Two",
+        ]
+    moves = rv_to_rv(summary)
+    assert sorted(m["vv"] for m in moves) == ["VV 1", "VV 2", "VV 3"]
+    assert all((m["from"], m["to"]) == ("Heli One", "Heli Two") for m in moves)
+    assert {v["name"]: v["tasks_done"] for v in summary["vehicles"]} == {
+        "Heli One": 6,
+        "Heli Two": 6,
+    }
+    # Each VV starts on the ground station and comes back to it when it ends.
+    for name in ("VV 1", "VV 2", "VV 3"):
+        path = [(m["from"], m["to"]) for m in summary["migrations"] if m["vv"] == name]
+        assert path == [("GS Base", "Heli One"), ("Heli One", "Heli Two"), ("Heli Two", "GS Base")]
+
+
+@pytest.mark.django_db
+@pytest.mark.parametrize("planner", PLANNER_NAMES)
+def test_every_planner_finishes_figure_3(planner: str) -> None:
+    summary = run(SCENARIOS / "paper-fig3.json", planner=planner)
+    assert summary["planner"] == planner
+    assert [v["status"] for v in summary["vvs"]] == ["finished"] * 3
+    assert sum(v["tasks_done"] for v in summary["vehicles"]) == 12
+
+
+@pytest.mark.django_db
+def test_rvs_land_at_their_depot_when_idle() -> None:
+    sim = Simulation(load_scenario(SCENARIOS / "paper-fig3.json"))
+    sim.run()
+    for driver in sim.drivers.values():
+        assert driver.is_landed_at(sim.clock.t)
+        assert driver.position_at(sim.clock.t) == driver.depot
+    assert all(v["flight_s"] > 0 for v in sim.summary()["vehicles"])
+
+
+def scenario_with(**changes) -> dict:
+    data = json.loads((SCENARIOS / "paper-fig3.json").read_text())
+    data = copy.deepcopy(data)
+    data.update(changes)
+    return data
+
+
+def parse(data: dict):
+    return parse_scenario(data, base_dir=SCENARIOS)
+
+
+@pytest.mark.django_db
+def test_a_vv_that_throws_or_has_a_syntax_error_fails_and_the_rest_runs_on() -> None:
+    data = scenario_with()
+    data["vvs"].append(
+        {"customer": "Customer A", "name": "Broken", "source": "var a = 1;\nvar b = ;\n"}
+    )
+    data["vvs"].append(
+        {
+            "customer": "Customer B",
+            "name": "Thrower",
+            "source": "VV.log('hi');\n\nthrow new Error('no luck');\n",
+        }
+    )
+    summary = Simulation(parse(data)).run()
+    by_name = {v["name"]: v for v in summary["vvs"]}
+    assert by_name["Broken"]["status"] == "failed"
+    assert (
+        "SyntaxError" in by_name["Broken"]["error"]
+        and "line 2, column 9" in by_name["Broken"]["error"]
+    )
+    assert by_name["Thrower"]["status"] == "failed"
+    assert (
+        "Error: no luck" in by_name["Thrower"]["error"] and "line 3" in by_name["Thrower"]["error"]
+    )
+    for name in ("VV 1", "VV 2", "VV 3"):
+        assert by_name[name]["status"] == "finished"
+        assert set(by_name[name]["storage"]) == KEYS
+
+
+@pytest.mark.django_db
+def test_vvs_are_submitted_at_their_time_and_copies_run_too() -> None:
+    data = scenario_with()
+    data["vvs"][0]["submit_at_s"] = 500
+    data["vvs"][1]["copies"] = 2
+    summary = Simulation(parse(data)).run()
+    by_name = {v["name"]: v for v in summary["vvs"]}
+    assert set(by_name) == {"VV 1", "VV 2 #1", "VV 2 #2", "VV 3"}
+    assert by_name["VV 1"]["submitted_s"] == 500
+    assert by_name["VV 1"]["tasks"][0]["requested_s"] >= 500
+    assert all(v["status"] == "finished" for v in summary["vvs"])
+
+
+@pytest.mark.django_db
+def test_removing_an_rv_mid_mission_hands_its_vvs_to_one_that_can_serve_them() -> None:
+    data = scenario_with()
+    # A third RV covering both areas takes over when Heli Two is removed.
+    backup = copy.deepcopy(data["vehicles"][1])
+    backup.update(
+        name="Backup",
+        depot=[48.1130, 12.8640, 0],
+        area=[
+            [48.109, 12.859],
+            [48.109, 12.868],
+            [48.114, 12.868],
+            [48.114, 12.859],
+            [48.109, 12.859],
+        ],
+    )
+    data["vehicles"].append(backup)
+    data["events"] = [{"at_s": 60, "vehicle": "Heli Two", "action": "remove"}]
+    summary = Simulation(parse(data)).run()
+    assert all(v["status"] == "finished" for v in summary["vvs"])
+    served = [t for v in summary["vvs"] for t in v["tasks"] if t["done_s"] > 60]
+    assert "Heli Two" not in {t["vehicle"] for t in served}
+    assert {v["name"]: v["tasks_done"] for v in summary["vehicles"]}["Backup"] > 0
+
+
+@pytest.mark.django_db
+def test_vvs_wait_for_an_rv_in_maintenance_and_an_rv_added_later_takes_the_work() -> None:
+    data = scenario_with()
+    heli_three = copy.deepcopy(data["vehicles"][1])
+    heli_three["name"] = "Heli Three"
+    data["events"] = [
+        {"at_s": 0, "vehicle": "Heli Two", "action": "maintenance"},
+        {"at_s": 300, "add_vehicle": heli_three},
+    ]
+    summary = Simulation(parse(data)).run()
+    assert all(v["status"] == "finished" for v in summary["vvs"])
+    for vv in summary["vvs"]:
+        late = vv["tasks"][2:]
+        assert [t["vehicle"] for t in late] == ["Heli Three", "Heli Three"]
+        assert all(t["done_s"] > 300 for t in late)
+        # While they waited, the VVs were parked on the ground station.
+        path = [m["to"] for m in summary["migrations"] if m["vv"] == vv["name"]]
+        assert path == ["Heli One", "GS Base", "Heli Three", "GS Base"]
+    assert {v["name"]: v["tasks_done"] for v in summary["vehicles"]}["Heli Two"] == 0
