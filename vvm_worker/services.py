@@ -64,6 +64,9 @@ from vvm_worker.runtime import (
 
 logger = logging.getLogger("cpcc.vvm")
 
+# Steps one host runs for one VV before it lets other work go first (rejected tasks in a row).
+MAX_STEPS_PER_ADVANCE = 50
+
 
 @dataclass
 class VVM:
@@ -273,7 +276,7 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
             return
         if vv.status == VVStatus.MIGRATING:
             vv.status = VVStatus.RUNNING
-        while True:
+        for _ in range(MAX_STEPS_PER_ADVANCE):
             if vv.pending is None:
                 result = _step(vv, vvm)
                 if result.outcome is not Outcome.SUSPENDED:
@@ -281,6 +284,10 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
                     break
             if not _route(vv, vvm):
                 break
+        else:
+            # A program that keeps asking for tasks nobody can serve: let the host's other
+            # work go first, then carry on (the tasks-per-VV quota bounds it).
+            vvm.dispatcher.vv_arrived(vv.pk)
         vv.save()
 
 
@@ -315,13 +322,13 @@ def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
 # --- routing and migration (the vehicle mapper and the migrator) -----------------------------
 
 
-def fleet_caps(*, exclude_removed: bool = True) -> list[VehicleCaps]:
+def fleet_caps() -> list[VehicleCaps]:
     """The mapper's view of the fleet: every RV that is in service or in maintenance."""
-    vehicles = Vehicle.objects.prefetch_related("sensors").annotate(
-        open_count=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN))
+    vehicles = (
+        Vehicle.objects.exclude(status=VehicleStatus.REMOVED)
+        .prefetch_related("sensors")
+        .annotate(open_count=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)))
     )
-    if exclude_removed:
-        vehicles = vehicles.exclude(status=VehicleStatus.REMOVED)
     return [
         VehicleCaps(
             id=v.pk,
@@ -346,9 +353,10 @@ def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
     open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
     fleet = fleet_caps()
     decisions = {t.pk: map_task(_request(t), fleet) for t in open_tasks}
-    rejected = [(t, d) for t, d in ((t, decisions[t.pk]) for t in open_tasks) if d.rejected]
-    answered_before = any(e.get("q") == pending.q for e in vv.journal[-1:])
-    if rejected and not answered_before:
+    rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
+    # A batch is accepted or rejected as a whole, before any of its tasks is answered.
+    partly_answered = bool(vv.journal) and vv.journal[-1].get("q") == pending.q
+    if rejected and not partly_answered:
         if vv.host_rv is not None:
             _migrate_to_ground_station(vv, reason="no vehicle can serve its task", vvm=vvm)
             return False

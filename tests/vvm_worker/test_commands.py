@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+import pty
+import struct
 import subprocess
 import sys
+import termios
 from pathlib import Path
 
 import pytest
@@ -84,8 +88,9 @@ def assert_summary_shape(summary: dict) -> None:
         assert_shape(migration, "migration")
 
 
-def test_simulate_prints_the_same_json_summary_twice(tmp_path: Path) -> None:
-    args = ("simulate", str(SCENARIOS / "paper-fig3.json"), "--speed", "0", "--json")
+@pytest.mark.parametrize("scenario", ["paper-fig2.json", "paper-fig3.json"])
+def test_simulate_prints_the_same_json_summary_twice(tmp_path: Path, scenario: str) -> None:
+    args = ("simulate", str(SCENARIOS / scenario), "--speed", "0", "--json")
     first = manage(*args, tmp=tmp_path)
     second = manage(*args, tmp=tmp_path)
     last = first.stdout.strip().splitlines()[-1]
@@ -116,6 +121,44 @@ def test_simulate_keep_leaves_the_results_in_the_configured_database(tmp_path: P
         tmp=tmp_path,
     )
     assert out.stdout.strip().splitlines()[-1] == "['finished', 'finished', 'finished']"
+
+
+def test_simulate_shows_a_progress_bar_on_a_terminal(tmp_path: Path) -> None:
+    main, child = pty.openpty()
+    fcntl.ioctl(child, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 200, 0, 0))
+    env = {**os.environ, "CPCC_VAR_DIR": str(tmp_path), "CPCC_MEDIA_ROOT": str(tmp_path / "media")}
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "manage.py",
+            "simulate",
+            str(SCENARIOS / "paper-fig2.json"),
+            "--speed",
+            "0",
+            "--json",
+        ],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=child,
+        text=True,
+    )
+    os.close(child)
+    shown = b""
+    while True:
+        try:
+            chunk = os.read(main, 4096)
+        except OSError:  # the terminal closes when the command exits
+            break
+        if not chunk:
+            break
+        shown += chunk
+    stdout, _ = process.communicate(timeout=120)
+    os.close(main)
+    assert process.returncode == 0
+    assert "3/3 VVs ended" in shown.decode(errors="replace")
+    assert "12 tasks done" in shown.decode(errors="replace")
+    json.loads(stdout.strip().splitlines()[-1])  # stdout still ends with the summary
 
 
 def test_simulate_human_output_has_a_table(tmp_path: Path) -> None:

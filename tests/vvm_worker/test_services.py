@@ -223,3 +223,25 @@ def test_without_ground_station_a_vv_stays_queued(customer_a, vvm_factory) -> No
     vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=vvm_factory())
     assert vv.status == VVStatus.QUEUED
     GroundStationFactory(name="Late GS")
+
+
+def test_a_vv_asking_again_and_again_for_rejected_tasks_ends_at_its_tasks_quota(
+    platform, fleet, customer_a, customer_b
+) -> None:
+    customer_a.max_tasks_per_vv = 120
+    customer_a.save()
+    source = """
+    var gps = VV.sensor.get('GPS');
+    var far = {type: 'point', position: new VV.types.LatLngAlt(10, 10, 50), tolerance: 2, sensors: [gps]};
+    var rejected = 0;
+    while (true) { try { VV.task.execute(far); } catch (e) { rejected++; } }
+    """
+    stubborn = vv_submit(customer=customer_a, name="stubborn", program=source, vvm=platform.vvm)
+    good = vv_submit(customer=customer_b, name="good", program=program(), vvm=platform.vvm)
+    platform.drain()
+    stubborn.refresh_from_db()
+    good.refresh_from_db()
+    assert stubborn.status == VVStatus.KILLED
+    assert "quota: tasks per VV" in stubborn.error
+    assert stubborn.tasks.filter(status=TaskStatus.REJECTED).count() == 120
+    assert good.status == VVStatus.FINISHED

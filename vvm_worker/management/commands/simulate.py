@@ -12,6 +12,10 @@ from django.conf import settings
 from django.core.management import call_command
 from django.core.management.base import BaseCommand, CommandError, CommandParser
 from django.db import connections
+from rich.console import Console
+from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
+from rich.progress import Progress as Bar
+from rich.table import Table
 
 from vvm_worker.planning import DEFAULT_PLANNER, PLANNER_NAMES
 from vvm_worker.scenario import ScenarioError, load_scenario
@@ -99,18 +103,19 @@ class Command(BaseCommand):
     def _run(self, simulation: Simulation) -> dict[str, Any]:
         if not sys.stderr.isatty():
             return simulation.run()
-        from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
-        from rich.progress import Progress as Bar
-
+        # On stderr, so that stdout keeps only the summary.
         with Bar(
             TextColumn("[bold]{task.description}"),
             BarColumn(),
             TextColumn("{task.completed}/{task.total} VVs ended"),
             TextColumn("· {task.fields[tasks]} tasks done · t = {task.fields[sim_s]:.1f} s"),
             TimeElapsedColumn(),
+            console=Console(stderr=True),
             transient=False,
         ) as bar:
-            job = bar.add_task(simulation.scenario.name, total=None, tasks=0, sim_s=0.0)
+            job = bar.add_task(
+                simulation.scenario.name, total=simulation.vv_count, tasks=0, sim_s=0.0
+            )
 
             def report(p: Progress) -> None:
                 bar.update(
@@ -124,9 +129,6 @@ class Command(BaseCommand):
             return simulation.run(progress=report)
 
     def _print_summary(self, summary: dict[str, Any]) -> None:
-        from rich.console import Console
-        from rich.table import Table
-
         console = Console(file=self.stdout._out, highlight=False)  # type: ignore[attr-defined]
         vvs = Table(title=f"Virtual vehicles (planner {summary['planner']})")
         for column in ("VV", "customer", "status", "tasks", "finished at (s)", "error"):
