@@ -170,6 +170,7 @@ def scenario_submit_vv(
     customer: Customer,
     vvm: VVM,
     seed: int | None = None,
+    admit: bool = True,
 ) -> VirtualVehicle:
     """Submit one VV of a scenario; a syntax error lets it end ``failed`` when it is loaded."""
     vv_seed = None if seed is None else derived_seed(seed, customer.name, instance_name)
@@ -182,16 +183,21 @@ def scenario_submit_vv(
         seed=vv_seed,
         vv_id=vv_id,
         refuse_syntax_errors=False,
+        admit=admit,
     )
 
 
 def scenario_submit_all(
-    scenario: Scenario, loaded: LoadedScenario, *, vvm: VVM
+    scenario: Scenario, loaded: LoadedScenario, *, vvm: VVM, admit: bool = True
 ) -> list[VirtualVehicle]:
     """Submit every VV of the scenario now (``submit_at_s`` is for ``simulate``)."""
     return [
         scenario_submit_vv(
-            spec=spec, instance_name=name, customer=loaded.customers[spec.customer], vvm=vvm
+            spec=spec,
+            instance_name=name,
+            customer=loaded.customers[spec.customer],
+            vvm=vvm,
+            admit=admit,
         )
         for spec, name in vv_instances(scenario)
     ]

@@ -98,8 +98,9 @@ def vv_submit(
     seed: int | None = None,
     vv_id: uuid.UUID | None = None,
     refuse_syntax_errors: bool = True,
+    admit: bool = True,
 ) -> VirtualVehicle:
-    """Queue a new VV for the customer and admit it if the customer's quota allows.
+    """Queue a new VV for the customer and, with ``admit``, start it if the quota allows.
 
     Raises ProgramRejected for a syntax error unless ``refuse_syntax_errors`` is False (a
     scenario's VV then ends ``failed`` with the line and column when it is loaded).
@@ -120,7 +121,8 @@ def vv_submit(
         submitted_s=now,
     )
     logger.info("vv submitted", extra={"vv": str(vv.id), "customer": customer.slug})
-    vv_admit_queued(customer_id=customer.pk, vvm=vvm)
+    if admit:
+        vv_admit_queued(customer_id=customer.pk, vvm=vvm)
     vv.refresh_from_db()
     return vv
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import os
+import queue
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import urllib.request
 from pathlib import Path
@@ -41,14 +43,20 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
     )
     lines: list[str] = []
     try:
-        deadline = time.monotonic() + 120
         assert demo.stdout is not None
-        while time.monotonic() < deadline:
-            line = demo.stdout.readline()
-            assert line, "the demo exited early:\n" + "".join(lines)
-            lines.append(line)
-            if "The scenario has ended" in line:
-                break
+        output_lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(
+            target=lambda: [output_lines.put(x) for x in demo.stdout], daemon=True
+        ).start()
+        deadline = time.monotonic() + 120
+        while not lines or "The scenario has ended" not in lines[-1]:
+            try:
+                lines.append(output_lines.get(timeout=max(0.0, deadline - time.monotonic())))
+            except queue.Empty:
+                raise AssertionError(
+                    "the demo did not finish the scenario:\n" + "".join(lines)
+                ) from None
+            assert demo.poll() is None, "the demo exited early:\n" + "".join(lines)
         output = "".join(lines)
         assert f"CPCC is running at http://127.0.0.1:{port}/" in output
         assert "customer: customer-a / demo-pass-123" in output

@@ -8,15 +8,10 @@ from django.core.management.base import BaseCommand, CommandError, CommandParser
 
 from fleet.simulation import SensorField
 from vvm_worker.clock import SystemClock
-from vvm_worker.dispatch import Dispatcher, NullDispatcher
+from vvm_worker.dispatch import NullDispatcher
 from vvm_worker.scenario import ScenarioError, load_scenario
 from vvm_worker.scenario_loader import PASSWORD_ENV, scenario_apply, scenario_submit_all
 from vvm_worker.services import VVM
-
-
-def platform_dispatcher() -> Dispatcher:
-    """The dispatcher of the running platform's workers (none yet: VVs wait queued)."""
-    return NullDispatcher()
 
 
 class Command(BaseCommand):
@@ -47,6 +42,7 @@ class Command(BaseCommand):
             self.stdout.write(f"  login {username} / {shown}")
         if options["no_vvs"]:
             return
-        vvm = VVM(clock=SystemClock(), dispatcher=platform_dispatcher(), field=SensorField(0))
-        vvs = scenario_submit_all(scenario, loaded, vvm=vvm)
-        self.stdout.write(f"Submitted {len(vvs)} VV(s).")
+        # Queued only: the ground-station workers admit them within each customer's quota.
+        vvm = VVM(clock=SystemClock(), dispatcher=NullDispatcher(), field=SensorField(0))
+        vvs = scenario_submit_all(scenario, loaded, vvm=vvm, admit=False)
+        self.stdout.write(f"Submitted {len(vvs)} VV(s); they wait queued for the workers.")
