@@ -15,6 +15,9 @@ from cpcc_site.env import ConfigError, env_bool, env_float, env_list, env_str
 
 BASE_DIR = Path(__file__).resolve().parent.parent
 VAR_DIR = Path(env_str("CPCC_VAR_DIR", str(BASE_DIR / "var")))
+# The project's own state (SQLite database, Redis socket, images) lives here; a fresh clone
+# has no var/ yet.
+VAR_DIR.mkdir(parents=True, exist_ok=True)
 
 DEBUG = env_bool("DEBUG", True)
 SECRET_KEY = env_str("SECRET_KEY", "")
