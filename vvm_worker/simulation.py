@@ -209,11 +209,18 @@ class Simulation:
     def vv_count(self) -> int:
         return len(vv_instances(self.scenario)) if self.scenario is not None else 0
 
-    def drain(self, *, progress: ProgressFn | None = None, total: int = 0) -> None:
-        """Process events until none is left (every VV ended, every RV landed)."""
+    def drain(
+        self,
+        *,
+        progress: ProgressFn | None = None,
+        total: int = 0,
+        until: Callable[[], bool] | None = None,
+    ) -> None:
+        """Process events until none is left (every VV ended, every RV landed), or until the
+        condition ``until`` holds after an event."""
         wall_start = time.monotonic()
         next_report = 0.0
-        while (item := self.queue.pop()) is not None:
+        while (until is None or not until()) and (item := self.queue.pop()) is not None:
             t, fn = item
             if self.speed > 0:
                 delay = wall_start + t / self.speed - time.monotonic()

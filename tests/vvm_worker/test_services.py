@@ -156,10 +156,7 @@ def test_completing_a_task_twice_changes_nothing_the_second_time(
     vv = vv_submit(
         customer=customer_a, name="VV", program=program() + program(48.112), vvm=platform.vvm
     )
-    while not Task.objects.filter(vv=vv).exists():
-        item = platform.queue.pop()
-        assert item is not None
-        item[1]()
+    platform.drain(until=Task.objects.filter(vv=vv).exists)
     task = Task.objects.get(vv=vv)
     assert task_complete(task_id=task.pk, readings=[{"value": 1}], vvm=platform.vvm)
     journal = VirtualVehicle.objects.get(pk=vv.pk).journal
@@ -192,11 +189,8 @@ def test_an_rv_in_maintenance_hands_its_vvs_to_another_that_can_serve_them(
     platform.add_vehicle_loop(spare)
     vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=platform.vvm)
     # Run until the VV is aboard Heli One, then take Heli One out of service.
-    while not VirtualVehicle.objects.filter(pk=vv.pk, host_rv=fleet).exists():
-        item = platform.queue.pop()
-        assert item is not None
-        platform.clock.t = item[0]
-        item[1]()
+    platform.drain(until=VirtualVehicle.objects.filter(pk=vv.pk, host_rv=fleet).exists)
+    assert vv.tasks.get().status == TaskStatus.OPEN
     vehicle_set_status(vehicle=fleet, status=VehicleStatus.MAINTENANCE, vvm=platform.vvm)
     platform.drain()
     vv.refresh_from_db()
