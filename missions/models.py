@@ -48,7 +48,8 @@ class VirtualVehicle(models.Model):
     seed = models.BigIntegerField()
     start_ms = models.BigIntegerField(help_text="Logical time before the first answer.")
     catalog = models.JSONField(default=list, help_text="SDC entries this VV may use.")
-    journal = models.JSONField(default=list, blank=True)
+    journal_length = models.PositiveIntegerField(default=0, help_text="Entries in its journal.")
+    journal_bytes = models.PositiveBigIntegerField(default=0)
     effects_applied = models.PositiveIntegerField(default=0)
     pending = models.JSONField(null=True, blank=True, help_text="The request it is blocked in.")
     steps = models.PositiveIntegerField(default=0)
@@ -86,6 +87,25 @@ class VirtualVehicle(models.Model):
     @property
     def is_ended(self) -> bool:
         return self.status in ENDED_STATUSES
+
+
+class JournalEntry(models.Model):
+    """One answer the VVM-API gave a VV (a task's readings or a rejection), in order.
+
+    Append-only: the journal and the program are the VV's checkpoint; a step replays them.
+    """
+
+    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="journal")
+    seq = models.PositiveIntegerField()
+    entry = models.JSONField()
+
+    class Meta:
+        ordering = ["vv", "seq"]
+        verbose_name_plural = "journal entries"
+        constraints = [models.UniqueConstraint(fields=["vv", "seq"], name="journal_unique_seq")]
+
+    def __str__(self) -> str:
+        return f"{self.vv.name} #{self.seq}"
 
 
 class TaskStatus(models.TextChoices):
@@ -151,13 +171,15 @@ class LogEntry(models.Model):
     """A line of a VV's log, shown to its owner."""
 
     vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="log")
-    seq = models.PositiveIntegerField(help_text="The program's effect number.")
+    seq = models.PositiveIntegerField(
+        null=True, blank=True, help_text="The program's effect number; empty for the platform's."
+    )
     at_s = models.FloatField()
     level = models.CharField(max_length=10, default="info")
     message = models.TextField()
 
     class Meta:
-        ordering = ["vv", "seq"]
+        ordering = ["vv", "at_s", "seq"]
         verbose_name_plural = "log entries"
         constraints = [models.UniqueConstraint(fields=["vv", "seq"], name="log_unique_seq")]
 

@@ -23,8 +23,10 @@ import secrets
 import uuid
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from dataclasses import field as dataclass_field
+from typing import Any, overload
 
+from django.conf import settings
 from django.db import transaction
 from django.db.models import Count, F, Q
 
@@ -37,6 +39,7 @@ from missions.models import (
     ACTIVE_STATUSES,
     ENDED_STATUSES,
     HostKind,
+    JournalEntry,
     LogEntry,
     Migration,
     StorageDocument,
@@ -49,17 +52,19 @@ from vvm_worker.clock import Clock
 from vvm_worker.dispatch import Dispatcher
 from vvm_worker.mapping import MapDecision, VehicleCaps, map_task
 from vvm_worker.runtime import (
+    ErrorKind,
     Outcome,
     PendingRequest,
+    Runtime,
     StepInput,
     StepResult,
     SyntaxProblem,
     TaskRequest,
+    VVError,
     answer_part,
     answer_reject,
     answer_task,
     check_syntax,
-    run_step,
 )
 
 logger = logging.getLogger("cpcc.vvm")
@@ -70,12 +75,14 @@ MAX_STEPS_PER_ADVANCE = 50
 
 @dataclass
 class VVM:
-    """What the services need from the process they run in."""
+    """What the services need from the process they run in: the clock, who to tell what to
+    do next, the sensor world, and the VV runtime with its warm contexts."""
 
     clock: Clock
     dispatcher: Dispatcher
     field: SensorField
     world_seed: int = 0
+    runtime: Runtime = dataclass_field(default_factory=Runtime)
 
 
 class ProgramRejected(ValueError):
@@ -195,7 +202,70 @@ def _pending_of(vv: VirtualVehicle) -> PendingRequest | None:
     )
 
 
+class JournalView(Sequence[dict[str, Any]]):
+    """A VV's journal as the runtime reads it: a warm context asks only for the entries it
+    does not have (and the last one it has, to check it is the same), a new one for all."""
+
+    def __init__(self, vv: VirtualVehicle) -> None:
+        self.vv = vv
+
+    def __len__(self) -> int:
+        return self.vv.journal_length
+
+    @overload
+    def __getitem__(self, index: int) -> dict[str, Any]: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[dict[str, Any]]: ...
+
+    def __getitem__(self, index: int | slice) -> dict[str, Any] | list[dict[str, Any]]:
+        rows = JournalEntry.objects.filter(vv_id=self.vv.pk)
+        if isinstance(index, slice):
+            start, stop, step = index.indices(len(self))
+            assert step == 1
+            rows = rows.filter(seq__gte=start, seq__lt=stop).order_by("seq")
+            return list(rows.values_list("entry", flat=True))
+        if index < 0:
+            index += len(self)
+        if not 0 <= index < len(self):
+            raise IndexError(index)
+        return rows.values_list("entry", flat=True).get(seq=index)
+
+
+def _journal_append(vv: VirtualVehicle, entry: dict[str, Any], vvm: VVM) -> None:
+    """Add an answer to the VV's journal (the caller saves the VV in the same transaction)."""
+    JournalEntry.objects.create(vv=vv, seq=vv.journal_length, entry=entry)
+    vv.journal_length += 1
+    vv.journal_bytes += len(json.dumps(entry, separators=(",", ":")))
+    if vv.journal_length == settings.CPCC_JOURNAL_WARN_ENTRIES:
+        LogEntry.objects.create(
+            vv=vv,
+            at_s=vvm.clock.now_s(),
+            level="warning",
+            message=f"the journal holds {vv.journal_length:,} answers; a VV stops at "
+            f"{settings.CPCC_JOURNAL_MAX_ENTRIES:,} answers or "
+            f"{settings.CPCC_JOURNAL_MAX_BYTES // 1_000_000} MB (every step replays it)",
+        )
+
+
+def _journal_full(vv: VirtualVehicle) -> str | None:
+    if vv.journal_length > settings.CPCC_JOURNAL_MAX_ENTRIES:
+        return (
+            f"the journal holds {vv.journal_length:,} answers, more than the "
+            f"{settings.CPCC_JOURNAL_MAX_ENTRIES:,} allowed (quota: journal)"
+        )
+    if vv.journal_bytes > settings.CPCC_JOURNAL_MAX_BYTES:
+        return (
+            f"the journal holds {vv.journal_bytes:,} bytes, more than the "
+            f"{settings.CPCC_JOURNAL_MAX_BYTES:,} allowed (quota: journal)"
+        )
+    return None
+
+
 def _step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
+    full = _journal_full(vv)
+    if full is not None:
+        return StepResult(Outcome.KILLED, error=VVError(ErrorKind.QUOTA, full, quota="journal"))
     step = StepInput(
         vv_id=str(vv.id),
         vv_name=vv.name,
@@ -203,12 +273,12 @@ def _step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
         seed=vv.seed,
         start_ms=vv.start_ms,
         catalog=vv.catalog,
-        journal=vv.journal,
+        journal=JournalView(vv),
         effects_applied=vv.effects_applied,
         limits=customer_limits(customer=vv.customer),
         previous_step_s=vv.last_step_s,
     )
-    result = run_step(step)
+    result = vvm.runtime.step(step)
     _apply_effects(vv, result, vvm)
     vv.steps += 1
     vv.last_step_s = result.duration_s
@@ -357,7 +427,7 @@ def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
     decisions = {t.pk: map_task(_request(t), fleet) for t in open_tasks}
     rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
     # A batch is accepted or rejected as a whole, before any of its tasks is answered.
-    partly_answered = bool(vv.journal) and vv.journal[-1].get("q") == pending.q
+    partly_answered = vv.journal_length > 0 and JournalView(vv)[-1].get("q") == pending.q
     if rejected and not partly_answered:
         if vv.host_rv is not None:
             _migrate_to_ground_station(vv, reason="no vehicle can serve its task", vvm=vvm)
@@ -432,10 +502,7 @@ def _reject(
     message = decision.reason or "no vehicle can serve the task"
     if pending.kind == "batch":
         message = f"task {task.index} of the batch: {message}"
-    vv.journal = [
-        *vv.journal,
-        answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message),
-    ]
+    _journal_append(vv, answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message), vvm)
     vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).update(
         status=TaskStatus.REJECTED, message=message, done_s=now
     )
@@ -462,6 +529,8 @@ def _record_migration(
         vv.host_rv, vv.host_gs = to, None
     else:
         vv.host_rv, vv.host_gs = None, to
+    # The VV's warm context stays with the host it left: the new host resumes it by replay.
+    vvm.runtime.forget(str(vv.pk))
     logger.info(
         "vv migrated",
         extra={"vv": str(vv.id), "from": getattr(source, "name", None), "to": to.name},
@@ -509,9 +578,9 @@ def task_complete(*, task_id: int, readings: list[dict[str, Any]], vvm: VVM) -> 
         task.save(update_fields=["status", "done_s", "readings"])
         if task.vehicle_id is not None:
             Vehicle.objects.filter(pk=task.vehicle_id).update(tasks_done=F("tasks_done") + 1)
-        vv.journal = [*vv.journal, entry]
+        _journal_append(vv, entry, vvm)
         vv.pending = None
-        vv.save(update_fields=["journal", "pending", "updated"])
+        vv.save(update_fields=["journal_length", "journal_bytes", "pending", "updated"])
     vv_advance(vv_id=vv.pk, vvm=vvm)
     return True
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from fleet.models import VehicleStatus
-from missions.models import Migration, Task, TaskStatus, VirtualVehicle, VVStatus
+from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.factories import AREA_TWO, GroundStationFactory, VehicleFactory
 from vvm_worker.services import ProgramRejected, task_complete, vehicle_set_status, vv_submit
 
@@ -159,10 +159,12 @@ def test_completing_a_task_twice_changes_nothing_the_second_time(
     platform.drain(until=Task.objects.filter(vv=vv).exists)
     task = Task.objects.get(vv=vv)
     assert task_complete(task_id=task.pk, readings=[{"value": 1}], vvm=platform.vvm)
-    journal = VirtualVehicle.objects.get(pk=vv.pk).journal
+    journal = list(JournalEntry.objects.filter(vv=vv).values_list("entry", flat=True))
     assert not task_complete(task_id=task.pk, readings=[{"value": 2}], vvm=platform.vvm)
-    assert VirtualVehicle.objects.get(pk=vv.pk).journal == journal
+    assert list(JournalEntry.objects.filter(vv=vv).values_list("entry", flat=True)) == journal
     assert len(journal) == 1
+    assert journal[0]["data"] == [{"value": 1}]
+    assert VirtualVehicle.objects.get(pk=vv.pk).journal_length == 1
 
 
 def test_a_vv_migrates_to_the_rv_of_its_next_area(platform, fleet, customer_a) -> None:

@@ -4,7 +4,9 @@ Pure Python over mini-racer; no Django import (tests check this).
 """
 
 from vvm_worker.runtime.engine import (
+    Runtime,
     SyntaxProblem,
+    VVContext,
     answer_part,
     answer_reject,
     answer_task,
@@ -31,10 +33,12 @@ __all__ = [
     "Outcome",
     "PendingRequest",
     "ReservedNameError",
+    "Runtime",
     "StepInput",
     "StepResult",
     "SyntaxProblem",
     "TaskRequest",
+    "VVContext",
     "VVError",
     "answer_part",
     "answer_reject",

@@ -1,19 +1,29 @@
-"""Running one step of a virtual vehicle in V8 (mini-racer), by deterministic replay.
+"""Running the steps of virtual vehicles in V8 (mini-racer), by deterministic replay.
 
-A step runs the program from its first line in a fresh V8 isolate, answers each VVM-API
-call from the journal and stops at the first call without an answer (DESIGN.md section 2).
-The isolate is created inside the calling process when a step runs, never at import time: an
+A step runs the program from its first line, answers each VVM-API call from the journal and
+stops at the first call without an answer (DESIGN.md section 2). A ``VVContext`` is one VV's
+V8 isolate with the prelude, the SDC entries, the compiled program and the journal entries it
+has seen; ``Runtime`` keeps one warm context per VV while the VV stays on this host and sends
+each step only the journal entries the context does not have yet. ``run_step`` runs one step
+in a context made for it.
+
+Isolates are created inside the calling process when a step runs, never at import time: an
 isolate made before ``fork()`` hangs in the child.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import json
 import os
+import queue
 import re
+import secrets
 import threading
 import time
+import weakref
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -21,11 +31,13 @@ from pathlib import Path
 from typing import Any
 
 from py_mini_racer import (
+    DEFAULT_V8_FLAGS,
     JSEvalException,
     JSOOMException,
     JSParseException,
     JSTimeoutException,
     MiniRacer,
+    init_mini_racer,
 )
 
 from vvm_worker.runtime.instrument import ReservedNameError, instrument
@@ -42,12 +54,9 @@ from vvm_worker.runtime.types import (
 
 PROGRAM_NAME = "vv.js"
 _PRELUDE_SOURCE = (Path(__file__).with_name("prelude.js")).read_text(encoding="utf-8")
-# mini-racer installs these in every context; a VV must not have timers or a console.
-_STRIP_GLOBALS = (
-    "setTimeout = undefined; clearTimeout = undefined; __timer_manager = undefined;"
-    " delete globalThis.console; delete globalThis.WebAssembly;"
-)
-_OUTCOME_TIMEOUT_S = 1.0
+# eval() and Function() inside a VV would run code the platform has not instrumented.
+V8_FLAGS = (*DEFAULT_V8_FLAGS, "--disallow-code-generation-from-strings")
+_HOST_TIMEOUT_S = 5.0
 # Fixed cost of re-running a program up to its last answer, on top of the previous step's time.
 _REPLAY_SLACK_S = 0.25
 
@@ -63,8 +72,117 @@ def _new_isolate() -> MiniRacer:
             if os.environ.get("TZ") != "UTC":
                 os.environ["TZ"] = "UTC"
                 time.tzset()
+            init_mini_racer(flags=V8_FLAGS, ignore_duplicate_init=True)
+            atexit.register(_close_all)
             _initialised = True
-    return MiniRacer()
+    mr = MiniRacer()
+    _open.add(mr)
+    return mr
+
+
+# Every isolate this process made. An isolate still open when the interpreter finalises its
+# objects hangs the exit (its event-loop thread is gone by then): close them all first.
+_open: weakref.WeakSet[MiniRacer] = weakref.WeakSet()
+
+
+def _close_all() -> None:
+    for mr in list(_open):
+        with contextlib.suppress(Exception):
+            mr.close()
+
+
+_WARM_UP_CATALOG = json.dumps(json.dumps([{"name": "GPS", "kind": "gps", "unit": "", "params": {}}]))
+_WARM_UP_PROGRAM = (
+    "var g = VV.sensor.get('GPS'); VV.storage.store('k', 1); VV.storage.load('k'); VV.log('x');"
+    " VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(1, 2, 3), sensors: [g]});"
+)
+_WARM_UP_RUN = json.dumps(
+    json.dumps(
+        {
+            "vvId": "",
+            "vvName": "",
+            "seed": 1,
+            "startMs": 0,
+            "effectsApplied": 0,
+            "limits": {"maxTasks": 10, "storageBytes": 1000, "allowedCalls": None},
+        }
+    )
+)
+
+
+@dataclass
+class _Prepared:
+    """An isolate with the prelude installed (built-ins frozen), not yet given to a VV."""
+
+    mr: MiniRacer
+    key: str  # the host key, as a JSON string literal
+
+
+def _prepare() -> _Prepared:
+    mr = _new_isolate()
+    key = json.dumps(secrets.token_hex(16))
+    try:
+        mr.eval(f"{_PRELUDE_SOURCE}({key});\n//# sourceURL=cpcc-prelude.js")
+        # One throw-away run compiles the prelude's functions now rather than in a VV's step.
+        mr.eval(f"__cpcc_host.setCatalog({key}, {_WARM_UP_CATALOG})")
+        mr.eval(f"__cpcc_host.setProgram({key}, function () {{ {_WARM_UP_PROGRAM} }})")
+        with contextlib.suppress(JSEvalException):
+            mr.eval(f"__cpcc_host.step({key}, {_WARM_UP_RUN})")
+        mr.eval(f"__cpcc_host.outcome({key})")
+    except BaseException:
+        mr.close()
+        raise
+    return _Prepared(mr, key)
+
+
+class IsolatePool:
+    """Isolates with the prelude installed, made ahead of time by a background thread.
+
+    A new isolate and the prelude's freezing of the built-ins cost about 5 ms; taking a
+    prepared one makes a VV's first step on a host cost little more than its program.
+    ``size`` 0 prepares every isolate when it is needed.
+    """
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._ready: queue.SimpleQueue[_Prepared] = queue.SimpleQueue()
+        self._count = 0
+        self._lock = threading.Lock()
+        self._filling = False
+
+    def take(self) -> _Prepared:
+        try:
+            with self._lock:
+                prepared = self._ready.get_nowait()
+                self._count -= 1
+        except queue.Empty:
+            prepared = _prepare()
+        self._refill()
+        return prepared
+
+    def _refill(self) -> None:
+        with self._lock:
+            if self._filling or self._count >= self.size:
+                return
+            self._filling = True
+        threading.Thread(target=self._fill, name="cpcc-isolate-pool", daemon=True).start()
+
+    def _fill(self) -> None:
+        try:
+            while True:
+                with self._lock:
+                    if self._count >= self.size:
+                        return
+                prepared = _prepare()
+                with self._lock:
+                    self._ready.put(prepared)
+                    self._count += 1
+        finally:
+            with self._lock:
+                self._filling = False
+
+
+POOL = IsolatePool(int(os.environ.get("CPCC_ISOLATE_POOL", "2")))
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,27 +203,33 @@ _USE_STRICT = re.compile(r"""^(?:\s|//[^\n]*\n|/\*.*?\*/)*(['"])use strict\1""",
 
 
 def _parse_v8_message(
-    text: str, *, parse_error: bool = False
+    text: str, *, parse_error: bool = False, first_line_offset: int = 0
 ) -> tuple[str, int | None, int | None]:
     """Split a mini-racer exception text into the message and the user's line and column.
 
     The text is ``RESOURCE:LINE: MESSAGE`` then the source line, a caret under the column and,
     for Error objects, the stack. The place in the program is the thrown-at location when it is
     in the program, otherwise the first stack frame in the program (an API call that threw).
+    ``first_line_offset`` is what the platform put in front of the program's first line.
     """
     match = _LOCATION.match(text)
     if match is None:
         return text.strip(), None, None
     message = match.group("msg")
+    line: int | None = None
+    column: int | None = None
     # A script that does not parse has no name yet: its location is the program's.
     if parse_error or match.group("res").endswith(PROGRAM_NAME):
         lines = text.split("\n")
+        line = int(match.group("line"))
         column = lines[2].index("^") + 1 if len(lines) > 2 and "^" in lines[2] else None
-        return message, int(match.group("line")), column
-    frame = _FRAME.search(text)
-    if frame is None:
-        return message, None, None
-    return message, int(frame.group(1)), int(frame.group(2))
+    else:
+        frame = _FRAME.search(text)
+        if frame is not None:
+            line, column = int(frame.group(1)), int(frame.group(2))
+    if line == 1 and column is not None:
+        column = max(1, column - first_line_offset)
+    return message, line, column
 
 
 @lru_cache(maxsize=512)
@@ -121,20 +245,16 @@ def check_syntax(source: str) -> SyntaxProblem | None:
     body = source
     if strict is not None:
         prefix = "'use strict';throw 0;"
-        body = (
-            source[: strict.start(1)]
-            + " " * (strict.end() - strict.start(1))
-            + source[strict.end() :]
-        )
+        body = source[: strict.start(1)] + " " * (strict.end() - strict.start(1)) + source[strict.end() :]
     mr = _new_isolate()
     try:
-        mr.eval(prefix + body + "\n//# sourceURL=" + PROGRAM_NAME, timeout_sec=5.0)
+        mr.eval(prefix + body + "\n//# sourceURL=" + PROGRAM_NAME, timeout_sec=_HOST_TIMEOUT_S)
     except JSParseException as exc:
-        message, line, column = _parse_v8_message(str(exc), parse_error=True)
+        message, line, column = _parse_v8_message(
+            str(exc), parse_error=True, first_line_offset=len(prefix)
+        )
         line = line or 1
         column = column or 1
-        if line == 1:
-            column = max(1, column - len(prefix))
         lines = source.split("\n")
         if line > len(lines):  # "Unexpected end of input" points past the program's end
             line, column = len(lines), len(lines[-1]) + 1
@@ -144,29 +264,6 @@ def check_syntax(source: str) -> SyntaxProblem | None:
     finally:
         mr.close()
     return None
-
-
-def _prelude_call(step: StepInput) -> str:
-    limits = step.limits
-    data = {
-        "vvId": step.vv_id,
-        "vvName": step.vv_name,
-        "seed": step.seed,
-        "startMs": step.start_ms,
-        "catalog": list(step.catalog),
-        "journal": list(step.journal),
-        "effectsApplied": step.effects_applied,
-        "limits": {
-            "maxTasks": limits.max_tasks,
-            "storageBytes": limits.storage_bytes,
-            "allowedCalls": sorted(limits.allowed_calls)
-            if limits.allowed_calls is not None
-            else None,
-        },
-    }
-    # JSON.parse of a string literal is faster in V8 than the same data as an object literal.
-    literal = json.dumps(json.dumps(data, separators=(",", ":")))
-    return f"{_PRELUDE_SOURCE}(JSON.parse({literal}));\n//# sourceURL=cpcc-prelude.js"
 
 
 def _pending(data: Mapping[str, Any]) -> PendingRequest:
@@ -203,117 +300,251 @@ def _killed(message: str, quota: str, duration: float) -> StepResult:
     )
 
 
+def _entry_text(entry: Mapping[str, Any]) -> str:
+    return json.dumps(entry, sort_keys=True, separators=(",", ":"))
+
+
+class StaleContext(Exception):
+    """The context's journal is not a prefix of the VV's journal (it was rolled back)."""
+
+
+class VVContext:
+    """One VV's warm V8 isolate: prelude, SDC entries, compiled program and journal so far.
+
+    Raises ReservedNameError when the program uses a name reserved for the platform. The
+    program's syntax must have been checked (``check_syntax``).
+    """
+
+    def __init__(self, *, vv_id: str, source: str, catalog: Sequence[Mapping[str, Any]]) -> None:
+        program = instrument(source)
+        self.vv_id = vv_id
+        self.source = source
+        self.usable = True
+        self.journal_length = 0
+        self._last_entry: str | None = None
+        prepared = POOL.take()
+        self._mr = prepared.mr
+        self._key = prepared.key
+        self._program_prefix = f"__cpcc_host.setProgram({self._key}, function () {{"
+        try:
+            self._host("setCatalog", json.dumps(list(catalog)))
+            self._mr.eval(f"{self._program_prefix}{program}\n}});\n//# sourceURL={PROGRAM_NAME}")
+        except BaseException:
+            self.close()
+            raise
+
+    def _host(self, call: str, *args: str, timeout: float = _HOST_TIMEOUT_S) -> Any:
+        arguments = ", ".join([self._key, *(json.dumps(a) for a in args)])
+        return self._mr.eval(f"__cpcc_host.{call}({arguments})", timeout_sec=timeout)
+
+    def heap_bytes(self) -> int:
+        """Bytes of V8 heap this context uses now."""
+        return int(self._mr.heap_stats()["used_heap_size"])
+
+    def close(self) -> None:
+        self.usable = False
+        self._mr.close()
+
+    def _sync_journal(self, journal: Sequence[Mapping[str, Any]]) -> None:
+        have = self.journal_length
+        if len(journal) < have or (have and _entry_text(journal[have - 1]) != self._last_entry):
+            raise StaleContext(self.vv_id)
+        new = list(journal[have:])
+        if new:
+            self._host("append", json.dumps(new, separators=(",", ":")))
+            self.journal_length = have + len(new)
+            self._last_entry = _entry_text(new[-1])
+
+    def step(self, step: StepInput) -> StepResult:
+        """Run the program once more from its start with the journal of ``step``.
+
+        Never raises for anything the program does; raises StaleContext when the context's
+        journal is not a prefix of the step's (the caller makes a new context).
+        """
+        self._sync_journal(step.journal)
+        limits = step.limits
+        timeout = limits.cpu_s + (
+            2.0 * step.previous_step_s + _REPLAY_SLACK_S if len(step.journal) else 0.0
+        )
+        run = {
+            "vvId": step.vv_id,
+            "vvName": step.vv_name,
+            "seed": step.seed,
+            "startMs": step.start_ms,
+            "effectsApplied": step.effects_applied,
+            "limits": {
+                "maxTasks": limits.max_tasks,
+                "storageBytes": limits.storage_bytes,
+                "allowedCalls": sorted(limits.allowed_calls)
+                if limits.allowed_calls is not None
+                else None,
+            },
+        }
+        self._mr.set_hard_memory_limit(limits.heap_bytes)
+        thrown: str | None = None
+        started = time.perf_counter()
+        try:
+            self._host("step", json.dumps(run, separators=(",", ":")), timeout=timeout)
+        except JSTimeoutException:
+            self.usable = False
+            # The terminated evaluation still reports back to mini-racer's event loop; let it
+            # arrive before the isolate is closed.
+            with contextlib.suppress(JSEvalException):
+                self._mr.eval("0", timeout_sec=_HOST_TIMEOUT_S)
+            return _killed(
+                f"the VV used more than {limits.cpu_s:g} s of CPU time in one step "
+                "(quota: CPU time per step)",
+                "cpu",
+                time.perf_counter() - started,
+            )
+        except JSOOMException:
+            self.usable = False
+            return _killed(self._heap_message(step), "heap", time.perf_counter() - started)
+        except JSEvalException as exc:
+            if self._mr.was_hard_memory_limit_reached():
+                self.usable = False
+                return _killed(self._heap_message(step), "heap", time.perf_counter() - started)
+            thrown = str(exc)
+        duration = time.perf_counter() - started
+        try:
+            raw = self._host("outcome")
+            state = json.loads(raw) if isinstance(raw, str) else None
+        except (JSEvalException, ValueError):
+            state = None
+        if not isinstance(state, dict) or state.get("tainted"):
+            self.usable = False
+        return self._interpret(state, thrown, duration)
+
+    @staticmethod
+    def _heap_message(step: StepInput) -> str:
+        mb = step.limits.heap_bytes // (1024 * 1024)
+        return f"the VV used more than {mb} MB of heap (quota: V8 heap)"
+
+    def _interpret(self, state: Any, thrown: str | None, duration: float) -> StepResult:
+        if not isinstance(state, dict) or "status" not in state:
+            return StepResult(
+                Outcome.FAILED,
+                error=VVError(
+                    ErrorKind.PLATFORM, "the program broke the VVM-API (its state could not be read)"
+                ),
+                duration_s=duration,
+            )
+        common: dict[str, Any] = {
+            "effects": _effects(state.get("effects") or ()),
+            "effects_total": int(state.get("effectsTotal", 0)),
+            "duration_s": duration,
+            "requests": int(state.get("requests", 0)),
+            "storage_bytes": int(state.get("storageBytes", 0)),
+        }
+        offset = len(self._program_prefix)
+        status = state["status"]
+        fatal = state.get("fatal")
+        if status in ("killed", "failed") and isinstance(fatal, dict):
+            kind = ErrorKind.QUOTA if status == "killed" else ErrorKind.NONDETERMINISM
+            line = column = None
+            if thrown is not None:
+                _, line, column = _parse_v8_message(thrown, first_line_offset=offset)
+            error = VVError(kind, str(fatal.get("message")), line, column, quota=fatal.get("quota"))
+            return StepResult(Outcome(status), error=error, **common)
+        if status == "suspended":
+            return StepResult(Outcome.SUSPENDED, pending=_pending(state["pending"]), **common)
+        if thrown is not None:
+            message, line, column = _parse_v8_message(thrown, first_line_offset=offset)
+            if message.startswith("Uncaught "):
+                message = message[len("Uncaught ") :]
+            error = VVError(ErrorKind.RUNTIME, message, line, column)
+            return StepResult(Outcome.FAILED, error=error, **common)
+        if state.get("consumed") != state.get("journalLength"):
+            error = VVError(
+                ErrorKind.NONDETERMINISM,
+                f"non-determinism: on replay the program ended after {state.get('consumed')} of "
+                f"the {state.get('journalLength')} answers in its journal; a VV must decide only "
+                "from what the VVM-API gave it",
+            )
+            return StepResult(Outcome.FAILED, error=error, **common)
+        return StepResult(Outcome.FINISHED, **common)
+
+
+def _syntax_failure(step: StepInput) -> StepResult | None:
+    problem = check_syntax(step.source)
+    if problem is not None:
+        error = VVError(ErrorKind.SYNTAX, problem.message, problem.line, problem.column)
+        return StepResult(Outcome.FAILED, error=error)
+    return None
+
+
+class Runtime:
+    """The steps of the VVs on this host, each in its warm context while it stays here.
+
+    Keeps at most ``max_contexts`` contexts (the least recently used goes first); a context
+    is dropped when its VV ends, is killed, or leaves (``forget``). Not thread-safe: one
+    runtime per worker thread.
+    """
+
+    def __init__(self, *, max_contexts: int = 64) -> None:
+        self.max_contexts = max_contexts
+        self._contexts: OrderedDict[str, VVContext] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._contexts)
+
+    def context(self, vv_id: str) -> VVContext | None:
+        return self._contexts.get(vv_id)
+
+    def step(self, step: StepInput) -> StepResult:
+        """Run one step of the VV: from its warm context when it has one, else a new one."""
+        failure = _syntax_failure(step)
+        if failure is not None:
+            self.forget(step.vv_id)
+            return failure
+        ctx = self._contexts.pop(step.vv_id, None)
+        if ctx is not None and (not ctx.usable or ctx.source != step.source):
+            ctx.close()
+            ctx = None
+        result: StepResult | None = None
+        if ctx is not None:
+            try:
+                result = ctx.step(step)
+            except StaleContext:
+                ctx.close()
+                ctx = None
+        if ctx is None:
+            try:
+                ctx = VVContext(vv_id=step.vv_id, source=step.source, catalog=step.catalog)
+            except ReservedNameError as exc:
+                error = VVError(ErrorKind.SYNTAX, str(exc), exc.line, exc.column)
+                return StepResult(Outcome.FAILED, error=error)
+            result = ctx.step(step)
+        assert result is not None
+        if ctx.usable and result.outcome is Outcome.SUSPENDED and self.max_contexts > 0:
+            self._contexts[step.vv_id] = ctx
+            while len(self._contexts) > self.max_contexts:
+                _, oldest = self._contexts.popitem(last=False)
+                oldest.close()
+        else:
+            ctx.close()
+        return result
+
+    def forget(self, vv_id: str) -> None:
+        """Drop the VV's context (it left this host, or ended)."""
+        ctx = self._contexts.pop(vv_id, None)
+        if ctx is not None:
+            ctx.close()
+
+    def close(self) -> None:
+        while self._contexts:
+            _, ctx = self._contexts.popitem()
+            ctx.close()
+
+
 def run_step(step: StepInput) -> StepResult:
-    """Run the VV from its start to its next blocking call, its end, or an error.
+    """Run one step of the VV in a context made for it (no warm context is kept).
 
     Returns the outcome, the pending request when suspended, the effects not yet applied
     (those numbered ``effects_applied`` and up) and, for a failed or killed VV, an error with
     the line in the program. Never raises for anything the program does.
     """
-    problem = check_syntax(step.source)
-    if problem is not None:
-        return StepResult(
-            Outcome.FAILED,
-            error=VVError(ErrorKind.SYNTAX, problem.message, problem.line, problem.column),
-        )
-    try:
-        program = instrument(step.source)
-    except ReservedNameError as exc:
-        return StepResult(
-            Outcome.FAILED, error=VVError(ErrorKind.SYNTAX, str(exc), exc.line, exc.column)
-        )
-
-    limits = step.limits
-    timeout = limits.cpu_s + (2.0 * step.previous_step_s + _REPLAY_SLACK_S if step.journal else 0.0)
-    mr = _new_isolate()
-    try:
-        mr.eval(_STRIP_GLOBALS)
-        mr.eval(_prelude_call(step))
-        mr.set_hard_memory_limit(limits.heap_bytes)
-        thrown: str | None = None
-        started = time.perf_counter()
-        try:
-            mr.eval(program + "\n//# sourceURL=" + PROGRAM_NAME, timeout_sec=timeout)
-        except JSTimeoutException:
-            # The terminated evaluation still reports back to mini-racer's event loop; let it
-            # arrive before the isolate is closed.
-            with contextlib.suppress(JSEvalException):
-                mr.eval("0", timeout_sec=_OUTCOME_TIMEOUT_S)
-            return _killed(
-                f"the VV used more than {limits.cpu_s:g} s of CPU time in one step (quota: CPU time per step)",
-                "cpu",
-                time.perf_counter() - started,
-            )
-        except JSOOMException:
-            return _killed(
-                f"the VV used more than {limits.heap_bytes // (1024 * 1024)} MB of heap (quota: V8 heap)",
-                "heap",
-                time.perf_counter() - started,
-            )
-        except JSEvalException as exc:
-            if mr.was_hard_memory_limit_reached():
-                return _killed(
-                    f"the VV used more than {limits.heap_bytes // (1024 * 1024)} MB of heap (quota: V8 heap)",
-                    "heap",
-                    time.perf_counter() - started,
-                )
-            thrown = str(exc)
-        duration = time.perf_counter() - started
-        try:
-            raw = mr.eval("__cpcc_outcome()", timeout_sec=_OUTCOME_TIMEOUT_S)
-            state = json.loads(raw) if isinstance(raw, str) else None
-        except (JSEvalException, ValueError):
-            state = None
-    finally:
-        mr.close()
-    return _interpret(state, thrown, duration)
-
-
-def _interpret(state: Any, thrown: str | None, duration: float) -> StepResult:
-    if not isinstance(state, dict) or "status" not in state:
-        return StepResult(
-            Outcome.FAILED,
-            error=VVError(
-                ErrorKind.PLATFORM, "the program broke the VVM-API (its state could not be read)"
-            ),
-            duration_s=duration,
-        )
-    effects = _effects(state.get("effects") or ())
-    common: dict[str, Any] = {
-        "effects": effects,
-        "effects_total": int(state.get("effectsTotal", 0)),
-        "duration_s": duration,
-        "requests": int(state.get("requests", 0)),
-        "storage_bytes": int(state.get("storageBytes", 0)),
-    }
-    status = state["status"]
-    fatal = state.get("fatal")
-    if status in ("killed", "failed") and isinstance(fatal, dict):
-        kind = ErrorKind.QUOTA if status == "killed" else ErrorKind.NONDETERMINISM
-        message = str(fatal.get("message"))
-        line = column = None
-        if thrown is not None:
-            _, line, column = _parse_v8_message(thrown)
-        error = VVError(kind, message, line, column, quota=fatal.get("quota"))
-        return StepResult(Outcome(status), error=error, **common)
-    if status == "suspended":
-        return StepResult(Outcome.SUSPENDED, pending=_pending(state["pending"]), **common)
-    if thrown is not None:
-        message, line, column = _parse_v8_message(thrown)
-        if message.startswith("Uncaught "):
-            message = message[len("Uncaught ") :]
-        return StepResult(
-            Outcome.FAILED, error=VVError(ErrorKind.RUNTIME, message, line, column), **common
-        )
-    if state.get("consumed") != state.get("journalLength"):
-        error = VVError(
-            ErrorKind.NONDETERMINISM,
-            f"non-determinism: on replay the program ended after {state.get('consumed')} of the "
-            f"{state.get('journalLength')} answers in its journal; a VV must decide only from what "
-            "the VVM-API gave it",
-        )
-        return StepResult(Outcome.FAILED, error=error, **common)
-    return StepResult(Outcome.FINISHED, **common)
+    return Runtime(max_contexts=0).step(step)
 
 
 # --- journal entries (the host writes these when it answers a pending request) -------------
