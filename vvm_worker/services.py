@@ -502,7 +502,9 @@ def _reject(
     message = decision.reason or "no vehicle can serve the task"
     if pending.kind == "batch":
         message = f"task {task.index} of the batch: {message}"
-    _journal_append(vv, answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message), vvm)
+    _journal_append(
+        vv, answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message), vvm
+    )
     vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).update(
         status=TaskStatus.REJECTED, message=message, done_s=now
     )

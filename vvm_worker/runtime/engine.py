@@ -91,7 +91,9 @@ def _close_all() -> None:
             mr.close()
 
 
-_WARM_UP_CATALOG = json.dumps(json.dumps([{"name": "GPS", "kind": "gps", "unit": "", "params": {}}]))
+_WARM_UP_CATALOG = json.dumps(
+    json.dumps([{"name": "GPS", "kind": "gps", "unit": "", "params": {}}])
+)
 _WARM_UP_PROGRAM = (
     "var g = VV.sensor.get('GPS'); VV.storage.store('k', 1); VV.storage.load('k'); VV.log('x');"
     " VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(1, 2, 3), sensors: [g]});"
@@ -245,7 +247,11 @@ def check_syntax(source: str) -> SyntaxProblem | None:
     body = source
     if strict is not None:
         prefix = "'use strict';throw 0;"
-        body = source[: strict.start(1)] + " " * (strict.end() - strict.start(1)) + source[strict.end() :]
+        body = (
+            source[: strict.start(1)]
+            + " " * (strict.end() - strict.start(1))
+            + source[strict.end() :]
+        )
     mr = _new_isolate()
     try:
         mr.eval(prefix + body + "\n//# sourceURL=" + PROGRAM_NAME, timeout_sec=_HOST_TIMEOUT_S)
@@ -289,14 +295,6 @@ def _effects(items: Sequence[Mapping[str, Any]]) -> tuple[Effect, ...]:
             message=e.get("message"),
         )
         for e in items
-    )
-
-
-def _killed(message: str, quota: str, duration: float) -> StepResult:
-    return StepResult(
-        Outcome.KILLED,
-        error=VVError(ErrorKind.QUOTA, message, quota=quota),
-        duration_s=duration,
     )
 
 
@@ -382,30 +380,31 @@ class VVContext:
         }
         self._mr.set_hard_memory_limit(limits.heap_bytes)
         thrown: str | None = None
+        killed: tuple[str, str] | None = None
         started = time.perf_counter()
         try:
             self._host("step", json.dumps(run, separators=(",", ":")), timeout=timeout)
         except JSTimeoutException:
-            self.usable = False
-            # The terminated evaluation still reports back to mini-racer's event loop; let it
-            # arrive before the isolate is closed.
-            with contextlib.suppress(JSEvalException):
-                self._mr.eval("0", timeout_sec=_HOST_TIMEOUT_S)
-            return _killed(
+            killed = (
                 f"the VV used more than {limits.cpu_s:g} s of CPU time in one step "
                 "(quota: CPU time per step)",
                 "cpu",
-                time.perf_counter() - started,
             )
         except JSOOMException:
-            self.usable = False
-            return _killed(self._heap_message(step), "heap", time.perf_counter() - started)
+            killed = (self._heap_message(step), "heap")
         except JSEvalException as exc:
             if self._mr.was_hard_memory_limit_reached():
-                self.usable = False
-                return _killed(self._heap_message(step), "heap", time.perf_counter() - started)
-            thrown = str(exc)
+                killed = (self._heap_message(step), "heap")
+            else:
+                thrown = str(exc)
         duration = time.perf_counter() - started
+        if killed is not None:
+            # V8 stopped the program where it was; what it did before (a callback's storage
+            # writes, say) still counts. The isolate is not used again.
+            self.usable = False
+            self._mr.set_hard_memory_limit(0)
+            with contextlib.suppress(JSEvalException):
+                self._host("abort")
         try:
             raw = self._host("outcome")
             state = json.loads(raw) if isinstance(raw, str) else None
@@ -413,6 +412,17 @@ class VVContext:
             state = None
         if not isinstance(state, dict) or state.get("tainted"):
             self.usable = False
+        if killed is not None:
+            effects = _effects(state.get("effects") or ()) if isinstance(state, dict) else ()
+            total = int(state.get("effectsTotal", 0)) if isinstance(state, dict) else 0
+            message, quota = killed
+            return StepResult(
+                Outcome.KILLED,
+                error=VVError(ErrorKind.QUOTA, message, quota=quota),
+                effects=effects,
+                effects_total=total,
+                duration_s=duration,
+            )
         return self._interpret(state, thrown, duration)
 
     @staticmethod
@@ -425,7 +435,8 @@ class VVContext:
             return StepResult(
                 Outcome.FAILED,
                 error=VVError(
-                    ErrorKind.PLATFORM, "the program broke the VVM-API (its state could not be read)"
+                    ErrorKind.PLATFORM,
+                    "the program broke the VVM-API (its state could not be read)",
                 ),
                 duration_s=duration,
             )

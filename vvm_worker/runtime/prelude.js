@@ -29,6 +29,7 @@
   const freeze = Object.freeze;
   const ownKeys = Reflect.ownKeys;
   const reflectApply = Reflect.apply;
+  const reflectDeleteProperty = Reflect.deleteProperty;
   const isArray = Array.isArray;
   const numberIsFinite = Number.isFinite;
   const mathImul = Math.imul;
@@ -182,7 +183,7 @@
     if (getPrototypeOf(global) !== baselineProto) return false;
     const keys = ownKeys(global);
     for (let i = 0; i < keys.length; i++) {
-      if (!reflectApply(setHas, baseline, [keys[i]]) && !delete global[keys[i]]) return false;
+      if (!reflectApply(setHas, baseline, [keys[i]]) && !reflectDeleteProperty(global, keys[i])) return false;
     }
     return true;
   }
@@ -615,6 +616,7 @@
     },
     step: function (key, json) {
       host(key, 'step');
+      run = null;
       if (!resetGlobals()) tainted = true;
       run = newRun(jsonParse(json));
       for (let i = 0; i < RUN_GLOBALS.length; i++) {
@@ -628,7 +630,18 @@
         running = false;
       }
     },
-    outcome: function (key) { host(key, 'outcome'); return run === null ? 'null' : run.outcome(); },
+    // V8 stopped the program (a quota): its `finally` above did not run.
+    abort: function (key) {
+      if (key !== hostKey) throw new TypeError('abort is for the platform only');
+      running = false;
+    },
+    // Also clears what the run left on the global object: if something cannot be cleared,
+    // the outcome says the context is tainted and the host does not reuse it.
+    outcome: function (key) {
+      host(key, 'outcome');
+      if (!resetGlobals()) tainted = true;
+      return run === null ? 'null' : run.outcome();
+    },
   }));
 
   baseline = new RealSet(ownKeys(global));
