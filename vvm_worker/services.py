@@ -28,7 +28,8 @@ from typing import Any, overload
 
 from django.conf import settings
 from django.db import transaction
-from django.db.models import Count, F, Q
+from django.db.models import Count, F, Q, QuerySet, TextField
+from django.db.models.functions import Cast
 
 from accounts.models import Customer
 from accounts.selectors import customer_catalog, customer_limits
@@ -202,9 +203,10 @@ def _pending_of(vv: VirtualVehicle) -> PendingRequest | None:
     )
 
 
-class JournalView(Sequence[dict[str, Any]]):
-    """A VV's journal as the runtime reads it: a warm context asks only for the entries it
-    does not have (and the last one it has, to check it is the same), a new one for all."""
+class JournalView(Sequence[str]):
+    """A VV's journal as the runtime reads it, each entry as the JSON text the database holds:
+    a warm context asks only for the entries it does not have (and the last one it has, to
+    check it is the same), a new one for all."""
 
     def __init__(self, vv: VirtualVehicle) -> None:
         self.vv = vv
@@ -212,24 +214,29 @@ class JournalView(Sequence[dict[str, Any]]):
     def __len__(self) -> int:
         return self.vv.journal_length
 
-    @overload
-    def __getitem__(self, index: int) -> dict[str, Any]: ...
+    def _texts(self) -> QuerySet[JournalEntry, str]:
+        return (
+            JournalEntry.objects.filter(vv_id=self.vv.pk)
+            .annotate(text=Cast("entry", output_field=TextField()))
+            .values_list("text", flat=True)
+        )
 
     @overload
-    def __getitem__(self, index: slice) -> list[dict[str, Any]]: ...
+    def __getitem__(self, index: int) -> str: ...
 
-    def __getitem__(self, index: int | slice) -> dict[str, Any] | list[dict[str, Any]]:
-        rows = JournalEntry.objects.filter(vv_id=self.vv.pk)
+    @overload
+    def __getitem__(self, index: slice) -> list[str]: ...
+
+    def __getitem__(self, index: int | slice) -> str | list[str]:
         if isinstance(index, slice):
             start, stop, step = index.indices(len(self))
             assert step == 1
-            rows = rows.filter(seq__gte=start, seq__lt=stop).order_by("seq")
-            return list(rows.values_list("entry", flat=True))
+            return list(self._texts().filter(seq__gte=start, seq__lt=stop).order_by("seq"))
         if index < 0:
             index += len(self)
         if not 0 <= index < len(self):
             raise IndexError(index)
-        return rows.values_list("entry", flat=True).get(seq=index)
+        return self._texts().get(seq=index)
 
 
 def _journal_append(vv: VirtualVehicle, entry: dict[str, Any], vvm: VVM) -> None:
@@ -427,7 +434,9 @@ def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
     decisions = {t.pk: map_task(_request(t), fleet) for t in open_tasks}
     rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
     # A batch is accepted or rejected as a whole, before any of its tasks is answered.
-    partly_answered = vv.journal_length > 0 and JournalView(vv)[-1].get("q") == pending.q
+    partly_answered = JournalEntry.objects.filter(
+        vv=vv, seq=vv.journal_length - 1, entry__q=pending.q
+    ).exists()
     if rejected and not partly_answered:
         if vv.host_rv is not None:
             _migrate_to_ground_station(vv, reason="no vehicle can serve its task", vvm=vvm)

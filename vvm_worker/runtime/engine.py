@@ -298,7 +298,11 @@ def _effects(items: Sequence[Mapping[str, Any]]) -> tuple[Effect, ...]:
     )
 
 
-def _entry_text(entry: Mapping[str, Any]) -> str:
+def _entry_text(entry: Mapping[str, Any] | str) -> str:
+    """An entry as JSON text: entries may come as objects or, straight from a database, as
+    text (which saves decoding and encoding them again)."""
+    if isinstance(entry, str):
+        return entry
     return json.dumps(entry, sort_keys=True, separators=(",", ":"))
 
 
@@ -349,9 +353,10 @@ class VVContext:
             raise StaleContext(self.vv_id)
         new = list(journal[have:])
         if new:
-            self._host("append", json.dumps(new, separators=(",", ":")))
+            texts = [_entry_text(e) for e in new]
+            self._host("append", "[" + ",".join(texts) + "]")
             self.journal_length = have + len(new)
-            self._last_entry = _entry_text(new[-1])
+            self._last_entry = texts[-1]
 
     def step(self, step: StepInput) -> StepResult:
         """Run the program once more from its start with the journal of ``step``.

@@ -46,7 +46,8 @@ class Limits:
 class StepInput:
     """Everything a step needs: the checkpoint (program + journal) and the VV's context.
 
-    ``journal`` holds the answers the VVM-API gave so far, in order; ``effects_applied`` is how
+    ``journal`` holds the answers the VVM-API gave so far, in order (as objects or as JSON
+    text, as a database keeps them); ``effects_applied`` is how
     many of the program's effects (storage writes, log lines) the platform has already applied.
     ``start_ms`` is the VV's logical time before its first answer; ``previous_step_s`` the
     duration of the last step, which bounds how long the replay part of this one may take.
@@ -58,7 +59,7 @@ class StepInput:
     seed: int
     start_ms: int
     catalog: Sequence[Mapping[str, JSON]]
-    journal: Sequence[Mapping[str, JSON]] = ()
+    journal: Sequence[Mapping[str, JSON] | str] = ()  # entries, or their JSON text
     effects_applied: int = 0
     limits: Limits = field(default_factory=Limits)
     previous_step_s: float = 0.0

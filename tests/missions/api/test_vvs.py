@@ -1,0 +1,72 @@
+"""POST/GET /api/v1/vvs/: submitting programs and reading one's own VVs."""
+
+from __future__ import annotations
+
+import pytest
+from rest_framework.authtoken.models import Token
+from rest_framework.test import APIClient
+
+from missions.models import VirtualVehicle, VVStatus
+
+PROGRAM = "var gps = VV.sensor.get('GPS');\nVV.log('hello');\n"
+
+
+@pytest.fixture
+def api_a(user_a) -> APIClient:
+    client = APIClient()
+    client.credentials(HTTP_AUTHORIZATION=f"Token {Token.objects.create(user=user_a).key}")
+    return client
+
+
+@pytest.fixture
+def api_b(user_b) -> APIClient:
+    client = APIClient()
+    client.force_authenticate(user_b)
+    return client
+
+
+def test_a_customer_submits_a_program_by_token(api_a, customer_a) -> None:
+    response = api_a.post("/api/v1/vvs/", {"name": "first", "program": PROGRAM}, format="json")
+    assert response.status_code == 201, response.content
+    body = response.json()
+    assert body["name"] == "first" and body["status"] == "queued"
+    assert {"id", "host", "tasks_done", "tasks_open", "error", "created", "finished"} <= set(body)
+    vv = VirtualVehicle.objects.get(pk=body["id"])
+    assert vv.customer == customer_a and vv.program == PROGRAM and vv.status == VVStatus.QUEUED
+
+
+def test_a_program_with_a_syntax_error_is_refused_with_line_and_column(api_a) -> None:
+    response = api_a.post(
+        "/api/v1/vvs/", {"name": "bad", "program": "var a = 1;\nvar b = ;\n"}, format="json"
+    )
+    assert response.status_code == 400
+    body = response.json()
+    assert body["error"] == {"message": "SyntaxError: Unexpected token ';'", "line": 2, "column": 9}
+    assert body["program"] == ["line 2, column 9: SyntaxError: Unexpected token ';'"]
+    assert not VirtualVehicle.objects.exists()
+
+
+def test_missing_fields_say_which(api_a) -> None:
+    response = api_a.post("/api/v1/vvs/", {"name": "nothing"}, format="json")
+    assert response.status_code == 400
+    assert response.json() == {"program": ["This field is required."]}
+
+
+def test_another_customers_vv_answers_404(api_a, api_b) -> None:
+    created = api_a.post("/api/v1/vvs/", {"name": "mine", "program": PROGRAM}, format="json").json()
+    assert api_a.get(f"/api/v1/vvs/{created['id']}/").status_code == 200
+    assert api_b.get(f"/api/v1/vvs/{created['id']}/").status_code == 404
+    assert api_b.get("/api/v1/vvs/").json()["results"] == []
+    listed = api_a.get("/api/v1/vvs/?status=queued").json()
+    assert [v["name"] for v in listed["results"]] == ["mine"]
+    assert api_a.get("/api/v1/vvs/?status=finished").json()["results"] == []
+
+
+def test_anonymous_callers_are_refused(db) -> None:
+    assert APIClient().get("/api/v1/vvs/").status_code in (401, 403)
+
+
+def test_the_openapi_schema_describes_the_vv_endpoints(api_a) -> None:
+    response = api_a.get("/api/schema/", HTTP_ACCEPT="application/vnd.oai.openapi+json")
+    assert response.status_code == 200
+    assert "/api/v1/vvs/" in response.json()["paths"]
