@@ -143,14 +143,14 @@ def main() -> None:
     assert run_step(replay).outcome is Outcome.FINISHED
     show(
         "replay of a 1,000-task journal in a new context (arrival)",
-        repeat(lambda: run_step(replay), 20),
+        repeat(lambda: run_step(replay), 20, pause_s=0.02),
     )
     for n in (10, 100):
         _, small = drive(Runtime(), program(n))
         fixed = step_input(program(n), [json.dumps(e) for e in small], n)
         show(
             f"replay of a {n}-task journal in a new context",
-            repeat(lambda r=fixed: run_step(r), 20),
+            repeat(lambda r=fixed: run_step(r), 20, pause_s=0.02),
         )
 
     idle = Runtime(max_contexts=1000)
