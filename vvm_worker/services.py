@@ -24,12 +24,14 @@ import uuid
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
+from functools import lru_cache
 from typing import Any, overload
 
 from django.conf import settings
 from django.db import transaction
 from django.db.models import Count, F, Q, QuerySet, TextField
 from django.db.models.functions import Cast
+from shapely.geometry import Polygon
 
 from accounts.models import Customer
 from accounts.selectors import customer_catalog, customer_limits
@@ -296,26 +298,42 @@ def _step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
 
 
 def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
-    if not result.effects:
-        return
-    for effect in result.effects:
-        at_s = vvm.clock.from_epoch_ms(effect.time_ms)
-        if effect.op == "store" and effect.key is not None and effect.value_json is not None:
-            StorageDocument.objects.update_or_create(
+    """Apply a step's storage writes and log lines: one upsert, one delete, one insert."""
+    if result.effects:
+        final: dict[str, tuple[str | None, float]] = {}  # key -> (value JSON or None, time)
+        lines = []
+        for effect in result.effects:
+            at_s = vvm.clock.from_epoch_ms(effect.time_ms)
+            if effect.op == "store" and effect.key is not None:
+                final[effect.key] = (effect.value_json, at_s)
+            elif effect.op == "remove" and effect.key is not None:
+                final[effect.key] = (None, at_s)
+            elif effect.op == "log" and effect.message is not None:
+                lines.append(LogEntry(vv=vv, seq=effect.seq, at_s=at_s, message=effect.message))
+        stored = [
+            StorageDocument(
                 vv=vv,
-                key=effect.key,
-                defaults={
-                    "value": json.loads(effect.value_json),
-                    "size_bytes": len(effect.key) + len(effect.value_json),
-                    "updated_s": at_s,
-                },
+                key=key,
+                value=json.loads(text),
+                size_bytes=len(key) + len(text),
+                updated_s=at_s,
             )
-        elif effect.op == "remove" and effect.key is not None:
-            StorageDocument.objects.filter(vv=vv, key=effect.key).delete()
-        elif effect.op == "log" and effect.message is not None:
-            LogEntry.objects.update_or_create(
-                vv=vv, seq=effect.seq, defaults={"at_s": at_s, "message": effect.message}
+            for key, (text, at_s) in final.items()
+            if text is not None
+        ]
+        if stored:
+            StorageDocument.objects.bulk_create(
+                stored,
+                update_conflicts=True,
+                unique_fields=["vv", "key"],
+                update_fields=["value", "size_bytes", "updated_s"],
             )
+        removed = [key for key, (text, _) in final.items() if text is None]
+        if removed:
+            StorageDocument.objects.filter(vv=vv, key__in=removed).delete()
+        if lines:
+            # A line is numbered by the program: applying it twice would be a duplicate.
+            LogEntry.objects.bulk_create(lines, ignore_conflicts=True)
     vv.effects_applied = max(vv.effects_applied, result.effects_total)
     vv.storage_bytes = result.storage_bytes
 
@@ -401,6 +419,27 @@ def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
 # --- routing and migration (the vehicle mapper and the migrator) -----------------------------
 
 
+def vehicle_caps(vehicle: Vehicle, open_tasks: int = 0) -> VehicleCaps:
+    """The mapper's view of one RV."""
+    return VehicleCaps(
+        id=vehicle.pk,
+        name=vehicle.name,
+        area=_polygon(json.dumps(vehicle.area)),
+        min_altitude_m=vehicle.min_altitude_m,
+        max_altitude_m=vehicle.max_altitude_m,
+        sensors=frozenset(s.name for s in vehicle.sensors.all()),
+        active=vehicle.status == VehicleStatus.ACTIVE,
+        position=vehicle.position,
+        max_speed_mps=vehicle.max_speed_mps,
+        open_tasks=open_tasks,
+    )
+
+
+@lru_cache(maxsize=1024)
+def _polygon(area_json: str) -> Polygon:
+    return Polygon([(float(lng), float(lat)) for lat, lng in json.loads(area_json)])
+
+
 def fleet_caps() -> list[VehicleCaps]:
     """The mapper's view of the fleet: every RV that is in service or in maintenance."""
     vehicles = (
@@ -408,21 +447,7 @@ def fleet_caps() -> list[VehicleCaps]:
         .prefetch_related("sensors")
         .annotate(open_count=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)))
     )
-    return [
-        VehicleCaps(
-            id=v.pk,
-            name=v.name,
-            area=v.area_polygon,
-            min_altitude_m=v.min_altitude_m,
-            max_altitude_m=v.max_altitude_m,
-            sensors=frozenset(s.name for s in v.sensors.all()),
-            active=v.status == VehicleStatus.ACTIVE,
-            position=v.position,
-            max_speed_mps=v.max_speed_mps,
-            open_tasks=v.open_count,
-        )
-        for v in vehicles
-    ]
+    return [vehicle_caps(v, v.open_count) for v in vehicles]
 
 
 def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
@@ -430,6 +455,16 @@ def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
     pending = _pending_of(vv)
     assert pending is not None
     open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
+    host = vv.host_rv
+    if host is not None and host.status == VehicleStatus.ACTIVE:
+        # The common case needs no look at the rest of the fleet: the RV aboard can go on.
+        caps = vehicle_caps(host)
+        mine = [t for t in open_tasks if caps.can_serve(_request(t))]
+        if mine:
+            _assign(mine, host, vvm)
+            return False
+        if any(t.vehicle_id == host.pk for t in open_tasks):
+            return False
     fleet = fleet_caps()
     decisions = {t.pk: map_task(_request(t), fleet) for t in open_tasks}
     rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
@@ -443,15 +478,6 @@ def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
             return False
         _reject(vv, pending, rejected, vvm)
         return True
-
-    host = vv.host_rv
-    if host is not None and host.status == VehicleStatus.ACTIVE:
-        mine = [t for t in open_tasks if any(c.id == host.pk for c in decisions[t.pk].candidates)]
-        if mine:
-            _assign(mine, host, vvm)
-            return False
-        if any(t.vehicle_id == host.pk for t in open_tasks):
-            return False
 
     best = _best_vehicle(open_tasks, decisions)
     if best is not None:

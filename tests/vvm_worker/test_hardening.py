@@ -254,3 +254,18 @@ def test_journal_limits_warn_then_stop_the_vv(platform, fleet, customer_a, setti
     warning = LogEntry.objects.get(vv=vv, level="warning")
     assert "the journal holds 2 answers" in warning.message
     assert vv.journal_length == 4
+
+
+@pytest.mark.django_db
+def test_a_call_the_customer_may_not_use_kills_the_vv_naming_the_quota(platform, fleet, customer_b) -> None:
+    restricted = tight("Restricted", allowed_api_calls=["sensor.get", "task.execute"])
+    source = GOOD  # it stores its readings: storage.store is not allowed
+    vv = vv_submit(customer=restricted, name="VV", program=source, vvm=platform.vvm)
+    good = vv_submit(customer=customer_b, name="good", program=GOOD, vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    good.refresh_from_db()
+    assert vv.status == VVStatus.KILLED
+    assert "storage.store is not allowed" in vv.error and "quota: allowed API calls" in vv.error
+    assert vv.storage.count() == 0
+    assert good.status == VVStatus.FINISHED
