@@ -648,7 +648,7 @@ def vehicle_set_status(*, vehicle: Vehicle, status: VehicleStatus, vvm: VVM) -> 
         logger.info("vehicle status", extra={"vehicle": vehicle.name, "status": status})
         vvm.dispatcher.vehicle_changed(vehicle.pk)
     if status == VehicleStatus.ACTIVE:
-        vvs_reroute_waiting(vvm=vvm)
+        vehicle_register(vehicle=vehicle, vvm=vvm)
 
 
 def vvs_reroute_waiting(*, vvm: VVM) -> None:
@@ -658,3 +658,77 @@ def vvs_reroute_waiting(*, vvm: VVM) -> None:
     ).order_by("submitted_s", "id")
     for vv_id in waiting.values_list("pk", flat=True):
         vvm.dispatcher.vv_arrived(vv_id)
+
+
+def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
+    """Stop a VV at the customer's request: its open tasks are dropped, what it stored stays.
+
+    Returns False when the VV had already ended. A VV aboard an RV goes back to a ground
+    station, like any VV that ends.
+    """
+    with transaction.atomic():
+        vv = (
+            VirtualVehicle.objects.select_for_update(of=("self",))
+            .select_related("customer", "host_gs", "host_rv")
+            .get(pk=vv_id)
+        )
+        if vv.is_ended:
+            return False
+        now = vvm.clock.now_s()
+        _release_tasks(vv, vvm)
+        vv.tasks.filter(status=TaskStatus.OPEN).update(status=TaskStatus.CANCELLED)
+        if vv.host_rv is not None:
+            gs = _ground_station_for(vv, near=vv.host_rv.position)
+            if gs is not None:
+                _record_migration(vv, to=gs, reason="cancelled", vvm=vvm)
+        was_queued = vv.status == VVStatus.QUEUED
+        vv.status = VVStatus.CANCELLED
+        vv.pending = None
+        vv.error = "cancelled by its owner"
+        vv.finished_s = now
+        vv.finished = dt.datetime.fromtimestamp(vvm.clock.epoch_ms(now) / 1000, tz=dt.UTC)
+        vv.save()
+        vvm.runtime.forget(str(vv.pk))
+        if not was_queued:
+            vvm.dispatcher.customer_slot_freed(vv.customer_id)
+    logger.info("vv cancelled", extra={"vv": str(vv_id)})
+    return True
+
+
+def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
+    """An RV came into service (new, or back from maintenance): it takes work at once.
+
+    VVs waiting on a ground station for an RV are routed again, and a VV whose open tasks all
+    lie in this RV's reach moves to it when it would get there sooner than the RV it is on
+    (the mapper's estimate: flight time plus the queue of tasks). The caller has saved the
+    vehicle and its sensors.
+    """
+    vvs_reroute_waiting(vvm=vvm)
+    with transaction.atomic():
+        vehicle = Vehicle.objects.prefetch_related("sensors").get(pk=vehicle.pk)
+        if vehicle.status != VehicleStatus.ACTIVE:
+            return
+        newcomer = vehicle_caps(vehicle)
+        fleet = {c.id: c for c in fleet_caps()}
+        aboard_others = (
+            VirtualVehicle.objects.select_for_update(of=("self",))
+            .filter(status=VVStatus.RUNNING, host_rv__isnull=False, pending__isnull=False)
+            .exclude(host_rv=vehicle)
+            .select_related("customer", "host_rv")
+            .order_by("submitted_s", "id")
+        )
+        for vv in aboard_others:
+            tasks = list(vv.tasks.filter(status=TaskStatus.OPEN))
+            host = fleet.get(vv.host_rv_id)  # type: ignore[arg-type]
+            requests = [_request(t) for t in tasks]
+            if not requests or host is None or not all(newcomer.can_serve(r) for r in requests):
+                continue
+            if newcomer.cost_s(requests[0]) >= host.cost_s(requests[0]):
+                continue
+            _release_tasks(vv, vvm)
+            _record_migration(vv, to=vehicle, reason="a closer vehicle came into service", vvm=vvm)
+            vv.status = VVStatus.MIGRATING
+            vv.save(update_fields=["host_rv", "host_gs", "status", "updated"])
+            vvm.dispatcher.vv_arrived(vv.pk)
+            newcomer = vehicle_caps(vehicle, newcomer.open_tasks + len(tasks))
+    vvm.dispatcher.vehicle_changed(vehicle.pk)

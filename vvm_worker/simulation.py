@@ -36,10 +36,10 @@ from vvm_worker.scenario_loader import (
 )
 from vvm_worker.services import (
     VVM,
+    vehicle_register,
     vehicle_set_status,
     vv_admit_queued,
     vv_advance,
-    vvs_reroute_waiting,
 )
 
 logger = logging.getLogger("cpcc.simulation")
@@ -161,7 +161,7 @@ class Simulation:
             vehicle = vehicle_upsert(event.add_vehicle)
             self.loaded.vehicles[vehicle.name] = vehicle
             self.add_vehicle_loop(vehicle)
-            vvs_reroute_waiting(vvm=self.vvm)
+            vehicle_register(vehicle=vehicle, vvm=self.vvm)
             return
         assert event.vehicle is not None
         vehicle = Vehicle.objects.get(name=event.vehicle)

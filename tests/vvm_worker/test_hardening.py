@@ -257,7 +257,9 @@ def test_journal_limits_warn_then_stop_the_vv(platform, fleet, customer_a, setti
 
 
 @pytest.mark.django_db
-def test_a_call_the_customer_may_not_use_kills_the_vv_naming_the_quota(platform, fleet, customer_b) -> None:
+def test_a_call_the_customer_may_not_use_kills_the_vv_naming_the_quota(
+    platform, fleet, customer_b
+) -> None:
     restricted = tight("Restricted", allowed_api_calls=["sensor.get", "task.execute"])
     source = GOOD  # it stores its readings: storage.store is not allowed
     vv = vv_submit(customer=restricted, name="VV", program=source, vvm=platform.vvm)

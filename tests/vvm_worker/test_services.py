@@ -241,3 +241,22 @@ def test_a_vv_asking_again_and_again_for_rejected_tasks_ends_at_its_tasks_quota(
     assert "quota: tasks per VV" in stubborn.error
     assert stubborn.tasks.filter(status=TaskStatus.REJECTED).count() == 120
     assert good.status == VVStatus.FINISHED
+
+
+def test_cancelling_a_vv_in_flight_sends_it_home_and_keeps_its_storage(
+    platform, fleet, customer_a
+) -> None:
+    from vvm_worker.services import vv_cancel
+
+    vv = vv_submit(
+        customer=customer_a, name="VV", program=program() + program(48.112), vvm=platform.vvm
+    )
+    platform.drain(until=lambda: VirtualVehicle.objects.get(pk=vv.pk).storage.exists())
+    assert vv_cancel(vv_id=vv.pk, vvm=platform.vvm)
+    assert not vv_cancel(vv_id=vv.pk, vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.CANCELLED and vv.host_gs is not None
+    assert vv.storage.filter(key="co2").exists()
+    assert set(vv.tasks.values_list("status", flat=True)) == {TaskStatus.DONE, TaskStatus.CANCELLED}
+    assert Migration.objects.filter(vv=vv).last().reason == "cancelled"

@@ -198,3 +198,26 @@ def test_vvs_wait_for_an_rv_in_maintenance_and_an_rv_added_later_takes_the_work(
         path = [m["to"] for m in summary["migrations"] if m["vv"] == vv["name"]]
         assert path == ["Heli One", "GS Base", "Heli Three", "GS Base"]
     assert {v["name"]: v["tasks_done"] for v in summary["vehicles"]}["Heli Two"] == 0
+
+
+@pytest.mark.django_db
+def test_an_rv_added_mid_mission_takes_over_work_in_its_area() -> None:
+    data = scenario_with()
+    heli_two = data["vehicles"].pop(1)
+    # Heli One covers the whole field at first; Heli Two joins after a minute.
+    data["vehicles"][0]["area"] = [
+        [48.109, 12.859],
+        [48.109, 12.868],
+        [48.114, 12.868],
+        [48.114, 12.859],
+        [48.109, 12.859],
+    ]
+    data["events"] = [{"at_s": 60, "add_vehicle": heli_two}]
+    summary = Simulation(parse(data)).run()
+    assert all(v["status"] == "finished" for v in summary["vvs"])
+    done = {v["name"]: v["tasks_done"] for v in summary["vehicles"]}
+    assert done["Heli Two"] > 0 and done["Heli One"] + done["Heli Two"] == 12
+    for vv in summary["vvs"]:
+        for task in vv["tasks"]:
+            if task["vehicle"] == "Heli Two":
+                assert task["position"][1] >= 12.864 and task["done_s"] > 60
