@@ -1,11 +1,15 @@
-"""What a customer may do: its quotas as runtime limits and the SDC entries it may use."""
+"""What a customer may do (its quotas as runtime limits, the SDC entries it may use), and the
+customers as staff see them."""
 
 from __future__ import annotations
 
 from typing import Any
 
+from django.db.models import Count, Q, QuerySet
+
 from accounts.models import Customer
 from fleet.models import SensorType
+from missions.models import ENDED_STATUSES
 from vvm_worker.runtime.types import Limits
 
 
@@ -29,3 +33,13 @@ def customer_catalog(*, customer: Customer) -> list[dict[str, Any]]:
     if not customer.privileged:
         entries = entries.filter(privileged=False)
     return [e.as_catalog_entry() for e in entries.order_by("name")]
+
+
+def customer_list() -> QuerySet[Customer]:
+    """Every customer (staff data) with its allowed SDC entries, its users, and how many of
+    its VVs have not ended."""
+    return (
+        Customer.objects.prefetch_related("allowed_sensors", "users")
+        .annotate(vvs_active=Count("vvs", filter=~Q(vvs__status__in=ENDED_STATUSES)))
+        .order_by("name")
+    )

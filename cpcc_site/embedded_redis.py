@@ -55,7 +55,9 @@ class EmbeddedRedis:
         self.socket_path = Path(socket_path)
         self.process: subprocess.Popen[bytes] | None = None
 
-    def start(self) -> EmbeddedRedis:
+    def start(self, *, detach: bool = False) -> EmbeddedRedis:
+        """Start the server unless one answers already. ``detach``: it keeps running after
+        this process ends (other processes use it); ``stop`` then leaves it alone."""
         if answers(self.socket_path):
             return self
         self.socket_path.parent.mkdir(parents=True, exist_ok=True)
@@ -71,7 +73,7 @@ class EmbeddedRedis:
             "--dir", str(self.socket_path.parent),
             "--logfile", str(log),
         ]  # fmt: skip
-        self.process = subprocess.Popen(command, stdin=subprocess.DEVNULL)
+        self.process = subprocess.Popen(command, stdin=subprocess.DEVNULL, start_new_session=detach)
         deadline = time.monotonic() + START_TIMEOUT_S
         while not answers(self.socket_path):
             if self.process.poll() is not None or time.monotonic() > deadline:
@@ -82,6 +84,8 @@ class EmbeddedRedis:
                 )
             time.sleep(0.05)
         logger.info("embedded redis started", extra={"socket": str(self.socket_path)})
+        if detach:
+            self.process = None
         return self
 
     def stop(self) -> None:

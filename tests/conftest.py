@@ -8,10 +8,52 @@ import pytest
 
 from tests.factories import CustomerFactory, GroundStationFactory, UserFactory, VehicleFactory
 
+# The distributed platform's fixtures (worker processes): see tests/live.py.
+pytest_plugins = ["tests.live"]
+
 # The paper's examples (../shared/examples), kept in the repository so a clone is complete.
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SCENARIOS = EXAMPLES / "scenarios"
 PROGRAMS = EXAMPLES / "vv"
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Remove what interrupted runs left of their SQLite test databases (a WAL file left
+    behind would make a new database fail with a disk I/O error)."""
+    from django.conf import settings
+
+    name = settings.DATABASES["default"].get("TEST", {}).get("NAME")
+    if not name or not settings.DATABASES["default"]["ENGINE"].endswith("sqlite3"):
+        return
+    for path in Path(name).parent.glob("test-db-*.sqlite3*"):
+        pid = path.name.removeprefix("test-db-").split(".", 1)[0]
+        if pid.isdigit() and not Path(f"/proc/{pid}").exists():
+            path.unlink(missing_ok=True)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def broker_url(tmp_path_factory: pytest.TempPathFactory):
+    """The Redis this test run's Celery messages go to: REDIS_URL's (CI's second pass), or an
+    embedded server of the run's own, so that two runs never share queues."""
+    from django.conf import settings
+
+    from cpcc_site.celery import app
+    from cpcc_site.embedded_redis import EmbeddedRedis
+
+    if settings.REDIS_URL:
+        yield settings.REDIS_URL
+        return
+    socket = tmp_path_factory.mktemp("redis") / "redis.sock"
+    with EmbeddedRedis(socket):
+        app.conf.broker_url = f"redis+socket://{socket}"
+        yield f"unix://{socket}"
+
+
+@pytest.fixture(autouse=True)
+def _fast_password_hashing(settings) -> None:
+    """Hashing test users' passwords at full strength (about 0.2 s each) would be most of the
+    suite's time; no test is about the hasher's strength."""
+    settings.PASSWORD_HASHERS = ["django.contrib.auth.hashers.MD5PasswordHasher"]
 
 
 @pytest.fixture(autouse=True)

@@ -14,6 +14,8 @@ PURE = [
     "vvm_worker.planning",
     "vvm_worker.scenario",
     "vvm_worker.mapping",
+    "missions.readings",
+    "cpcc_client.cli",  # the customers' command line runs without Django
 ]
 
 

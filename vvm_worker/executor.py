@@ -99,7 +99,9 @@ class VehicleLoop:
                 battery_fraction=self._battery_fraction(now),
                 seed=self.vvm.world_seed,
             )
-            task_complete(task_id=task.pk, readings=readings, vvm=self.vvm)
+            task_complete(
+                task_id=task.pk, readings=readings, vvm=self.vvm, vehicle_id=self.vehicle_id
+            )
         self._plan(now)
 
     def _landed(self, token: int) -> None:

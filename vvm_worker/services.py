@@ -16,6 +16,7 @@ must act next (DESIGN.md section 3). A VV moves through its life like this:
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import json
 import logging
@@ -86,6 +87,9 @@ class VVM:
     field: SensorField
     world_seed: int = 0
     runtime: Runtime = dataclass_field(default_factory=Runtime)
+    # Distributed platform: an RV whose worker has not reported for this long takes no work.
+    # None in `simulate`, where every RV's loop runs in the same process.
+    lease_s: float | None = None
 
 
 class ProgramRejected(ValueError):
@@ -440,14 +444,29 @@ def _polygon(area_json: str) -> Polygon:
     return Polygon([(float(lng), float(lat)) for lat, lng in json.loads(area_json)])
 
 
-def fleet_caps() -> list[VehicleCaps]:
-    """The mapper's view of the fleet: every RV that is in service or in maintenance."""
+def fleet_caps(vvm: VVM) -> list[VehicleCaps]:
+    """The mapper's view of the fleet: every RV that is in service or in maintenance; one whose
+    worker is gone counts as in maintenance (it may come back)."""
     vehicles = (
         Vehicle.objects.exclude(status=VehicleStatus.REMOVED)
         .prefetch_related("sensors")
         .annotate(open_count=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)))
     )
-    return [vehicle_caps(v, v.open_count) for v in vehicles]
+    caps = [vehicle_caps(v, v.open_count) for v in vehicles]
+    if vvm.lease_s is not None:
+        online = set(_online_vehicles(vvm).values_list("pk", flat=True))
+        caps = [dataclasses.replace(c, active=c.active and c.id in online) for c in caps]
+    return caps
+
+
+def _online_vehicles(vvm: VVM) -> QuerySet[Vehicle]:
+    assert vvm.lease_s is not None
+    since = _as_datetime(vvm, vvm.clock.now_s() - vvm.lease_s)
+    return Vehicle.objects.filter(worker_seen__gte=since)
+
+
+def _as_datetime(vvm: VVM, t_s: float) -> dt.datetime:
+    return dt.datetime.fromtimestamp(vvm.clock.epoch_ms(t_s) / 1000, tz=dt.UTC)
 
 
 def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
@@ -465,7 +484,7 @@ def _route(vv: VirtualVehicle, vvm: VVM) -> bool:
             return False
         if any(t.vehicle_id == host.pk for t in open_tasks):
             return False
-    fleet = fleet_caps()
+    fleet = fleet_caps(vvm)
     decisions = {t.pk: map_task(_request(t), fleet) for t in open_tasks}
     rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
     # A batch is accepted or rejected as a whole, before any of its tasks is answered.
@@ -588,11 +607,15 @@ def _migrate_to_ground_station(vv: VirtualVehicle, *, reason: str, vvm: VVM) -> 
 # --- task completion (the task executor's answer) -------------------------------------------
 
 
-def task_complete(*, task_id: int, readings: list[dict[str, Any]], vvm: VVM) -> bool:
+def task_complete(
+    *, task_id: int, readings: list[dict[str, Any]], vvm: VVM, vehicle_id: int | None = None
+) -> bool:
     """Record an RV's readings as the answer to a task and resume the VV on that RV.
 
-    Returns False (and changes nothing) when the task is no longer open: a duplicate
-    delivery, or a VV that was cancelled or moved on meanwhile.
+    Returns False (and changes nothing) when the task is no longer open or no longer this
+    vehicle's (``vehicle_id``): a duplicate delivery, or a VV that was cancelled or moved on
+    meanwhile, e.g. because this RV's worker was taken for gone. A reading is never taken
+    twice.
     """
     with transaction.atomic():
         # Lock the VV before its task, in the same order as vv_advance, so two workers
@@ -602,6 +625,10 @@ def task_complete(*, task_id: int, readings: list[dict[str, Any]], vvm: VVM) -> 
         task = Task.objects.select_for_update().get(pk=task_id)
         pending = _pending_of(vv)
         if task.status != TaskStatus.OPEN or pending is None or pending.q != task.q:
+            return False
+        if vehicle_id is not None and (
+            task.vehicle_id != vehicle_id or vv.host_rv_id != vehicle_id
+        ):
             return False
         now = vvm.clock.now_s()
         time_ms = vvm.clock.epoch_ms(now)
@@ -709,7 +736,7 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
         if vehicle.status != VehicleStatus.ACTIVE:
             return
         newcomer = vehicle_caps(vehicle)
-        fleet = {c.id: c for c in fleet_caps()}
+        fleet = {c.id: c for c in fleet_caps(vvm)}
         aboard_others = (
             VirtualVehicle.objects.select_for_update(of=("self",))
             .filter(status=VVStatus.RUNNING, host_rv__isnull=False, pending__isnull=False)
@@ -732,3 +759,38 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
             vvm.dispatcher.vv_arrived(vv.pk)
             newcomer = vehicle_caps(vehicle, newcomer.open_tasks + len(tasks))
     vvm.dispatcher.vehicle_changed(vehicle.pk)
+
+
+def vehicle_heartbeat(*, vehicle_id: int, vvm: VVM) -> None:
+    """The vehicle's worker is alive (it renews its lease)."""
+    Vehicle.objects.filter(pk=vehicle_id).update(worker_seen=_as_datetime(vvm, vvm.clock.now_s()))
+
+
+def vehicles_check_leases(*, vvm: VVM) -> list[str]:
+    """Move the VVs off every RV whose worker has stopped reporting; returns those RVs' names.
+
+    The VVs wait on a ground station, which routes them to an RV that can serve them (this
+    one again, if its worker comes back). Whatever that worker might still report for their
+    tasks is refused (``task_complete`` checks the vehicle), so no reading is taken twice.
+    """
+    assert vvm.lease_s is not None
+    gone = []
+    online = _online_vehicles(vvm).values("pk")
+    stale = (
+        Vehicle.objects.exclude(pk__in=online).filter(vvs__status__in=ACTIVE_STATUSES).distinct()
+    )
+    for vehicle in stale:
+        with transaction.atomic():
+            stranded = (
+                VirtualVehicle.objects.select_for_update(of=("self",))
+                .filter(host_rv=vehicle, status__in=ACTIVE_STATUSES)
+                .select_related("customer", "host_gs", "host_rv")
+            )
+            for vv in stranded:
+                _migrate_to_ground_station(
+                    vv, reason="its vehicle's worker stopped reporting", vvm=vvm
+                )
+                vv.save()
+        gone.append(vehicle.name)
+        logger.warning("vehicle worker lost", extra={"vehicle": vehicle.name})
+    return gone

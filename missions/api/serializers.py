@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
+import datetime as dt
+import uuid
+from typing import Any
+
+from django.urls import reverse
+from drf_spectacular.types import OpenApiTypes
+from drf_spectacular.utils import extend_schema_field
 from rest_framework import serializers
 
-from missions.models import TaskStatus, VirtualVehicle
+from missions.models import LogEntry, StorageDocument, Task, TaskStatus, VirtualVehicle
+from missions.readings import image_file, map_camera_readings
 
 
 class VVCreateSerializer(serializers.Serializer):
@@ -52,3 +60,135 @@ class VVSerializer(serializers.ModelSerializer):
 
     def get_tasks_open(self, vv: VirtualVehicle) -> int:
         return vv.tasks.filter(status=TaskStatus.OPEN).count()
+
+
+def platform_datetime(vv: VirtualVehicle, t_s: float | None) -> dt.datetime | None:
+    """A time on the platform clock (``*_s`` fields) as a date.
+
+    The platform clock is the Unix epoch in a live system; ``simulate`` counts from 0 and gives
+    its VVs dates from 2025-01-01. The VV's logical start (``start_ms``, a date) against its
+    submission (``submitted_s``, platform clock) says which, so task and log times line up
+    with the ``time`` of the readings in both cases.
+    """
+    if t_s is None:
+        return None
+    offset_s = round(vv.start_ms / 1000.0 - vv.submitted_s)
+    return dt.datetime.fromtimestamp(t_s + offset_s, tz=dt.UTC)
+
+
+_DATETIME = serializers.DateTimeField()
+
+
+def platform_time(vv: VirtualVehicle, t_s: float | None) -> str | None:
+    """A time on the platform clock as the API shows dates (ISO 8601, UTC)."""
+    moment = platform_datetime(vv, t_s)
+    return None if moment is None else _DATETIME.to_representation(moment)
+
+
+def image_url(context: dict[str, Any], vv_id: uuid.UUID, file: str) -> str:
+    """The absolute URL of ``GET /api/v1/vvs/{id}/images/{file}`` (relative without a request)."""
+    path = reverse("vv-image", kwargs={"id": str(vv_id), "file": file})
+    request = context.get("request")
+    return request.build_absolute_uri(path) if request is not None else path
+
+
+def with_image_urls(value: Any, *, context: dict[str, Any], vv_id: uuid.UUID) -> Any:
+    """A copy of a JSON value where every camera reading also has ``image_url``."""
+
+    def link(reading: dict[str, Any]) -> dict[str, Any]:
+        reading["image_url"] = image_url(context, vv_id, image_file(reading["image"]))
+        return reading
+
+    return map_camera_readings(value, link)
+
+
+class StorageDocumentOutSerializer(serializers.ModelSerializer):
+    """One key of a VV's storage. A camera reading in the value (at any depth) also has
+    ``image_url``, where its picture is."""
+
+    value = serializers.SerializerMethodField()
+    updated = serializers.SerializerMethodField()
+
+    class Meta:
+        model = StorageDocument
+        fields = ["key", "value", "updated"]
+
+    @extend_schema_field(OpenApiTypes.ANY)
+    def get_value(self, doc: StorageDocument) -> Any:
+        return with_image_urls(doc.value, context=self.context, vv_id=doc.vv_id)
+
+    @extend_schema_field(OpenApiTypes.DATETIME)
+    def get_updated(self, doc: StorageDocument) -> str | None:
+        return platform_time(doc.vv, doc.updated_s)
+
+
+class TaskOutSerializer(serializers.ModelSerializer):
+    """A point task the VV asked for, and its readings once an RV has been there."""
+
+    position = serializers.SerializerMethodField(
+        help_text="[lat, lng, alt], alt in m above ground."
+    )
+    requested = serializers.SerializerMethodField()
+    done = serializers.SerializerMethodField(help_text="When it was read or rejected.")
+    readings = serializers.SerializerMethodField(
+        help_text="One reading per sensor, in the order asked; camera readings have image_url."
+    )
+    sensors = serializers.ListField(child=serializers.CharField(), help_text="SDC entry names.")
+    message = serializers.CharField(help_text="Why the task was rejected, if it was.")
+
+    class Meta:
+        model = Task
+        fields = [
+            "q",
+            "index",
+            "position",
+            "tolerance_m",
+            "sensors",
+            "status",
+            "requested",
+            "done",
+            "readings",
+            "message",
+        ]
+
+    def get_position(self, task: Task) -> list[float]:
+        return [task.lat, task.lng, task.alt]
+
+    @extend_schema_field(OpenApiTypes.DATETIME)
+    def get_requested(self, task: Task) -> str | None:
+        return platform_time(task.vv, task.requested_s)
+
+    @extend_schema_field({"type": "string", "format": "date-time", "nullable": True})
+    def get_done(self, task: Task) -> str | None:
+        return platform_time(task.vv, task.done_s)
+
+    @extend_schema_field(
+        {"type": "array", "items": {"type": "object", "additionalProperties": {}}, "nullable": True}
+    )
+    def get_readings(self, task: Task) -> Any:
+        if task.readings is None:
+            return None
+        return with_image_urls(task.readings, context=self.context, vv_id=task.vv_id)
+
+
+class StaffTaskOutSerializer(TaskOutSerializer):
+    """A task as staff see it: also which vehicle served (or serves) it."""
+
+    vehicle = serializers.CharField(source="vehicle.name", default=None, allow_null=True)
+
+    class Meta(TaskOutSerializer.Meta):
+        fields = [*TaskOutSerializer.Meta.fields, "vehicle"]
+
+
+class LogEntryOutSerializer(serializers.ModelSerializer):
+    """A line of the VV's log."""
+
+    at = serializers.SerializerMethodField()
+
+    class Meta:
+        model = LogEntry
+        fields = ["at", "level", "message"]
+
+    @extend_schema_field(OpenApiTypes.DATETIME)
+    def get_at(self, entry: LogEntry) -> str | None:
+        return platform_time(entry.vv, entry.at_s)

@@ -1,8 +1,34 @@
+"""Routes of the VV endpoints: /api/v1/vvs/ and what hangs off one VV."""
+
+from django.urls import re_path
 from rest_framework.routers import DefaultRouter
 
-from missions.api.views import VirtualVehicleViewSet
+from missions.api.views import (
+    VirtualVehicleViewSet,
+    VVImageView,
+    VVLogView,
+    VVResultsView,
+    VVStorageItemView,
+    VVStorageListView,
+    VVTaskListView,
+)
 
 router = DefaultRouter()
 router.register("vvs", VirtualVehicleViewSet, basename="vv")
 
-urlpatterns = router.urls
+ONE_VV = r"^vvs/(?P<id>[0-9a-fA-F-]{36})/"
+
+urlpatterns = [
+    *router.urls,
+    re_path(ONE_VV + r"storage/$", VVStorageListView.as_view(), name="vv-storage"),
+    # A key is any non-empty string: dots, slashes, spaces, even line breaks (percent-encoded).
+    re_path(
+        ONE_VV + r"storage/(?P<key>[\s\S]+)/$",
+        VVStorageItemView.as_view(),
+        name="vv-storage-item",
+    ),
+    re_path(ONE_VV + r"images/(?P<file>[^/]+)$", VVImageView.as_view(), name="vv-image"),
+    re_path(ONE_VV + r"tasks/$", VVTaskListView.as_view(), name="vv-tasks"),
+    re_path(ONE_VV + r"log/$", VVLogView.as_view(), name="vv-log"),
+    re_path(ONE_VV + r"results\.zip$", VVResultsView.as_view(), name="vv-results"),
+]

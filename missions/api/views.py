@@ -1,18 +1,90 @@
-"""The VV endpoints of the REST API (DESIGN.md section 6), always scoped to the caller."""
+"""The VV endpoints of the REST API (DESIGN.md section 6), always scoped to the caller.
+
+Another customer's VV answers 404, exactly like one that does not exist.
+"""
 
 from __future__ import annotations
 
+import mimetypes
+from typing import Any
+
+from django.core.files.storage import default_storage
 from django.db.models import QuerySet
+from django.http import FileResponse
+from drf_spectacular.types import OpenApiTypes
 from drf_spectacular.utils import OpenApiParameter, extend_schema, extend_schema_view
-from rest_framework import mixins, status, viewsets
-from rest_framework.exceptions import PermissionDenied
+from rest_framework import generics, mixins, status, viewsets
+from rest_framework.decorators import action
+from rest_framework.exceptions import NotFound, PermissionDenied
 from rest_framework.request import Request
 from rest_framework.response import Response
+from rest_framework.serializers import BaseSerializer
 
-from missions.api.serializers import VVCreateSerializer, VVSerializer
-from missions.models import VirtualVehicle, VVStatus
-from missions.selectors import vv_list_for_user
-from missions.services import NotACustomer, vv_create_for_user
+from cpcc_site.api import Conflict, DetailSerializer, FileOrJSONNegotiation
+from missions.api.results import build_results_zip, results_filename
+from missions.api.serializers import (
+    LogEntryOutSerializer,
+    StaffTaskOutSerializer,
+    StorageDocumentOutSerializer,
+    TaskOutSerializer,
+    VVCreateSerializer,
+    VVSerializer,
+)
+from missions.models import LogEntry, StorageDocument, Task, VirtualVehicle, VVStatus
+from missions.readings import image_file, is_camera_reading
+from missions.selectors import (
+    ImageNotFound,
+    StorageKeyNotFound,
+    VVNotFound,
+    vv_get_for_user,
+    vv_image_for_user,
+    vv_list_for_user,
+    vv_log_for_user,
+    vv_storage_for_user,
+    vv_storage_get_for_user,
+    vv_tasks_for_user,
+)
+from missions.services import NotACustomer, VVAlreadyEnded, vv_cancel_for_user, vv_create_for_user
+
+NO_SUCH_VV = (
+    "No virtual vehicle with this id among yours: check the id (GET /api/v1/vvs/ lists them)."
+)
+VV_ID = OpenApiParameter("id", OpenApiTypes.UUID, OpenApiParameter.PATH, description="The VV's id.")
+NOT_FOUND = {404: DetailSerializer}
+IMAGE = {(200, "image/png"): OpenApiTypes.BINARY, (200, "image/jpeg"): OpenApiTypes.BINARY}
+
+
+class VVErrorsMixin:
+    """Turns the domain's "not found" and "already ended" into JSON errors a person can act on."""
+
+    def handle_exception(self, exc: Exception) -> Response:
+        if isinstance(exc, VVNotFound):
+            exc = NotFound(NO_SUCH_VV)
+        elif isinstance(exc, StorageKeyNotFound):
+            exc = NotFound(
+                f"This VV's storage has no key {exc.args[0]!r} "
+                "(GET /api/v1/vvs/{id}/storage/ lists its keys)."
+            )
+        elif isinstance(exc, ImageNotFound):
+            exc = NotFound(f"No reading of this VV took a picture named {exc.args[0]!r}.")
+        elif isinstance(exc, VVAlreadyEnded):
+            exc = Conflict(
+                f"{exc.vv.name!r} has already ended ({exc.vv.status}): there is nothing to cancel."
+            )
+        return super().handle_exception(exc)  # type: ignore[misc, no-any-return]
+
+
+def _image_response(reference: str) -> FileResponse:
+    """The picture a reading references, from the platform's media storage."""
+    try:
+        handle = default_storage.open(reference, "rb")
+    except OSError:
+        raise NotFound("The picture of this reading is no longer kept by the platform.") from None
+    content_type = mimetypes.guess_type(reference)[0] or "application/octet-stream"
+    response = FileResponse(handle, content_type=content_type, filename=image_file(reference))
+    # Content-addressed: a file name always means the same bytes. Private: tenancy.
+    response["Cache-Control"] = "private, max-age=86400"
+    return response
 
 
 @extend_schema_view(
@@ -20,12 +92,13 @@ from missions.services import NotACustomer, vv_create_for_user
         parameters=[
             OpenApiParameter("status", enum=VVStatus.values, description="only VVs in this state")
         ]
-    )
+    ),
+    retrieve=extend_schema(responses={200: VVSerializer, **NOT_FOUND}),
 )
 class VirtualVehicleViewSet(
-    mixins.ListModelMixin, mixins.RetrieveModelMixin, viewsets.GenericViewSet
+    VVErrorsMixin, mixins.ListModelMixin, mixins.RetrieveModelMixin, viewsets.GenericViewSet
 ):
-    """Your virtual vehicles: submit a program, list them, look at one.
+    """Your virtual vehicles: submit a program, list them, look at one, cancel one.
 
     Another customer's VV answers 404, like one that does not exist.
     """
@@ -37,6 +110,9 @@ class VirtualVehicleViewSet(
         vvs = vv_list_for_user(user=self.request.user).order_by("-created")  # type: ignore[arg-type]
         wanted = self.request.query_params.get("status")
         return vvs.filter(status=wanted) if wanted else vvs
+
+    def get_object(self) -> VirtualVehicle:
+        return vv_get_for_user(user=self.request.user, vv_id=self.kwargs["pk"])  # type: ignore[arg-type]
 
     @extend_schema(request=VVCreateSerializer, responses={201: VVSerializer})
     def create(self, request: Request) -> Response:
@@ -52,3 +128,131 @@ class VirtualVehicleViewSet(
                 {"program": [str(problem)], "error": error}, status=status.HTTP_400_BAD_REQUEST
             )
         return Response(self.get_serializer(vv).data, status=status.HTTP_201_CREATED)
+
+    @extend_schema(
+        request=None,
+        responses={200: VVSerializer, **NOT_FOUND, 409: DetailSerializer},
+        description="Stop the VV: its open tasks are dropped, what it stored stays. "
+        "409 when it had already ended.",
+    )
+    @action(detail=True, methods=["post"])
+    def cancel(self, request: Request, pk: str) -> Response:
+        vv = vv_cancel_for_user(user=request.user, vv_id=pk)  # type: ignore[arg-type]
+        return Response(self.get_serializer(vv).data)
+
+
+@extend_schema(
+    parameters=[VV_ID], responses={200: StorageDocumentOutSerializer(many=True), **NOT_FOUND}
+)
+class VVStorageListView(VVErrorsMixin, generics.ListAPIView):  # type: ignore[type-arg]
+    """The VV's storage: every key with its value. A camera reading in a value (at any depth)
+    also has ``image_url``, where its picture is."""
+
+    serializer_class = StorageDocumentOutSerializer
+
+    def get_queryset(self) -> QuerySet[StorageDocument]:
+        return vv_storage_for_user(user=self.request.user, vv_id=self.kwargs["id"])  # type: ignore[arg-type]
+
+
+@extend_schema(
+    parameters=[
+        VV_ID,
+        OpenApiParameter(
+            "key",
+            OpenApiTypes.STR,
+            OpenApiParameter.PATH,
+            description="The storage key, percent-encoded (it may contain '/', '.', spaces...).",
+        ),
+        OpenApiParameter(
+            "format",
+            OpenApiTypes.STR,
+            enum=["json"],
+            description="json: the document as JSON even when the value is a camera reading.",
+        ),
+    ],
+    responses={200: StorageDocumentOutSerializer, **IMAGE, **NOT_FOUND},
+)
+class VVStorageItemView(VVErrorsMixin, generics.GenericAPIView):  # type: ignore[type-arg]
+    """One key of the VV's storage as ``{key, value, updated}``, or, when the value is itself a
+    camera reading, its picture (PNG or JPEG); ``?format=json`` gives the JSON anyway."""
+
+    serializer_class = StorageDocumentOutSerializer
+    content_negotiation_class = FileOrJSONNegotiation
+
+    def get(self, request: Request, id: str, key: str) -> Response | FileResponse:
+        doc = vv_storage_get_for_user(user=request.user, vv_id=id, key=key)  # type: ignore[arg-type]
+        if is_camera_reading(doc.value) and request.query_params.get("format") != "json":
+            reference = vv_image_for_user(
+                user=request.user,  # type: ignore[arg-type]
+                vv_id=id,
+                file=image_file(doc.value["image"]),
+            )
+            return _image_response(reference)
+        return Response(self.get_serializer(doc).data)
+
+
+@extend_schema(
+    parameters=[
+        VV_ID,
+        OpenApiParameter(
+            "file", OpenApiTypes.STR, OpenApiParameter.PATH, description="The image's file name."
+        ),
+    ],
+    responses={**IMAGE, **NOT_FOUND},
+)
+class VVImageView(VVErrorsMixin, generics.GenericAPIView):  # type: ignore[type-arg]
+    """A picture one of the VV's camera readings took (the ``image_url`` of the reading)."""
+
+    content_negotiation_class = FileOrJSONNegotiation
+
+    def get_serializer_class(self) -> type[BaseSerializer[Any]]:
+        return DetailSerializer  # only errors are JSON here
+
+    def get(self, request: Request, id: str, file: str) -> FileResponse:
+        reference = vv_image_for_user(user=request.user, vv_id=id, file=file)  # type: ignore[arg-type]
+        return _image_response(reference)
+
+
+@extend_schema(parameters=[VV_ID], responses={200: TaskOutSerializer(many=True), **NOT_FOUND})
+class VVTaskListView(VVErrorsMixin, generics.ListAPIView):  # type: ignore[type-arg]
+    """The VV's tasks in the order it asked for them, with their readings once done (camera
+    readings have ``image_url``) and why a rejected one was rejected. Staff also see
+    ``vehicle``, the name of the RV that served or serves the task."""
+
+    def get_serializer_class(self) -> type[TaskOutSerializer]:
+        return StaffTaskOutSerializer if self.request.user.is_staff else TaskOutSerializer
+
+    def get_queryset(self) -> QuerySet[Task]:
+        return vv_tasks_for_user(user=self.request.user, vv_id=self.kwargs["id"])  # type: ignore[arg-type]
+
+
+@extend_schema(parameters=[VV_ID], responses={200: LogEntryOutSerializer(many=True), **NOT_FOUND})
+class VVLogView(VVErrorsMixin, generics.ListAPIView):  # type: ignore[type-arg]
+    """The VV's log, oldest line first: what its program logged and what the platform said."""
+
+    serializer_class = LogEntryOutSerializer
+
+    def get_queryset(self) -> QuerySet[LogEntry]:
+        return vv_log_for_user(user=self.request.user, vv_id=self.kwargs["id"])  # type: ignore[arg-type]
+
+
+@extend_schema(
+    parameters=[VV_ID], responses={(200, "application/zip"): OpenApiTypes.BINARY, **NOT_FOUND}
+)
+class VVResultsView(VVErrorsMixin, generics.GenericAPIView):  # type: ignore[type-arg]
+    """Everything the VV produced as one zip: ``vv.json``, ``storage.json`` (camera readings
+    name their file under ``images/``), ``tasks.json``, ``log.txt`` and ``images/``."""
+
+    content_negotiation_class = FileOrJSONNegotiation
+
+    def get_serializer_class(self) -> type[BaseSerializer[Any]]:
+        return DetailSerializer  # only errors are JSON here
+
+    def get(self, request: Request, id: str) -> FileResponse:
+        vv = vv_get_for_user(user=request.user, vv_id=id)  # type: ignore[arg-type]
+        return FileResponse(
+            build_results_zip(request=request, vv=vv),
+            as_attachment=True,
+            filename=results_filename(vv),
+            content_type="application/zip",
+        )

@@ -347,7 +347,7 @@ class VVContext:
         self.usable = False
         self._mr.close()
 
-    def _sync_journal(self, journal: Sequence[Mapping[str, Any]]) -> None:
+    def _sync_journal(self, journal: Sequence[Mapping[str, Any] | str]) -> None:
         have = self.journal_length
         if len(journal) < have or (have and _entry_text(journal[have - 1]) != self._last_entry):
             raise StaleContext(self.vv_id)

@@ -2,27 +2,12 @@
 
 from __future__ import annotations
 
-import pytest
-from rest_framework.authtoken.models import Token
 from rest_framework.test import APIClient
 
+import missions.services
 from missions.models import VirtualVehicle, VVStatus
 
 PROGRAM = "var gps = VV.sensor.get('GPS');\nVV.log('hello');\n"
-
-
-@pytest.fixture
-def api_a(user_a) -> APIClient:
-    client = APIClient()
-    client.credentials(HTTP_AUTHORIZATION=f"Token {Token.objects.create(user=user_a).key}")
-    return client
-
-
-@pytest.fixture
-def api_b(user_b) -> APIClient:
-    client = APIClient()
-    client.force_authenticate(user_b)
-    return client
 
 
 def test_a_customer_submits_a_program_by_token(api_a, customer_a) -> None:
@@ -33,6 +18,17 @@ def test_a_customer_submits_a_program_by_token(api_a, customer_a) -> None:
     assert {"id", "host", "tasks_done", "tasks_open", "error", "created", "finished"} <= set(body)
     vv = VirtualVehicle.objects.get(pk=body["id"])
     assert vv.customer == customer_a and vv.program == PROGRAM and vv.status == VVStatus.QUEUED
+
+
+def test_the_workers_are_asked_to_admit_a_new_vv_once_it_is_committed(
+    api_a, customer_a, vvm_factory, monkeypatch
+) -> None:
+    vvm = vvm_factory()
+    monkeypatch.setattr(missions.services, "platform_vvm", lambda: vvm)
+    api_a.post("/api/v1/vvs/", {"name": "first", "program": PROGRAM}, format="json")
+    assert vvm.dispatcher.slots == [customer_a.pk]
+    api_a.post("/api/v1/vvs/", {"name": "bad", "program": "var = ;"}, format="json")
+    assert vvm.dispatcher.slots == [customer_a.pk], "nothing to admit for a refused program"
 
 
 def test_a_program_with_a_syntax_error_is_refused_with_line_and_column(api_a) -> None:

@@ -1,0 +1,78 @@
+"""Input and output shapes of the customer endpoints."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rest_framework import serializers
+
+from accounts.models import Customer
+from accounts.services import VVM_API_CALLS, CustomerConfig
+
+
+class CustomerInSerializer(serializers.Serializer):
+    """A customer and its quotas; quotas left out keep their defaults (or current values)."""
+
+    name = serializers.CharField(max_length=120)
+    slug = serializers.SlugField(
+        max_length=120, required=False, help_text="Made from the name when left out."
+    )
+    privileged = serializers.BooleanField(required=False)
+    max_parallel_vvs = serializers.IntegerField(min_value=1, required=False)
+    max_tasks_per_vv = serializers.IntegerField(min_value=1, required=False)
+    storage_bytes = serializers.IntegerField(min_value=0, required=False)
+    cpu_ms_per_step = serializers.IntegerField(min_value=1, required=False)
+    heap_bytes = serializers.IntegerField(min_value=1024 * 1024, required=False)
+    allowed_sensors = serializers.ListField(
+        child=serializers.CharField(),
+        required=False,
+        help_text="SDC entry names its VVs may use; empty: every unprivileged entry "
+        "(privileged ones too for a privileged customer).",
+    )
+    allowed_api_calls = serializers.ListField(
+        child=serializers.ChoiceField(choices=VVM_API_CALLS),
+        required=False,
+        help_text="VVM-API calls its VVs may use; empty: all.",
+    )
+
+    def config(self) -> CustomerConfig:
+        """The validated input as model fields."""
+        data: dict[str, Any] = {
+            k: v for k, v in self.validated_data.items() if k != "allowed_sensors"
+        }
+        return CustomerConfig(**data)  # type: ignore[typeddict-item]
+
+    def sensor_names(self) -> list[str] | None:
+        """The allowed sensors asked for, or None when the input does not mention them."""
+        names = self.validated_data.get("allowed_sensors")
+        return None if names is None else list(names)
+
+
+class CustomerOutSerializer(serializers.ModelSerializer):
+    """A customer: its quotas, what its VVs may use, its users."""
+
+    allowed_sensors = serializers.SlugRelatedField(slug_field="name", many=True, read_only=True)
+    allowed_api_calls = serializers.ListField(child=serializers.CharField())
+    users = serializers.SlugRelatedField(slug_field="username", many=True, read_only=True)
+    vvs_active = serializers.IntegerField(
+        read_only=True, default=0, help_text="Its VVs that have not ended."
+    )
+
+    class Meta:
+        model = Customer
+        fields = [
+            "id",
+            "name",
+            "slug",
+            "privileged",
+            "max_parallel_vvs",
+            "max_tasks_per_vv",
+            "storage_bytes",
+            "cpu_ms_per_step",
+            "heap_bytes",
+            "allowed_sensors",
+            "allowed_api_calls",
+            "users",
+            "vvs_active",
+            "created",
+        ]

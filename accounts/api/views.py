@@ -1,0 +1,101 @@
+"""The customer endpoints of the REST API (staff only): customers and their quotas."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from django.core.exceptions import ValidationError as DjangoValidationError
+from django.db.models import QuerySet
+from drf_spectacular.types import OpenApiTypes
+from drf_spectacular.utils import extend_schema, extend_schema_view
+from rest_framework import mixins, status, viewsets
+from rest_framework.exceptions import NotFound, ValidationError
+from rest_framework.permissions import IsAuthenticated
+from rest_framework.request import Request
+from rest_framework.response import Response
+from rest_framework.serializers import as_serializer_error
+
+from accounts.api.serializers import CustomerInSerializer, CustomerOutSerializer
+from accounts.models import Customer
+from accounts.selectors import customer_list
+from accounts.services import CustomerBusy, customer_create, customer_delete, customer_update
+from cpcc_site.api import Conflict, DetailSerializer, IsStaff
+from vvm_worker.platform import platform_vvm
+
+STAFF_ERRORS = {403: DetailSerializer, 404: DetailSerializer}
+BAD_INPUT = {400: OpenApiTypes.OBJECT}
+
+
+@extend_schema_view(
+    retrieve=extend_schema(responses={200: CustomerOutSerializer, **STAFF_ERRORS}),
+    create=extend_schema(
+        request=CustomerInSerializer,
+        responses={201: CustomerOutSerializer, **BAD_INPUT, 403: DetailSerializer},
+    ),
+    update=extend_schema(
+        request=CustomerInSerializer,
+        responses={200: CustomerOutSerializer, **BAD_INPUT, **STAFF_ERRORS},
+    ),
+    partial_update=extend_schema(
+        request=CustomerInSerializer,
+        responses={200: CustomerOutSerializer, **BAD_INPUT, **STAFF_ERRORS},
+    ),
+    destroy=extend_schema(responses={204: None, 409: DetailSerializer, **STAFF_ERRORS}),
+)
+class CustomerViewSet(
+    mixins.ListModelMixin,
+    mixins.RetrieveModelMixin,
+    viewsets.GenericViewSet,  # type: ignore[type-arg]
+):
+    """The customers (staff only): who may use the platform, with which quotas and which SDC
+    entries and VVM-API calls. A customer with VVs that have not ended cannot be deleted."""
+
+    permission_classes = [IsAuthenticated, IsStaff]
+    serializer_class = CustomerOutSerializer
+
+    def get_queryset(self) -> QuerySet[Customer]:
+        return customer_list()
+
+    def get_object(self) -> Customer:
+        try:
+            return self.get_queryset().get(pk=int(self.kwargs["pk"]))
+        except (ValueError, Customer.DoesNotExist):
+            raise NotFound(f"No customer with id {self.kwargs['pk']!r}.") from None
+
+    def handle_exception(self, exc: Exception) -> Response:
+        if isinstance(exc, DjangoValidationError):
+            exc = ValidationError(as_serializer_error(exc))
+        elif isinstance(exc, CustomerBusy):
+            exc = Conflict(
+                f"{exc.customer.name} has {exc.count} VV(s) that have not ended; "
+                "cancel them (POST /api/v1/vvs/{id}/cancel/) or wait until they end."
+            )
+        return super().handle_exception(exc)
+
+    def _shown(self, customer: Customer, code: int = status.HTTP_200_OK) -> Response:
+        fresh = customer_list().get(pk=customer.pk)
+        return Response(self.get_serializer(fresh).data, status=code)
+
+    def create(self, request: Request) -> Response:
+        given = CustomerInSerializer(data=request.data)
+        given.is_valid(raise_exception=True)
+        customer = customer_create(config=given.config(), allowed_sensors=given.sensor_names())
+        return self._shown(customer, status.HTTP_201_CREATED)
+
+    def update(self, request: Request, pk: str, partial: bool = False, **kwargs: Any) -> Response:
+        given = CustomerInSerializer(data=request.data, partial=partial)
+        given.is_valid(raise_exception=True)
+        customer = customer_update(
+            customer=self.get_object(),
+            config=given.config(),
+            allowed_sensors=given.sensor_names(),
+            vvm=platform_vvm(),
+        )
+        return self._shown(customer)
+
+    def partial_update(self, request: Request, pk: str) -> Response:
+        return self.update(request, pk, partial=True)
+
+    def destroy(self, request: Request, pk: str) -> Response:
+        customer_delete(customer=self.get_object())
+        return Response(status=status.HTTP_204_NO_CONTENT)

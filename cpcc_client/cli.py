@@ -1,0 +1,296 @@
+"""``cpcc``: submit VV programs to a CPCC platform, watch them and fetch their results.
+
+Environment: ``CPCC_URL`` (default http://127.0.0.1:8000) and ``CPCC_TOKEN``, your API token
+(``python manage.py drf_create_token USERNAME`` on the server gives one).
+
+Exit codes: 0 success (``submit --wait``: the VV finished); 1 the server refused the request,
+could not be reached, or the VV ended otherwise than finished; 2 a usage or set-up problem, or
+a program with a syntax error (printed as ``FILE:LINE:COLUMN: message``); 3 ``--wait`` gave up
+after ``--timeout`` seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+import zipfile
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from cpcc_client.client import ApiError, Client, Unreachable
+
+DEFAULT_URL = "http://127.0.0.1:8000"
+ENDED = ("finished", "failed", "killed", "cancelled")
+VVS = "/api/v1/vvs/"
+
+EXIT_OK = 0
+EXIT_ERROR = 1
+EXIT_USAGE = 2
+EXIT_TIMEOUT = 3
+
+# How --wait waits between two polls; a module attribute so that tests can step time.
+_sleep: Callable[[float], None] = time.sleep
+
+
+class UsageError(Exception):
+    """A problem with the command line or the environment (exit code 2)."""
+
+
+def _out(*parts: object) -> None:
+    print(*parts, file=sys.stdout)
+
+
+def _err(*parts: object) -> None:
+    print(*parts, file=sys.stderr)
+
+
+def _vv_path(vv_id: str, rest: str = "") -> str:
+    return f"{VVS}{vv_id.strip()}/{rest}"
+
+
+# --- commands ---------------------------------------------------------------------------------
+
+
+def cmd_submit(client: Client, args: argparse.Namespace) -> int:
+    source = Path(args.program)
+    try:
+        program = source.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise UsageError(f"cannot read {source}: {exc.strerror or exc}") from None
+    name = args.name or source.stem
+    try:
+        vv = client.call("POST", VVS, data={"name": name, "program": program})
+    except ApiError as exc:
+        error = exc.body.get("error") if isinstance(exc.body, dict) else None
+        if exc.status == 400 and isinstance(error, dict) and "line" in error:
+            _err(f"{args.program}:{error['line']}:{error['column']}: {error['message']}")
+            return EXIT_USAGE
+        raise
+    _out(vv["id"])
+    if not args.wait:
+        return EXIT_OK
+    return _wait(client, vv, timeout_s=args.timeout, poll_s=args.poll)
+
+
+def _wait(client: Client, vv: dict[str, Any], *, timeout_s: float | None, poll_s: float) -> int:
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    while vv["status"] not in ENDED:
+        if deadline is not None and time.monotonic() >= deadline:
+            _out(vv["status"])
+            _err(f"gave up waiting after {timeout_s:g} s: the VV is still {vv['status']}")
+            return EXIT_TIMEOUT
+        _sleep(poll_s)
+        vv = client.call("GET", _vv_path(vv["id"]))
+    _out(vv["status"])
+    if vv["status"] != "finished":
+        if vv.get("error"):
+            _err(vv["error"])
+        return EXIT_ERROR
+    return EXIT_OK
+
+
+def cmd_status(client: Client, args: argparse.Namespace) -> int:
+    vv = client.call("GET", _vv_path(args.id))
+    if args.json:
+        _out(json.dumps(vv, indent=2))
+        return EXIT_OK
+    rows = [
+        ("id", vv["id"]),
+        ("name", vv["name"]),
+        ("status", vv["status"]),
+        ("host", vv.get("host") or "-"),
+        ("tasks", f"{vv['tasks_done']} done, {vv['tasks_open']} open"),
+        ("created", vv.get("created") or "-"),
+        ("finished", vv.get("finished") or "-"),
+    ]
+    if vv.get("error"):
+        where = ""
+        if vv.get("error_line"):
+            where = f" (line {vv['error_line']}, column {vv.get('error_column')})"
+        rows.append(("error", vv["error"] + where))
+    for label, value in rows:
+        _out(f"{label:<9} {value}")
+    return EXIT_OK
+
+
+def cmd_list(client: Client, args: argparse.Namespace) -> int:
+    query = {"status": args.status} if args.status else None
+    vvs = list(client.pages(VVS, query=query))
+    if args.json:
+        _out(json.dumps(vvs, indent=2))
+        return EXIT_OK
+    if not vvs:
+        _out("no VVs" + (f" with status {args.status}" if args.status else ""))
+        return EXIT_OK
+    _out(f"{'ID':<36}  {'STATUS':<9}  {'DONE':>5}  {'OPEN':>5}  {'CREATED':<20}  NAME")
+    for vv in vvs:
+        created = (vv.get("created") or "")[:19].replace("T", " ")
+        _out(
+            f"{vv['id']:<36}  {vv['status']:<9}  {vv['tasks_done']:>5}  "
+            f"{vv['tasks_open']:>5}  {created:<20}  {vv['name']}"
+        )
+    return EXIT_OK
+
+
+def cmd_log(client: Client, args: argparse.Namespace) -> int:
+    for line in client.pages(_vv_path(args.id, "log/")):
+        _out(f"{line['at']} {line['level']:<7} {line['message']}")
+    return EXIT_OK
+
+
+def cmd_cancel(client: Client, args: argparse.Namespace) -> int:
+    vv = client.call("POST", _vv_path(args.id, "cancel/"))
+    _out(f"{vv['id']} {vv['status']}")
+    return EXIT_OK
+
+
+def cmd_results(client: Client, args: argparse.Namespace) -> int:
+    path = _vv_path(args.id, "results.zip")
+    if args.extract:
+        target = Path(args.extract)
+        with tempfile.TemporaryFile() as archive:
+            client.download(path, archive)
+            archive.seek(0)
+            count = _extract(archive, target)
+        _out(f"{count} files in {target}")
+        return EXIT_OK
+    if args.output:
+        destination = Path(args.output)
+        with _writing(destination) as out:
+            client.download(path, out)
+    else:
+        with tempfile.NamedTemporaryFile(dir=".", suffix=".part", delete=False) as out:
+            try:
+                suggested = client.download(path, out)
+            except BaseException:
+                out.close()
+                Path(out.name).unlink(missing_ok=True)
+                raise
+        destination = Path(suggested or f"{args.id.strip()}-results.zip")
+        Path(out.name).replace(destination)
+    _out(destination)
+    return EXIT_OK
+
+
+class _writing:
+    """Write a file under a temporary name and put it in place only once it is complete."""
+
+    def __init__(self, destination: Path) -> None:
+        self.destination = destination
+        self.partial = destination.with_name(destination.name + ".part")
+
+    def __enter__(self) -> Any:
+        try:
+            self.handle = self.partial.open("wb")
+        except OSError as exc:
+            raise UsageError(f"cannot write {self.destination}: {exc.strerror or exc}") from None
+        return self.handle
+
+    def __exit__(self, kind: object, error: object, trace: object) -> None:
+        self.handle.close()
+        if error is None:
+            self.partial.replace(self.destination)
+        else:
+            self.partial.unlink(missing_ok=True)
+
+
+def _extract(archive: Any, target: Path) -> int:
+    """Unpack a results zip into ``target``, refusing members that would land outside it."""
+    target.mkdir(parents=True, exist_ok=True)
+    root = target.resolve()
+    with zipfile.ZipFile(archive) as zipped:
+        members = zipped.infolist()
+        for member in members:
+            where = (root / member.filename).resolve()
+            if not where.is_relative_to(root):
+                raise UsageError(f"refusing to extract {member.filename!r} outside {target}")
+        zipped.extractall(root)
+    return sum(1 for m in members if not m.is_dir())
+
+
+# --- the command line -------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``cpcc`` command line."""
+    parser = argparse.ArgumentParser(
+        prog="cpcc",
+        description="Submit virtual vehicles (VV programs) to a CPCC platform, watch them and "
+        "download their results.",
+        epilog=f"Environment: CPCC_URL (default {DEFAULT_URL}) and CPCC_TOKEN (your API token).",
+    )
+    parser.add_argument("--url", help="the platform's address (default: $CPCC_URL)")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    submit = commands.add_parser("submit", help="submit a VV program, print its id")
+    submit.add_argument("program", metavar="PROG.js", help="the program (JavaScript)")
+    submit.add_argument("--name", help="the VV's name (default: the file name)")
+    submit.add_argument("--wait", action="store_true", help="wait until it ends, print status")
+    submit.add_argument(
+        "--timeout", type=float, default=None, metavar="S", help="stop waiting after S seconds"
+    )
+    submit.add_argument(
+        "--poll", type=float, default=2.0, metavar="S", help="seconds between polls (2)"
+    )
+    submit.set_defaults(handler=cmd_submit)
+
+    status = commands.add_parser("status", help="show one VV")
+    status.add_argument("id")
+    status.add_argument("--json", action="store_true", help="print the API's JSON")
+    status.set_defaults(handler=cmd_status)
+
+    listing = commands.add_parser("list", help="list your VVs")
+    listing.add_argument(
+        "--status", choices=["queued", "running", "migrating", *ENDED], help="only these"
+    )
+    listing.add_argument("--json", action="store_true", help="print the API's JSON")
+    listing.set_defaults(handler=cmd_list)
+
+    log = commands.add_parser("log", help="print a VV's log")
+    log.add_argument("id")
+    log.set_defaults(handler=cmd_log)
+
+    cancel = commands.add_parser("cancel", help="cancel a VV")
+    cancel.add_argument("id")
+    cancel.set_defaults(handler=cmd_cancel)
+
+    results = commands.add_parser("results", help="download a VV's results (a zip)")
+    results.add_argument("id")
+    where = results.add_mutually_exclusive_group()
+    where.add_argument("-o", "--output", metavar="FILE.zip", help="where to save the zip")
+    where.add_argument("--extract", metavar="DIR", help="unpack the zip into DIR instead")
+    results.set_defaults(handler=cmd_results)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run one ``cpcc`` command; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    url = args.url or os.environ.get("CPCC_URL") or DEFAULT_URL
+    token = os.environ.get("CPCC_TOKEN", "").strip()
+    try:
+        if not token:
+            raise UsageError(
+                "set CPCC_TOKEN to your API token "
+                "(on the server: python manage.py drf_create_token USERNAME)"
+            )
+        if args.command == "submit" and args.poll <= 0:
+            raise UsageError("--poll must be more than 0 seconds")
+        return int(args.handler(Client(url, token), args))
+    except UsageError as exc:
+        _err(f"cpcc: {exc}")
+        return EXIT_USAGE
+    except ApiError as exc:
+        _err(f"cpcc: {exc.describe()}")
+        return EXIT_ERROR
+    except Unreachable as exc:
+        _err(f"cpcc: {exc}")
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        _err("cpcc: interrupted")
+        return 130

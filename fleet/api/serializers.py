@@ -1,0 +1,176 @@
+"""Input and output shapes of the SDC, vehicle and ground-station endpoints."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rest_framework import serializers
+
+from fleet.models import Driver, GroundStation, SensorType, Vehicle
+from fleet.services import GroundStationConfig, VehicleConfig
+
+
+def _check_lat_lng(lat: float, lng: float, where: str) -> None:
+    if not -90.0 <= lat <= 90.0:
+        raise serializers.ValidationError(f"{where}: latitude {lat:g} is outside -90..90")
+    if not -180.0 <= lng <= 180.0:
+        raise serializers.ValidationError(f"{where}: longitude {lng:g} is outside -180..180")
+
+
+def _position_field(help_text: str) -> serializers.ListField:
+    return serializers.ListField(
+        child=serializers.FloatField(), min_length=2, max_length=3, help_text=help_text
+    )
+
+
+class SensorOutSerializer(serializers.ModelSerializer):
+    """An SDC entry as ``VV.sensor.list()`` shows it (``description`` equals ``name``)."""
+
+    description = serializers.CharField(source="name")
+
+    class Meta:
+        model = SensorType
+        fields = ["name", "description", "kind", "unit", "params"]
+
+
+class StaffSensorOutSerializer(SensorOutSerializer):
+    """An SDC entry as staff see it: also whether only privileged customers may use it."""
+
+    class Meta(SensorOutSerializer.Meta):
+        fields = [*SensorOutSerializer.Meta.fields, "privileged"]
+
+
+class VehicleInSerializer(serializers.Serializer):
+    """An RV's configuration: where it may fly, how, with which sensors."""
+
+    name = serializers.CharField(max_length=80)
+    driver = serializers.ChoiceField(choices=Driver.choices, required=False)
+    driver_url = serializers.CharField(
+        max_length=200,
+        required=False,
+        allow_blank=True,
+        help_text="MAVLink connection, e.g. udpin:0.0.0.0:14550.",
+    )
+    depot = _position_field("[lat, lng] or [lat, lng, alt]: where it takes off and lands.")
+    area = serializers.ListField(
+        child=serializers.ListField(child=serializers.FloatField(), min_length=2, max_length=2),
+        help_text="Operation area: a closed ring of [lat, lng] points (the last repeats the "
+        "first), at least 3 distinct points, not crossing itself.",
+    )
+    min_altitude_m = serializers.FloatField(min_value=0.0, required=False)
+    max_altitude_m = serializers.FloatField(min_value=0.0)
+    max_speed_mps = serializers.FloatField(min_value=0.1)
+    climb_rate_mps = serializers.FloatField(min_value=0.1, required=False)
+    battery_s = serializers.FloatField(
+        min_value=1.0, required=False, allow_null=True, help_text="Flight endurance, seconds."
+    )
+    sensors = serializers.ListField(
+        child=serializers.CharField(), required=False, help_text="SDC entry names."
+    )
+
+    def validate_depot(self, value: list[float]) -> list[float]:
+        _check_lat_lng(value[0], value[1], "depot")
+        return value
+
+    def validate_area(self, value: list[list[float]]) -> list[list[float]]:
+        for n, (lat, lng) in enumerate(value):
+            _check_lat_lng(lat, lng, f"point {n}")
+        return value
+
+    def config(self) -> VehicleConfig:
+        """The validated input as model fields (depot split into its coordinates)."""
+        data: dict[str, Any] = {k: v for k, v in self.validated_data.items() if k != "sensors"}
+        if "depot" in data:
+            depot = data.pop("depot")
+            data["depot_lat"], data["depot_lng"] = depot[0], depot[1]
+            data["depot_alt"] = depot[2] if len(depot) > 2 else 0.0
+        return VehicleConfig(**data)  # type: ignore[typeddict-item]
+
+    def sensor_names(self) -> list[str] | None:
+        """The sensors asked for, or None when the input does not mention them."""
+        names = self.validated_data.get("sensors")
+        return None if names is None else list(names)
+
+
+class VehicleOutSerializer(serializers.ModelSerializer):
+    """An RV: its configuration, its status and what its control loop last reported."""
+
+    depot = serializers.SerializerMethodField(help_text="[lat, lng, alt]")
+    position = serializers.SerializerMethodField(
+        help_text="[lat, lng, alt] as last reported, or null before its first report."
+    )
+    sensors = serializers.SlugRelatedField(slug_field="name", many=True, read_only=True)
+    vvs_aboard = serializers.IntegerField(
+        read_only=True, default=0, help_text="VVs on it that have not ended."
+    )
+
+    class Meta:
+        model = Vehicle
+        fields = [
+            "id",
+            "name",
+            "status",
+            "driver",
+            "driver_url",
+            "depot",
+            "area",
+            "min_altitude_m",
+            "max_altitude_m",
+            "max_speed_mps",
+            "climb_rate_mps",
+            "battery_s",
+            "sensors",
+            "position",
+            "phase",
+            "distance_m",
+            "flight_s",
+            "tasks_done",
+            "vvs_aboard",
+            "updated",
+        ]
+
+    def get_depot(self, vehicle: Vehicle) -> list[float]:
+        return [vehicle.depot_lat, vehicle.depot_lng, vehicle.depot_alt]
+
+    def get_position(self, vehicle: Vehicle) -> list[float] | None:
+        if vehicle.lat is None or vehicle.lng is None:
+            return None
+        return [vehicle.lat, vehicle.lng, vehicle.alt or 0.0]
+
+
+class GroundStationInSerializer(serializers.Serializer):
+    """A ground station: its name and where it is."""
+
+    name = serializers.CharField(max_length=80)
+    position = _position_field("[lat, lng] or [lat, lng, alt].")
+
+    def validate_position(self, value: list[float]) -> list[float]:
+        _check_lat_lng(value[0], value[1], "position")
+        return value
+
+    def config(self) -> GroundStationConfig:
+        """The validated input as model fields."""
+        config = GroundStationConfig()
+        if "name" in self.validated_data:
+            config["name"] = self.validated_data["name"]
+        if "position" in self.validated_data:
+            position = self.validated_data["position"]
+            config["lat"], config["lng"] = position[0], position[1]
+            config["alt"] = position[2] if len(position) > 2 else 0.0
+        return config
+
+
+class GroundStationOutSerializer(serializers.ModelSerializer):
+    """A ground station and how many VVs that have not ended it holds."""
+
+    position = serializers.SerializerMethodField(help_text="[lat, lng, alt]")
+    vvs_here = serializers.IntegerField(
+        read_only=True, default=0, help_text="VVs on it that have not ended."
+    )
+
+    class Meta:
+        model = GroundStation
+        fields = ["id", "name", "position", "vvs_here"]
+
+    def get_position(self, station: GroundStation) -> list[float]:
+        return [station.lat, station.lng, station.alt]

@@ -1,0 +1,237 @@
+"""The SDC, vehicle and ground-station endpoints of the REST API (DESIGN.md section 6).
+
+``/api/v1/sensors/`` is for everyone (each sees the entries they may use); vehicles and ground
+stations are for platform staff only.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from django.core.exceptions import ValidationError as DjangoValidationError
+from django.db.models import QuerySet
+from drf_spectacular.types import OpenApiTypes
+from drf_spectacular.utils import OpenApiParameter, extend_schema, extend_schema_view
+from rest_framework import generics, mixins, status, viewsets
+from rest_framework.decorators import action
+from rest_framework.exceptions import NotFound, ValidationError
+from rest_framework.permissions import IsAuthenticated
+from rest_framework.request import Request
+from rest_framework.response import Response
+from rest_framework.serializers import as_serializer_error
+
+from cpcc_site.api import Conflict, DetailSerializer, IsStaff
+from fleet.api.serializers import (
+    GroundStationInSerializer,
+    GroundStationOutSerializer,
+    SensorOutSerializer,
+    StaffSensorOutSerializer,
+    VehicleInSerializer,
+    VehicleOutSerializer,
+)
+from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
+from fleet.selectors import ground_station_list, sensor_list_for_user, vehicle_list
+from fleet.services import (
+    GroundStationBusy,
+    ground_station_create,
+    ground_station_delete,
+    ground_station_update,
+    vehicle_create,
+    vehicle_update,
+)
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import vehicle_set_status
+
+STAFF_ERRORS = {403: DetailSerializer, 404: DetailSerializer}
+# Model fields that the API shows as one field.
+API_FIELD = {"depot_lat": "depot", "depot_lng": "depot", "depot_alt": "depot"}
+API_FIELD |= {"lat": "position", "lng": "position", "alt": "position"}
+
+
+class FleetErrorsMixin:
+    """Validation errors of the services (Django's) as 400 JSON naming the API's fields; a
+    missing object as 404 saying which."""
+
+    noun = "object"
+
+    def handle_exception(self, exc: Exception) -> Response:
+        if isinstance(exc, DjangoValidationError):
+            errors: dict[str, list[Any]] = {}
+            for field, messages in as_serializer_error(exc).items():
+                errors.setdefault(API_FIELD.get(field, field), []).extend(messages)
+            exc = ValidationError(errors)
+        elif isinstance(exc, GroundStationBusy):
+            exc = Conflict(
+                f"{exc.station.name} holds {exc.count} VV(s) that have not ended; "
+                "remove it once they have."
+            )
+        return super().handle_exception(exc)  # type: ignore[misc, no-any-return]
+
+    def get_object(self) -> Any:
+        try:
+            return self.get_queryset().get(pk=int(self.kwargs["pk"]))  # type: ignore[attr-defined]
+        except (ValueError, TypeError, Vehicle.DoesNotExist, GroundStation.DoesNotExist):
+            raise NotFound(f"No {self.noun} with id {self.kwargs['pk']!r}.") from None  # type: ignore[attr-defined]
+
+
+class SensorListView(generics.ListAPIView):  # type: ignore[type-arg]
+    """The SDC entries you may use in a VV: ``{name, description, kind, unit, params}`` as
+    ``VV.sensor.list()`` shows them. Staff see every entry, with ``privileged``."""
+
+    def get_serializer_class(self) -> type[SensorOutSerializer]:
+        return StaffSensorOutSerializer if self.request.user.is_staff else SensorOutSerializer
+
+    def get_queryset(self) -> QuerySet[SensorType]:
+        return sensor_list_for_user(user=self.request.user)  # type: ignore[arg-type]
+
+
+def _vehicle_command_schema(what: str) -> Any:
+    return extend_schema(
+        request=None, responses={200: VehicleOutSerializer, **STAFF_ERRORS}, description=what
+    )
+
+
+@extend_schema_view(
+    list=extend_schema(
+        parameters=[
+            OpenApiParameter(
+                "status", enum=VehicleStatus.values, description="only vehicles in this state"
+            )
+        ]
+    ),
+    retrieve=extend_schema(responses={200: VehicleOutSerializer, **STAFF_ERRORS}),
+    create=extend_schema(
+        request=VehicleInSerializer,
+        responses={201: VehicleOutSerializer, 400: OpenApiTypes.OBJECT, 403: DetailSerializer},
+    ),
+    partial_update=extend_schema(
+        request=VehicleInSerializer,
+        responses={200: VehicleOutSerializer, 400: OpenApiTypes.OBJECT, **STAFF_ERRORS},
+    ),
+    destroy=extend_schema(
+        responses={200: VehicleOutSerializer, **STAFF_ERRORS},
+        description="The same as POST .../remove/: the vehicle is kept, with status removed.",
+    ),
+)
+class VehicleViewSet(
+    FleetErrorsMixin,
+    mixins.ListModelMixin,
+    mixins.RetrieveModelMixin,
+    viewsets.GenericViewSet,  # type: ignore[type-arg]
+):
+    """The real vehicles (staff only): add one, change its configuration, and put it into
+    maintenance, back into service, or remove it with explicit commands. A removed vehicle is
+    kept, with status ``removed``; the VVs aboard a vehicle leaving service move on unnoticed."""
+
+    permission_classes = [IsAuthenticated, IsStaff]
+    serializer_class = VehicleOutSerializer
+    http_method_names = ["get", "post", "patch", "delete", "head", "options"]
+    noun = "vehicle"
+
+    def get_queryset(self) -> QuerySet[Vehicle]:
+        return vehicle_list(status=self.request.query_params.get("status") or None)
+
+    def _shown(self, vehicle: Vehicle, code: int = status.HTTP_200_OK) -> Response:
+        fresh = vehicle_list().get(pk=vehicle.pk)
+        return Response(self.get_serializer(fresh).data, status=code)
+
+    def create(self, request: Request) -> Response:
+        given = VehicleInSerializer(data=request.data)
+        given.is_valid(raise_exception=True)
+        vehicle = vehicle_create(
+            config=given.config(), sensors=given.sensor_names() or [], vvm=platform_vvm()
+        )
+        return self._shown(vehicle, status.HTTP_201_CREATED)
+
+    def partial_update(self, request: Request, pk: str) -> Response:
+        given = VehicleInSerializer(data=request.data, partial=True)
+        given.is_valid(raise_exception=True)
+        vehicle = vehicle_update(
+            vehicle=self.get_object(),
+            config=given.config(),
+            sensors=given.sensor_names(),
+            vvm=platform_vvm(),
+        )
+        return self._shown(vehicle)
+
+    def _set_status(self, status_: VehicleStatus) -> Response:
+        vehicle = self.get_object()
+        vehicle_set_status(vehicle=vehicle, status=status_, vvm=platform_vvm())
+        return self._shown(vehicle)
+
+    def destroy(self, request: Request, pk: str) -> Response:
+        return self._set_status(VehicleStatus.REMOVED)
+
+    @_vehicle_command_schema("Take the vehicle out of service for maintenance or recharging.")
+    @action(detail=True, methods=["post"])
+    def maintenance(self, request: Request, pk: str) -> Response:
+        return self._set_status(VehicleStatus.MAINTENANCE)
+
+    @_vehicle_command_schema("Put the vehicle (back) into service.")
+    @action(detail=True, methods=["post"], url_path="return", url_name="return")
+    def return_(self, request: Request, pk: str) -> Response:
+        return self._set_status(VehicleStatus.ACTIVE)
+
+    @_vehicle_command_schema("Remove the vehicle from the fleet; it is kept, with status removed.")
+    @action(detail=True, methods=["post"])
+    def remove(self, request: Request, pk: str) -> Response:
+        return self._set_status(VehicleStatus.REMOVED)
+
+
+@extend_schema_view(
+    retrieve=extend_schema(responses={200: GroundStationOutSerializer, **STAFF_ERRORS}),
+    create=extend_schema(
+        request=GroundStationInSerializer,
+        responses={
+            201: GroundStationOutSerializer,
+            400: OpenApiTypes.OBJECT,
+            403: DetailSerializer,
+        },
+    ),
+    update=extend_schema(
+        request=GroundStationInSerializer,
+        responses={200: GroundStationOutSerializer, 400: OpenApiTypes.OBJECT, **STAFF_ERRORS},
+    ),
+    partial_update=extend_schema(
+        request=GroundStationInSerializer,
+        responses={200: GroundStationOutSerializer, 400: OpenApiTypes.OBJECT, **STAFF_ERRORS},
+    ),
+    destroy=extend_schema(responses={204: None, 409: DetailSerializer, **STAFF_ERRORS}),
+)
+class GroundStationViewSet(
+    FleetErrorsMixin,
+    mixins.ListModelMixin,
+    mixins.RetrieveModelMixin,
+    viewsets.GenericViewSet,  # type: ignore[type-arg]
+):
+    """The ground stations (staff only). One holding VVs that have not ended cannot be deleted."""
+
+    permission_classes = [IsAuthenticated, IsStaff]
+    serializer_class = GroundStationOutSerializer
+    noun = "ground station"
+
+    def get_queryset(self) -> QuerySet[GroundStation]:
+        return ground_station_list()
+
+    def _shown(self, station: GroundStation, code: int = status.HTTP_200_OK) -> Response:
+        fresh = ground_station_list().get(pk=station.pk)
+        return Response(self.get_serializer(fresh).data, status=code)
+
+    def create(self, request: Request) -> Response:
+        given = GroundStationInSerializer(data=request.data)
+        given.is_valid(raise_exception=True)
+        station = ground_station_create(config=given.config(), vvm=platform_vvm())
+        return self._shown(station, status.HTTP_201_CREATED)
+
+    def update(self, request: Request, pk: str, partial: bool = False) -> Response:
+        given = GroundStationInSerializer(data=request.data, partial=partial)
+        given.is_valid(raise_exception=True)
+        station = ground_station_update(station=self.get_object(), config=given.config())
+        return self._shown(station)
+
+    def partial_update(self, request: Request, pk: str) -> Response:
+        return self.update(request, pk, partial=True)
+
+    def destroy(self, request: Request, pk: str) -> Response:
+        ground_station_delete(station=self.get_object())
+        return Response(status=status.HTTP_204_NO_CONTENT)

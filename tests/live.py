@@ -1,0 +1,138 @@
+"""The distributed platform for end-to-end tests: real Celery workers in subprocesses on a real
+Redis (the embedded server, or REDIS_URL's), sharing the test database (SQLite file or
+PostgreSQL). Tests using it need ``django_db(transaction=True)`` so their data is committed."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from django.conf import settings
+from django.db import connection
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def database_url() -> str:
+    """The test database as a URL a worker process can open."""
+    conf = connection.settings_dict
+    if conf["ENGINE"] == "django.db.backends.sqlite3":
+        return f"sqlite:///{conf['NAME']}"
+    user = conf["USER"] or ""
+    password = f":{conf['PASSWORD']}" if conf["PASSWORD"] else ""
+    host = conf["HOST"] or "127.0.0.1"
+    port = f":{conf['PORT']}" if conf["PORT"] else ""
+    return f"postgres://{user}{password}@{host}{port}/{conf['NAME']}"
+
+
+def wait_for(
+    condition: Callable[[], bool],
+    *,
+    timeout: float = 60.0,
+    what: str = "condition",
+    details: Callable[[], str] | None = None,
+) -> None:
+    """Poll until ``condition`` holds; fail saying ``what`` (and ``details()``, e.g. the
+    workers' logs at that moment) after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            more = f"\n{details()}" if details is not None else ""
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}{more}")
+        time.sleep(0.05)
+
+
+class Workers:
+    """Worker processes of one test: started with the test database and broker, and stopped
+    (or killed) at the end."""
+
+    def __init__(self, tmp: Path, redis_url: str, speed: float) -> None:
+        self.tmp = tmp
+        self.env = {
+            **os.environ,
+            "REDIS_URL": redis_url,
+            "CPCC_SIM_SPEED": str(speed),
+            "CPCC_RV_LEASE_S": "3",
+            "CPCC_VAR_DIR": str(tmp / "var"),
+            "CPCC_MEDIA_ROOT": str(settings.MEDIA_ROOT),
+        }
+        self.processes: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self, kind: str, name: str) -> subprocess.Popen[bytes]:
+        """Start ``manage.py gsworker NAME`` or ``rvworker NAME``; returns once it runs."""
+        log = (self.tmp / f"{kind}-{name}.log".replace(" ", "_")).open("ab")
+        process = subprocess.Popen(
+            [sys.executable, "manage.py", kind, name],
+            cwd=ROOT,
+            env={**self.env, "DATABASE_URL": database_url()},
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,  # a process group of its own, to kill it with its children
+        )
+        self.processes[name] = process
+        path = Path(log.name)
+        wait_for(
+            lambda: f"{kind} {name}:".encode() in path.read_bytes() or process.poll() is not None,
+            timeout=60,
+            what=f"{kind} {name} to start",
+        )
+        assert process.poll() is None, path.read_text()
+        return process
+
+    def kill(self, name: str) -> None:
+        """SIGKILL a worker and everything it started, as a crash would."""
+        process = self.processes.pop(name)
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait(timeout=10)
+
+    def stop_all(self) -> None:
+        for process in self.processes.values():
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGTERM)
+        for process in self.processes.values():
+            try:
+                process.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+        self.processes.clear()
+
+    def logs(self) -> str:
+        """The end of every worker's log, and the VVs' state: what a timed-out test shows."""
+        from missions.models import VirtualVehicle
+
+        parts = [
+            f"--- {p.name}\n{_quiet(p.read_text())[-4000:]}" for p in sorted(self.tmp.glob("*.log"))
+        ]
+        for vv in VirtualVehicle.objects.select_related("host_gs", "host_rv"):
+            tasks = list(vv.tasks.values_list("q", "status", "vehicle__name"))
+            parts.append(
+                f"VV {vv.name}: {vv.status} on {vv.host_name} pending={bool(vv.pending)} tasks={tasks}"
+            )
+        return "\n".join(parts)
+
+
+def _quiet(log: str) -> str:
+    """A worker's log without Celery's start-up banner and root warning."""
+    return "\n".join(
+        line
+        for line in log.splitlines()
+        if not line.startswith((" ", "-", "[", "absolutely", "Please", "User", "\x1b"))
+        and line.strip()
+    )
+
+
+@pytest.fixture
+def workers(broker_url: str, tmp_path: Path, transactional_db: None) -> Iterator[Workers]:
+    """Worker processes of this test, stopped at its end."""
+    pool = Workers(tmp_path, broker_url, speed=25)
+    try:
+        yield pool
+    finally:
+        pool.stop_all()

@@ -1,0 +1,297 @@
+"""The hosts of the distributed platform: a ground station's worker and an RV's worker.
+
+Each worker process is a Celery worker on its host's own queue (``gs.<id>``, ``rv.<id>``) that
+runs one host object. Celery messages only say "look at this VV" or "look at your tasks": the
+database holds all state, so a worker that starts (or restarts after a crash) first recovers
+everything its host is responsible for, and a message delivered twice finds nothing to do.
+
+An RV's worker does all its VVM work in one thread of its own, the host thread: the VV steps
+(with the warm V8 contexts of the VVs aboard), and the vehicle's control loop, which needs
+timers (flights take time). Celery tasks hand work to that thread and wait until it is
+committed, so a message is acknowledged only after its checkpoint is in the database.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import datetime as dt
+import heapq
+import logging
+import queue
+import threading
+import uuid
+from collections.abc import Callable
+from typing import Any
+
+from django.conf import settings
+from django.db import close_old_connections, connection
+from django.db.models import Q
+from django.utils import timezone
+
+from fleet.models import GroundStation, Vehicle
+from fleet.simulation import SensorField, SimVehicle
+from fleet.simulation import VehicleSpec as KinematicSpec
+from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus
+from vvm_worker.clock import Clock, SystemClock
+from vvm_worker.dispatch import CeleryDispatcher
+from vvm_worker.executor import VehicleLoop
+from vvm_worker.planning import DEFAULT_PLANNER, make_planner
+from vvm_worker.runtime import Runtime
+from vvm_worker.services import (
+    VVM,
+    vehicle_heartbeat,
+    vehicle_register,
+    vehicles_check_leases,
+    vv_admit_queued,
+    vv_advance,
+)
+
+logger = logging.getLogger("cpcc.hosts")
+
+# With time acceleration 0 ("instant flights") a simulated vehicle flies this much faster.
+INSTANT = 1e6
+WAIT_S = 60.0  # how long a Celery task waits for the host thread
+SWEEP_S = 5.0  # how often a host looks for work a lost message would have started
+
+
+class RealTimeScheduler:
+    """Timers on the platform clock and work from other threads, run in one thread.
+
+    ``call_at`` is for the host thread itself (the vehicle's control loop); ``submit`` for any
+    thread, which gets a future for the result.
+    """
+
+    def __init__(self, clock: Clock) -> None:
+        self.clock = clock
+        self._timers: list[tuple[float, int, Callable[[], None]]] = []
+        self._seq = 0
+        self._inbox: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future[Any]]] = (
+            queue.SimpleQueue()
+        )
+        self._stopping = threading.Event()
+
+    def call_at(self, t_s: float, fn: Callable[[], None]) -> None:
+        self._seq += 1
+        heapq.heappush(self._timers, (t_s, self._seq, fn))
+
+    def submit(self, fn: Callable[[], Any]) -> concurrent.futures.Future[Any]:
+        future: concurrent.futures.Future[Any] = concurrent.futures.Future()
+        self._inbox.put((fn, future))
+        return future
+
+    def stop(self) -> None:
+        self._stopping.set()
+        self.submit(lambda: None)  # wake the thread up
+
+    def run(self) -> None:
+        while not self._stopping.is_set():
+            wait = 0.5
+            if self._timers:
+                wait = min(wait, max(0.0, self._timers[0][0] - self.clock.now_s()))
+            try:
+                fn, future = self._inbox.get(timeout=wait)
+            except queue.Empty:
+                pass
+            else:
+                self._run(fn, future)
+            while self._timers and self._timers[0][0] <= self.clock.now_s():
+                _, _, timer = heapq.heappop(self._timers)
+                self._run(timer, None)
+
+    @staticmethod
+    def _run(fn: Callable[[], Any], future: concurrent.futures.Future[Any] | None) -> None:
+        close_old_connections()
+        try:
+            result = fn()
+        except Exception as exc:
+            logger.exception("host work failed")
+            if future is not None:
+                future.set_exception(exc)
+        else:
+            if future is not None:
+                future.set_result(result)
+
+
+class RVHost:
+    """The worker of one real vehicle: the VVs aboard and the vehicle's control loop."""
+
+    def __init__(self, vehicle: Vehicle, *, speed: float, planner: str = DEFAULT_PLANNER) -> None:
+        self.vehicle_id = vehicle.pk
+        self.name = vehicle.name
+        self.clock = SystemClock()
+        self.scheduler = RealTimeScheduler(self.clock)
+        self.vvm = VVM(
+            clock=self.clock,
+            dispatcher=CeleryDispatcher(local=self),
+            field=SensorField(0),
+            runtime=Runtime(),
+            lease_s=settings.CPCC_RV_LEASE_S,
+        )
+        # Simulated flights: time acceleration shortens them (distances stay right).
+        scale = INSTANT if speed <= 0 else speed
+        driver = SimVehicle(
+            KinematicSpec(
+                max_speed_mps=vehicle.max_speed_mps * scale,
+                climb_rate_mps=vehicle.climb_rate_mps * scale,
+                battery_s=vehicle.battery_s,
+            ),
+            vehicle.depot,
+            now_s=self.clock.now_s(),
+        )
+        self.loop = VehicleLoop(
+            vehicle_id=vehicle.pk,
+            driver=driver,
+            planner=make_planner(planner),
+            vvm=self.vvm,
+            scheduler=self.scheduler,
+            battery_s=vehicle.battery_s,
+        )
+        self._thread = threading.Thread(target=self._run, name=f"rv-{vehicle.pk}", daemon=True)
+
+    # --- LocalHost (vvm_worker.dispatch): work this host does itself -------------------------
+
+    def is_vehicle(self, vehicle_id: int) -> bool:
+        return vehicle_id == self.vehicle_id
+
+    def advance_later(self, vv_id: uuid.UUID) -> None:
+        self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
+
+    def wake_later(self) -> None:
+        self.scheduler.submit(self.loop.wake)
+
+    # --- what Celery tasks ask -----------------------------------------------------------------
+
+    def advance(self, vv_id: uuid.UUID) -> None:
+        self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm)).result(WAIT_S)
+
+    def wake(self) -> None:
+        self.scheduler.submit(self.loop.wake).result(WAIT_S)
+
+    # --- life ---------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._thread.start()
+        self.scheduler.submit(self._recover).result(WAIT_S)
+        logger.info("rv worker started", extra={"vehicle": self.name})
+
+    def stop(self) -> None:
+        self.scheduler.stop()
+        self._thread.join(timeout=10)
+
+    def _run(self) -> None:
+        try:
+            self.scheduler.run()
+        finally:
+            self.vvm.runtime.close()
+            connection.close()
+
+    def _recover(self) -> None:
+        """Take up whatever this RV was doing: VVs aboard, its open tasks, and any VV waiting
+        for an RV that this one can serve."""
+        self._heartbeat()
+        aboard = VirtualVehicle.objects.filter(
+            host_rv_id=self.vehicle_id, status__in=ACTIVE_STATUSES
+        )
+        for vv_id in aboard.order_by("submitted_s", "id").values_list("pk", flat=True):
+            vv_advance(vv_id=vv_id, vvm=self.vvm)
+        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+        vehicle_register(vehicle=vehicle, vvm=self.vvm)
+        self.loop.wake()
+        self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
+
+    def _heartbeat(self) -> None:
+        vehicle_heartbeat(vehicle_id=self.vehicle_id, vvm=self.vvm)
+        self.scheduler.call_at(self.clock.now_s() + settings.CPCC_RV_LEASE_S / 4, self._heartbeat)
+
+    def _sweep(self) -> None:
+        """Messages are hints: now and then, look for VVs aboard that wait for this host."""
+        for vv_id in stalled(host_rv_id=self.vehicle_id):
+            vv_advance(vv_id=vv_id, vvm=self.vvm)
+        self.loop.wake()
+        self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
+
+
+class GSHost:
+    """The worker of one ground station: loads new VVs, takes back the ones that end or wait,
+    and watches the RVs' leases."""
+
+    def __init__(self, station: GroundStation) -> None:
+        self.station_id = station.pk
+        self.name = station.name
+        self.vvm = VVM(
+            clock=SystemClock(),
+            dispatcher=CeleryDispatcher(),
+            field=SensorField(0),
+            runtime=Runtime(),
+            lease_s=settings.CPCC_RV_LEASE_S,
+        )
+        self._stopping = threading.Event()
+        self._watch = threading.Thread(target=self._watch_leases, name="lease-watch", daemon=True)
+
+    def advance(self, vv_id: uuid.UUID) -> None:
+        vv_advance(vv_id=vv_id, vvm=self.vvm)
+
+    def admit(self, customer_id: int) -> None:
+        vv_admit_queued(customer_id=customer_id, vvm=self.vvm)
+
+    def wake(self) -> None:  # an RV's message that reached a ground station: nothing to do
+        pass
+
+    def start(self) -> None:
+        here = VirtualVehicle.objects.filter(host_gs_id=self.station_id, status__in=ACTIVE_STATUSES)
+        for vv_id in here.order_by("submitted_s", "id").values_list("pk", flat=True):
+            vv_advance(vv_id=vv_id, vvm=self.vvm)
+        waiting = VirtualVehicle.objects.filter(status=VVStatus.QUEUED)
+        for customer_id in waiting.values_list("customer_id", flat=True).distinct():
+            vv_admit_queued(customer_id=customer_id, vvm=self.vvm)
+        self._watch.start()
+        logger.info("gs worker started", extra={"ground_station": self.name})
+
+    def stop(self) -> None:
+        self._stopping.set()
+        self._watch.join(timeout=10)
+
+    def _watch_leases(self) -> None:
+        vvm = VVM(
+            clock=SystemClock(),
+            dispatcher=CeleryDispatcher(),
+            field=SensorField(0),
+            lease_s=settings.CPCC_RV_LEASE_S,
+        )
+        try:
+            while not self._stopping.wait(min(SWEEP_S, settings.CPCC_RV_LEASE_S / 4)):
+                close_old_connections()
+                try:
+                    vehicles_check_leases(vvm=vvm)
+                    # Messages are hints: pick up what a lost one would have started.
+                    for vv_id in stalled(host_gs_id=self.station_id):
+                        vv_advance(vv_id=vv_id, vvm=vvm)
+                    queued = VirtualVehicle.objects.filter(status=VVStatus.QUEUED)
+                    for customer_id in queued.values_list("customer_id", flat=True).distinct():
+                        vv_admit_queued(customer_id=customer_id, vvm=vvm)
+                except Exception:
+                    logger.exception("sweep failed")
+        finally:
+            connection.close()
+
+
+def stalled(**host: int) -> list[uuid.UUID]:
+    """VVs on a host that have not moved for a while although they could: answered but not
+    resumed, or arrived but not taken up (their message was lost)."""
+    since = timezone.now() - dt.timedelta(seconds=SWEEP_S)
+    vvs = VirtualVehicle.objects.filter(updated__lt=since, **host).filter(
+        Q(status=VVStatus.MIGRATING) | Q(status=VVStatus.RUNNING, pending__isnull=True)
+    )
+    return list(vvs.order_by("submitted_s", "id").values_list("pk", flat=True))
+
+
+_host: RVHost | GSHost | None = None
+
+
+def set_host(host: RVHost | GSHost | None) -> None:
+    global _host
+    _host = host
+
+
+def current_host() -> RVHost | GSHost | None:
+    return _host

@@ -1,0 +1,45 @@
+"""Celery tasks: the messages between hosts. They carry ids only; the database holds the state.
+
+Every task is safe to run twice (``acks_late``: Celery delivers at least once) and returns only
+after its work is committed, so a worker that dies mid-task leaves the message to be delivered
+again, and a worker that restarts recovers from the database anyway.
+"""
+
+from __future__ import annotations
+
+import uuid
+
+from celery import shared_task
+
+from vvm_worker.hosts import GSHost, current_host
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import vv_admit_queued
+from vvm_worker.services import vv_advance as advance
+
+
+@shared_task(name="cpcc.vv_advance", acks_late=True, ignore_result=True)
+def vv_advance(vv_id: str) -> None:
+    """The VV arrived on this worker's host (or must be looked at again): step and route it."""
+    host = current_host()
+    if host is None:
+        advance(vv_id=uuid.UUID(vv_id), vvm=platform_vvm())
+    else:
+        host.advance(uuid.UUID(vv_id))
+
+
+@shared_task(name="cpcc.vehicle_changed", acks_late=True, ignore_result=True)
+def vehicle_changed(vehicle_id: int) -> None:
+    """This worker's vehicle has new work or a new status: its control loop re-plans."""
+    host = current_host()
+    if host is not None:
+        host.wake()
+
+
+@shared_task(name="cpcc.admit", acks_late=True, ignore_result=True)
+def admit(customer_id: int) -> None:
+    """Start the customer's queued VVs as far as its quota allows (any ground station)."""
+    host = current_host()
+    if isinstance(host, GSHost):
+        host.admit(customer_id)
+    else:
+        vv_admit_queued(customer_id=customer_id, vvm=platform_vvm())
