@@ -13,10 +13,10 @@ from typing import TypedDict
 from django.core.exceptions import ValidationError
 from django.db import transaction
 
-from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
+from fleet.models import GroundStation, SensorType, Vehicle
 from fleet.selectors import UnknownSensors, sensors_by_name
-from missions.models import ENDED_STATUSES, Task, TaskStatus, VirtualVehicle, VVStatus
-from vvm_worker.services import VVM, vehicle_register
+from missions.models import ENDED_STATUSES, VirtualVehicle, VVStatus
+from vvm_worker.services import VVM, vehicle_reconfigured, vehicle_register
 
 # Changing any of these may leave tasks planned on the RV that it can no longer serve.
 REACH_FIELDS = ("area", "min_altitude_m", "max_altitude_m")
@@ -113,14 +113,8 @@ def vehicle_update(
         vehicle.save()
         if entries is not None:
             vehicle.sensors.set(entries)
-        if reach_changed and vehicle.status != VehicleStatus.REMOVED:
-            Task.objects.filter(vehicle=vehicle, status=TaskStatus.OPEN).update(vehicle=None)
-            aboard = vehicle.vvs.exclude(status__in=ENDED_STATUSES).values_list("pk", flat=True)
-            for vv_id in aboard:
-                vvm.dispatcher.vv_arrived(vv_id)
-            vvm.dispatcher.vehicle_changed(vehicle.pk)
-    if reach_changed and vehicle.status == VehicleStatus.ACTIVE:
-        vehicle_register(vehicle=vehicle, vvm=vvm)
+    if reach_changed:
+        vehicle_reconfigured(vehicle=vehicle, vvm=vvm)
     return vehicle
 
 

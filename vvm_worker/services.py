@@ -794,3 +794,20 @@ def vehicles_check_leases(*, vvm: VVM) -> list[str]:
         gone.append(vehicle.name)
         logger.warning("vehicle worker lost", extra={"vehicle": vehicle.name})
     return gone
+
+
+def vehicle_reconfigured(*, vehicle: Vehicle, vvm: VVM) -> None:
+    """An RV's reach changed (area, altitude range, sensors): the tasks planned on it are taken
+    off it and the VVs aboard route them again; they stay if it can still serve them and move
+    to an RV that can otherwise. An RV in service with a larger reach takes work at once."""
+    with transaction.atomic():
+        vehicle = Vehicle.objects.select_for_update().get(pk=vehicle.pk)
+        if vehicle.status == VehicleStatus.REMOVED:
+            return
+        Task.objects.filter(vehicle=vehicle, status=TaskStatus.OPEN).update(vehicle=None)
+        aboard = vehicle.vvs.exclude(status__in=ENDED_STATUSES).values_list("pk", flat=True)
+        for vv_id in aboard:
+            vvm.dispatcher.vv_arrived(vv_id)
+        vvm.dispatcher.vehicle_changed(vehicle.pk)
+    if vehicle.status == VehicleStatus.ACTIVE:
+        vehicle_register(vehicle=vehicle, vvm=vvm)

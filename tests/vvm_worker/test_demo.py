@@ -18,6 +18,20 @@ from cpcc_site.embedded_redis import answers
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def processes_of(var_dir: Path) -> list[int]:
+    """The processes still running with this demo's CPCC_VAR_DIR in their environment."""
+    mark = f"CPCC_VAR_DIR={var_dir}".encode()
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit() and int(proc.name) != os.getpid():
+            try:
+                if mark in (proc / "environ").read_bytes().split(b"\0"):
+                    found.append(int(proc.name))
+            except OSError:
+                continue
+    return found
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -61,6 +75,8 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
         assert f"CPCC is running at http://127.0.0.1:{port}/" in output
         assert "customer: customer-a / demo-pass-123" in output
         assert "VVs ended 3/3" in output
+        assert "with 1 ground-station and 2 vehicle worker(s)" in output
+        assert "VV 1 (Customer A): finished" in output
         assert answers(tmp_path / "redis" / "redis.sock")
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/accounts/login/", timeout=10) as page:
             assert page.status == 200
@@ -69,5 +85,6 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
         demo.wait(timeout=30)
     assert demo.returncode == 0
     assert not answers(tmp_path / "redis" / "redis.sock")
+    assert processes_of(tmp_path) == [], "the demo left processes behind"
     with socket.socket() as s:
         assert s.connect_ex(("127.0.0.1", port)) != 0  # the web server is gone too

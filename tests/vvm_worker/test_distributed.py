@@ -140,3 +140,77 @@ def test_an_rv_added_mid_mission_takes_over_work_in_its_area(
     served = Task.objects.filter(vehicle__name="Heli Two", status=TaskStatus.DONE)
     assert served.exists()
     assert all(t.lng >= 12.864 for t in served)
+
+
+def test_a_vv_submitted_over_rest_by_token_finishes_and_its_results_come_back(
+    workers, tmp_path, monkeypatch
+) -> None:
+    import io
+    import zipfile
+
+    from rest_framework.authtoken.models import Token
+    from rest_framework.test import APIClient
+
+    from accounts.models import User
+
+    load("paper-fig3.json", tmp_path, monkeypatch)
+    VirtualVehicle.objects.all().delete()  # only the one submitted over REST
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    workers.start("rvworker", "Heli Two")
+    client = APIClient()
+    token = Token.objects.create(user=User.objects.get(username="customer-a"))
+    client.credentials(HTTP_AUTHORIZATION=f"Token {token.key}")
+    program = (SCENARIOS.parent / "vv" / "vv1-paper.js").read_text()
+    created = client.post("/api/v1/vvs/", {"name": "over REST", "program": program}, format="json")
+    assert created.status_code == 201, created.content
+    vv_id = created.json()["id"]
+    wait_for(all_ended, timeout=120, what="the VV to end", details=workers.logs)
+    detail = client.get(f"/api/v1/vvs/{vv_id}/").json()
+    assert detail["status"] == "finished" and detail["tasks_done"] == 4
+    storage = client.get(f"/api/v1/vvs/{vv_id}/storage/").json()
+    assert {d["key"] for d in storage["results"]} == KEYS
+    camera = next(d for d in storage["results"] if d["key"] == "p0.2")
+    image = client.get(camera["value"]["image_url"])
+    assert image.status_code == 200 and image["Content-Type"] == "image/png"
+    archive = client.get(f"/api/v1/vvs/{vv_id}/results.zip")
+    assert archive.status_code == 200
+    with zipfile.ZipFile(
+        io.BytesIO(b"".join(archive.streaming_content if archive.streaming else [archive.content]))
+    ) as z:
+        names = z.namelist()
+        assert {"vv.json", "storage.json", "tasks.json", "log.txt"} <= set(names)
+        assert len([n for n in names if n.startswith("images/")]) == 4
+        assert set(json.loads(z.read("storage.json"))) == KEYS
+    other = APIClient()
+    other.force_authenticate(User.objects.get(username="customer-b"))
+    for path in ("", "storage/", "results.zip", "tasks/", "log/"):
+        assert other.get(f"/api/v1/vvs/{vv_id}/{path}").status_code == 404
+
+
+def test_the_vvs_of_an_rv_worker_that_never_comes_back_move_on_when_its_lease_expires(
+    workers, tmp_path, monkeypatch
+) -> None:
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    data["vehicles"].append(dict(data["vehicles"][0], name="Heli Two", depot=[48.1100, 12.8650, 0]))
+    load(data, tmp_path, monkeypatch)
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    workers.start("rvworker", "Heli Two")
+    wait_for(
+        lambda: (
+            VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
+            and Task.objects.filter(status=TaskStatus.DONE).exists()
+        ),
+        timeout=120,
+        what="a VV aboard an RV and a task done",
+        details=workers.logs,
+    )
+    busy = Vehicle.objects.filter(vvs__isnull=False).distinct().first()
+    assert busy is not None
+    workers.kill(busy.name)
+    killed_at = Task.objects.filter(status=TaskStatus.DONE, vehicle=busy).count()
+    wait_for(all_ended, timeout=180, what="the VVs to end on the other RV", details=workers.logs)
+    assert_paper_results()
+    assert Task.objects.filter(status=TaskStatus.DONE, vehicle=busy).count() == killed_at
+    assert Migration.objects.filter(reason="its vehicle's worker stopped reporting").exists()

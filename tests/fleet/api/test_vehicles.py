@@ -6,6 +6,7 @@ import pytest
 
 import fleet.api.views
 import fleet.services
+import vvm_worker.services
 from fleet.models import Vehicle, VehicleStatus
 from missions.models import VVStatus
 from tests.factories import AREA_ONE, AREA_TWO, VehicleFactory
@@ -25,9 +26,12 @@ NEW = {
 def registered(monkeypatch) -> list[str]:
     """The vehicles given work through vehicle_register (recorded, not run)."""
     seen: list[str] = []
-    monkeypatch.setattr(
-        fleet.services, "vehicle_register", lambda *, vehicle, vvm: seen.append(vehicle.name)
-    )
+
+    def record(*, vehicle, vvm) -> None:
+        seen.append(vehicle.name)
+
+    monkeypatch.setattr(fleet.services, "vehicle_register", record)
+    monkeypatch.setattr(vvm_worker.services, "vehicle_register", record)
     return seen
 
 

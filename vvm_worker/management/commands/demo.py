@@ -1,8 +1,9 @@
 """``manage.py demo``: the whole local system in the foreground, stopped cleanly by Ctrl-C.
 
-Starts the embedded Redis (unless REDIS_URL is set), the web server (daphne, ASGI) and runs
-the scenario's fleet in this process at the given time acceleration, so the run can be
-watched in the browser. The web server keeps running after the scenario ends.
+Starts the embedded Redis (unless REDIS_URL is set), loads the scenario, and runs the web
+server (daphne, ASGI), one ground-station worker per GS and one worker per RV as processes of
+their own, exactly as they would run on separate machines. Fleet events of the scenario are
+applied at their (accelerated) time. Everything keeps running after the scenario ends.
 """
 
 from __future__ import annotations
@@ -24,14 +25,32 @@ from django.core.management.base import BaseCommand, CommandError, CommandParser
 
 from accounts.models import User
 from cpcc_site.embedded_redis import EmbeddedRedis
-from fleet.models import Vehicle
-from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus
-from vvm_worker.scenario import ScenarioError, load_scenario
-from vvm_worker.scenario_loader import PASSWORD_ENV
-from vvm_worker.simulation import Progress, Simulation
+from fleet.models import Vehicle, VehicleStatus
+from missions.models import (
+    ACTIVE_STATUSES,
+    ENDED_STATUSES,
+    Task,
+    TaskStatus,
+    VirtualVehicle,
+    VVStatus,
+)
+from vvm_worker.platform import platform_vvm
+from vvm_worker.scenario import FleetEvent, Scenario, ScenarioError, load_scenario
+from vvm_worker.scenario_loader import (
+    PASSWORD_ENV,
+    scenario_apply,
+    scenario_submit_all,
+    vehicle_upsert,
+)
+from vvm_worker.services import vehicle_register, vehicle_set_status
 
 DEFAULT_SCENARIO = settings.BASE_DIR / "examples" / "scenarios" / "paper-fig3.json"
-WEB_START_TIMEOUT_S = 30.0
+START_TIMEOUT_S = 60.0
+ACTIONS = {
+    "remove": VehicleStatus.REMOVED,
+    "maintenance": VehicleStatus.MAINTENANCE,
+    "return": VehicleStatus.ACTIVE,
+}
 
 
 def _demo_password(name: str) -> str:
@@ -50,11 +69,46 @@ def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def _wait_for_port(host: str, port: int, process: subprocess.Popen[bytes]) -> None:
-    deadline = time.monotonic() + WEB_START_TIMEOUT_S
+class Processes:
+    """The demo's child processes, each in a process group of its own."""
+
+    def __init__(self, env: dict[str, str]) -> None:
+        self.env = env
+        self.children: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self, label: str, *args: str) -> subprocess.Popen[bytes]:
+        process = subprocess.Popen(
+            [sys.executable, *args],
+            env=self.env,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,  # Ctrl-C reaches the demo, which stops the children in order
+        )
+        self.children[label] = process
+        return process
+
+    def check(self) -> None:
+        for label, process in self.children.items():
+            if process.poll() is not None:
+                raise CommandError(f"{label} exited with code {process.returncode}")
+
+    def stop(self) -> None:
+        for process in self.children.values():
+            if process.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(process.pid, signal.SIGTERM)
+        for process in self.children.values():
+            try:
+                process.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+
+
+def _wait_for_port(host: str, port: int, processes: Processes) -> None:
+    deadline = time.monotonic() + START_TIMEOUT_S
     while time.monotonic() < deadline:
-        if process.poll() is not None:
-            raise CommandError(f"the web server exited with code {process.returncode}")
+        processes.check()
         with contextlib.suppress(OSError), socket.create_connection((host, port), timeout=0.5):
             return
         time.sleep(0.1)
@@ -62,7 +116,7 @@ def _wait_for_port(host: str, port: int, process: subprocess.Popen[bytes]) -> No
 
 
 class Command(BaseCommand):
-    help = "Run the whole local system (web, Redis, the scenario's fleet) until Ctrl-C."
+    help = "Run the whole local system (web, Redis, a worker per GS and RV) until Ctrl-C."
 
     def add_arguments(self, parser: CommandParser) -> None:
         parser.add_argument("--scenario", default=str(DEFAULT_SCENARIO), help="scenario file")
@@ -70,11 +124,10 @@ class Command(BaseCommand):
             "--speed",
             type=float,
             default=None,
-            help="time acceleration of the simulated fleet (default: CPCC_SIM_SPEED)",
+            help="time acceleration of the simulated fleet, 0 = instant flights (default: CPCC_SIM_SPEED)",
         )
         parser.add_argument("--port", type=int, default=8000)
         parser.add_argument("--host", default="127.0.0.1")
-        parser.add_argument("--seed", type=int, default=1)
 
     def handle(self, *args: Any, **options: Any) -> None:
         speed = settings.CPCC_SIM_SPEED if options["speed"] is None else options["speed"]
@@ -83,47 +136,56 @@ class Command(BaseCommand):
         except ScenarioError as exc:
             raise CommandError(f"scenario error: {exc}") from None
         call_command("migrate", verbosity=0, interactive=False)
+        signal.signal(signal.SIGTERM, _interrupt)  # a service manager stops with SIGTERM
         redis = EmbeddedRedis(settings.EMBEDDED_REDIS_SOCKET) if not settings.REDIS_URL else None
-        web: subprocess.Popen[bytes] | None = None
-        # A service manager stops with SIGTERM: clean up as for Ctrl-C.
-        signal.signal(signal.SIGTERM, _interrupt)
+        redis_url = settings.REDIS_URL or f"unix://{settings.EMBEDDED_REDIS_SOCKET}"
+        env = {**os.environ, "REDIS_URL": redis_url, "CPCC_SIM_SPEED": str(speed)}
+        env.setdefault(PASSWORD_ENV, _demo_password("customer"))
+        processes = Processes(env)
         try:
             if redis is not None:
                 redis.start()
+            os.environ[PASSWORD_ENV] = env[PASSWORD_ENV]
             admin_password = self._admin()
-            os.environ.setdefault(PASSWORD_ENV, _demo_password("customer"))
             self._retire_previous_runs()
-            web = subprocess.Popen(
-                [sys.executable, "-m", "daphne", "-b", options["host"], "-p", str(options["port"]),
-                 "cpcc_site.asgi:application"],
-                stdin=subprocess.DEVNULL,
-            )  # fmt: skip
-            _wait_for_port(options["host"], options["port"], web)
-            simulation = Simulation(scenario, seed=options["seed"], speed=speed)
-            loaded = simulation.start()
+            loaded = scenario_apply(scenario)
+            manage = str(Path(settings.BASE_DIR) / "manage.py")
+            processes.start(
+                "web",
+                "-m",
+                "daphne",
+                "-b",
+                options["host"],
+                "-p",
+                str(options["port"]),
+                "cpcc_site.asgi:application",
+            )
+            _wait_for_port(options["host"], options["port"], processes)
+            for name in loaded.ground_stations:
+                processes.start(f"gsworker {name}", manage, "gsworker", name)
+            for name in loaded.vehicles:
+                processes.start(f"rvworker {name}", manage, "rvworker", name)
+            vvs = scenario_submit_all(scenario, loaded, vvm=platform_vvm())
             url = f"http://{options['host']}:{options['port']}/"
             self.stdout.write(self.style.SUCCESS(f"CPCC is running at {url}"))
             self.stdout.write(f"  admin: admin / {admin_password}  ({url}admin/)")
             for username, password in loaded.logins:
                 self.stdout.write(f"  customer: {username} / {password or '(unchanged)'}")
             self.stdout.write(
-                f"Running {scenario.name!r} at speed {speed:g}. Ctrl-C stops everything."
+                f"Running {scenario.name!r} at speed {speed:g} with {len(loaded.ground_stations)} "
+                f"ground-station and {len(loaded.vehicles)} vehicle worker(s). Ctrl-C stops everything."
             )
-            simulation.drain(progress=self._reporter(), total=simulation.vv_count)
+            self._follow(scenario, [vv.pk for vv in vvs], speed, processes, manage)
             self.stdout.write(
-                self.style.SUCCESS("The scenario has ended; the web server keeps running.")
+                self.style.SUCCESS("The scenario has ended; everything keeps running.")
             )
-            while web.poll() is None:
+            while True:
+                processes.check()
                 time.sleep(0.5)
         except KeyboardInterrupt:
             self.stdout.write("\nStopping.")
         finally:
-            if web is not None and web.poll() is None:
-                web.terminate()
-                try:
-                    web.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    web.kill()
+            processes.stop()
             if redis is not None:
                 redis.stop()
 
@@ -138,23 +200,52 @@ class Command(BaseCommand):
         return password
 
     def _retire_previous_runs(self) -> None:
-        """VVs an interrupted demo left running are cancelled; vehicles start at their depot."""
+        """VVs an interrupted demo left unfinished are cancelled; vehicles start at their depot."""
         VirtualVehicle.objects.filter(status__in=(VVStatus.QUEUED, *ACTIVE_STATUSES)).update(
             status=VVStatus.CANCELLED, host_rv=None, pending=None, error="cancelled: demo restarted"
+        )
+        Task.objects.filter(status=TaskStatus.OPEN).update(
+            status=TaskStatus.CANCELLED, vehicle=None
         )
         for vehicle in Vehicle.objects.all():
             Vehicle.objects.filter(pk=vehicle.pk).update(
                 lat=vehicle.depot_lat, lng=vehicle.depot_lng, alt=vehicle.depot_alt, phase="landed"
             )
 
-    def _reporter(self) -> Any:
-        last = [-1, -1]
+    def _follow(
+        self, scenario: Scenario, vv_ids: list[Any], speed: float, processes: Processes, manage: str
+    ) -> None:
+        """Print progress until this run's VVs have ended, applying fleet events on time."""
+        started = time.monotonic()
+        events = list(scenario.events)
+        last = None
+        while True:
+            processes.check()
+            elapsed_s = (time.monotonic() - started) * (speed if speed > 0 else float("inf"))
+            while events and events[0].at_s <= elapsed_s:
+                self._apply(events.pop(0), processes, manage)
+            mine = VirtualVehicle.objects.filter(pk__in=vv_ids)
+            ended = mine.filter(status__in=ENDED_STATUSES).count()
+            done = Task.objects.filter(vv__in=vv_ids, status=TaskStatus.DONE).count()
+            if (ended, done) != last:
+                last = (ended, done)
+                self.stdout.write(f"  tasks done {done:4d}  VVs ended {ended}/{len(vv_ids)}")
+            if ended == len(vv_ids) and not events:
+                for vv in mine.order_by("name"):
+                    self.stdout.write(
+                        f"  {vv.name} ({vv.customer}): {vv.status} {vv.error}".rstrip()
+                    )
+                return
+            time.sleep(0.25)
 
-        def report(p: Progress) -> None:
-            if [p.vvs_ended, p.tasks_done] != last:
-                last[:] = [p.vvs_ended, p.tasks_done]
-                self.stdout.write(
-                    f"  t={p.time_s:7.1f} s  tasks done {p.tasks_done:4d}  VVs ended {p.vvs_ended}/{p.vvs_total}"
-                )
-
-        return report
+    def _apply(self, event: FleetEvent, processes: Processes, manage: str) -> None:
+        vvm = platform_vvm()
+        if event.add_vehicle is not None:
+            vehicle = vehicle_upsert(event.add_vehicle)
+            processes.start(f"rvworker {vehicle.name}", manage, "rvworker", vehicle.name)
+            vehicle_register(vehicle=vehicle, vvm=vvm)
+            self.stdout.write(f"  event: {vehicle.name} added")
+            return
+        vehicle = Vehicle.objects.get(name=event.vehicle)
+        vehicle_set_status(vehicle=vehicle, status=ACTIONS[event.action], vvm=vvm)
+        self.stdout.write(f"  event: {vehicle.name} {event.action}")
