@@ -131,6 +131,7 @@ class Task(models.Model):
         Vehicle, null=True, blank=True, on_delete=models.SET_NULL, related_name="tasks"
     )
     requested_s = models.FloatField()
+    assigned_s = models.FloatField(null=True, blank=True, help_text="When an RV took it on.")
     done_s = models.FloatField(null=True, blank=True)
     readings = models.JSONField(null=True, blank=True)
     message = models.TextField(blank=True)

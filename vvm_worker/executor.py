@@ -10,6 +10,7 @@ worker.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -25,6 +26,7 @@ logger = logging.getLogger("cpcc.executor")
 # A vehicle at its target serves every open task within the task's tolerance plus this much
 # (floating-point slack of the kinematics).
 _REACH_SLACK_M = 1e-3
+_SDC_TTL_S = 10.0
 
 
 class Scheduler(Protocol):
@@ -68,6 +70,7 @@ class VehicleLoop:
         self.target: int | None = None  # the task the vehicle is flying to
         self.returning = False
         self._token = 0  # invalidates the arrival of a leg that was replaced
+        self._sdc: tuple[float, dict[str, dict[str, Any]]] | None = None
 
     # --- events ------------------------------------------------------------------------------
 
@@ -100,7 +103,11 @@ class VehicleLoop:
                 seed=self.vvm.world_seed,
             )
             task_complete(
-                task_id=task.pk, readings=readings, vvm=self.vvm, vehicle_id=self.vehicle_id
+                task_id=task.pk,
+                readings=readings,
+                vvm=self.vvm,
+                vehicle_id=self.vehicle_id,
+                vv_id=task.vv_id,
             )
         self._plan(now)
 
@@ -139,7 +146,11 @@ class VehicleLoop:
         self._save_state(now)
 
     def _catalog(self) -> dict[str, dict[str, Any]]:
-        return {s.name: s.as_catalog_entry() for s in SensorType.objects.all()}
+        # The SDC changes rarely; read it again now and then, not at every stop.
+        now = time.monotonic()
+        if self._sdc is None or now - self._sdc[0] > _SDC_TTL_S:
+            self._sdc = (now, {s.name: s.as_catalog_entry() for s in SensorType.objects.all()})
+        return self._sdc[1]
 
     def _battery_fraction(self, now: float) -> float | None:
         remaining = self.driver.battery_remaining_s(now)

@@ -84,6 +84,9 @@ class RealTimeScheduler:
         self.submit(lambda: None)  # wake the thread up
 
     def run(self) -> None:
+        # Work from other threads (a VV arriving, say) goes before the next timer, and one
+        # timer runs between two looks at the inbox: with instant flights a vehicle always has
+        # a timer due, which must not keep arriving VVs waiting.
         while not self._stopping.is_set():
             wait = 0.5
             if self._timers:
@@ -94,7 +97,13 @@ class RealTimeScheduler:
                 pass
             else:
                 self._run(fn, future)
-            while self._timers and self._timers[0][0] <= self.clock.now_s():
+                while True:
+                    try:
+                        fn, future = self._inbox.get_nowait()
+                    except queue.Empty:
+                        break
+                    self._run(fn, future)
+            if self._timers and self._timers[0][0] <= self.clock.now_s():
                 _, _, timer = heapq.heappop(self._timers)
                 self._run(timer, None)
 

@@ -343,7 +343,12 @@ def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
 
 
 def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None:
-    existing = set(vv.tasks.filter(q=pending.q).values_list("index", flat=True))
+    # A batch's tasks exist from its first suspension on; a single task is new each time.
+    existing = (
+        set(vv.tasks.filter(q=pending.q).values_list("index", flat=True))
+        if pending.kind == "batch"
+        else set()
+    )
     now = vvm.clock.now_s()
     Task.objects.bulk_create(
         Task(
@@ -431,12 +436,30 @@ def vehicle_caps(vehicle: Vehicle, open_tasks: int = 0) -> VehicleCaps:
         area=_polygon(json.dumps(vehicle.area)),
         min_altitude_m=vehicle.min_altitude_m,
         max_altitude_m=vehicle.max_altitude_m,
-        sensors=frozenset(s.name for s in vehicle.sensors.all()),
+        sensors=_sensor_names(vehicle),
         active=vehicle.status == VehicleStatus.ACTIVE,
         position=vehicle.position,
         max_speed_mps=vehicle.max_speed_mps,
         open_tasks=open_tasks,
     )
+
+
+# An RV's sensors, remembered per version of the vehicle row: a step on an RV asks each time
+# whether the RV aboard can serve the next task. Changing the sensors touches the row
+# (fleet.signals), so a new version is read again.
+_sensors_seen: dict[tuple[int, Any], frozenset[str]] = {}
+
+
+def _sensor_names(vehicle: Vehicle) -> frozenset[str]:
+    if "sensors" in getattr(vehicle, "_prefetched_objects_cache", {}):
+        return frozenset(s.name for s in vehicle.sensors.all())
+    key = (vehicle.pk, vehicle.updated)
+    names = _sensors_seen.get(key)
+    if names is None:
+        if len(_sensors_seen) > 10_000:
+            _sensors_seen.clear()
+        names = _sensors_seen[key] = frozenset(vehicle.sensors.values_list("name", flat=True))
+    return names
 
 
 @lru_cache(maxsize=1024)
@@ -535,7 +558,7 @@ def _best_vehicle(tasks: Sequence[Task], decisions: dict[int, MapDecision]) -> V
 def _assign(tasks: Iterable[Task], vehicle: Vehicle, vvm: VVM) -> None:
     ids = [t.pk for t in tasks if t.vehicle_id != vehicle.pk]
     if ids:
-        Task.objects.filter(pk__in=ids).update(vehicle=vehicle)
+        Task.objects.filter(pk__in=ids).update(vehicle=vehicle, assigned_s=vvm.clock.now_s())
         vvm.dispatcher.vehicle_changed(vehicle.pk)
 
 
@@ -608,7 +631,12 @@ def _migrate_to_ground_station(vv: VirtualVehicle, *, reason: str, vvm: VVM) -> 
 
 
 def task_complete(
-    *, task_id: int, readings: list[dict[str, Any]], vvm: VVM, vehicle_id: int | None = None
+    *,
+    task_id: int,
+    readings: list[dict[str, Any]],
+    vvm: VVM,
+    vehicle_id: int | None = None,
+    vv_id: uuid.UUID | None = None,
 ) -> bool:
     """Record an RV's readings as the answer to a task and resume the VV on that RV.
 
@@ -620,7 +648,8 @@ def task_complete(
     with transaction.atomic():
         # Lock the VV before its task, in the same order as vv_advance, so two workers
         # cannot deadlock.
-        vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
+        if vv_id is None:
+            vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
         vv = VirtualVehicle.objects.select_for_update().get(pk=vv_id)
         task = Task.objects.select_for_update().get(pk=task_id)
         pending = _pending_of(vv)

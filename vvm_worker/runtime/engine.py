@@ -349,9 +349,13 @@ class VVContext:
 
     def _sync_journal(self, journal: Sequence[Mapping[str, Any] | str]) -> None:
         have = self.journal_length
-        if len(journal) < have or (have and _entry_text(journal[have - 1]) != self._last_entry):
+        if len(journal) < have:
             raise StaleContext(self.vv_id)
-        new = list(journal[have:])
+        # One read for the last entry this context has (still the same?) and the new ones.
+        tail = list(journal[have - 1 :]) if have else list(journal[0:])
+        if have and _entry_text(tail[0]) != self._last_entry:
+            raise StaleContext(self.vv_id)
+        new = tail[1:] if have else tail
         if new:
             texts = [_entry_text(e) for e in new]
             self._host("append", "[" + ",".join(texts) + "]")
