@@ -40,6 +40,7 @@ simulate-fig3: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m bench
+	$(PY) -m bench.platform
 
 clean:
 	rm -rf $(VENV) var
