@@ -7,9 +7,9 @@ import pytest
 from accounts.models import Customer
 from missions.models import LogEntry, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.factories import CustomerFactory, VehicleFactory
-from vvm_worker import services
 from vvm_worker.runtime import Runtime
 from vvm_worker.services import task_complete, vv_advance, vv_submit
+from vvm_worker.services import vvs as vv_services
 
 GOOD = """
 var co2 = VV.sensor.get('CO2');
@@ -189,18 +189,18 @@ def test_a_crash_after_the_effects_but_before_the_commit_applies_them_once(
 ) -> None:
     vv = vv_submit(customer=customer_a, name="VV", program=CALLBACKS, vvm=platform.vvm)
     task = run_until_task(platform, vv, q=1)
-    original = services._create_tasks
+    original = vv_services._create_tasks
 
     def crash(*args, **kwargs):
         raise Crash("database connection lost")
 
-    monkeypatch.setattr(services, "_create_tasks", crash)
+    monkeypatch.setattr(vv_services, "_create_tasks", crash)
     with pytest.raises(Crash):
         task_complete(task_id=task.pk, readings=[{"sensor": "GPS", "value": 1}], vvm=platform.vvm)
     vv.refresh_from_db()
     assert vv.storage.get(key="calls").value == 1  # rolled back with the step
     assert LogEntry.objects.filter(vv=vv).count() == 1
-    monkeypatch.setattr(services, "_create_tasks", original)
+    monkeypatch.setattr(vv_services, "_create_tasks", original)
     vv_advance(vv_id=vv.pk, vvm=platform.vvm)
     platform.drain()
     vv.refresh_from_db()
@@ -224,7 +224,7 @@ def test_a_crash_before_the_answer_is_committed_flies_the_task_again(
     def crash(*args, **kwargs):
         raise Crash("worker killed while writing the answer")
 
-    monkeypatch.setattr(services, "_journal_append", crash)
+    monkeypatch.setattr(vv_services, "journal_append", crash)
     with pytest.raises(Crash):
         task_complete(task_id=task.pk, readings=[{"sensor": "GPS", "value": 1}], vvm=platform.vvm)
     monkeypatch.undo()

@@ -6,7 +6,7 @@ import pytest
 
 import fleet.api.views
 import fleet.services
-import vvm_worker.services
+import vvm_worker.services.fleet
 from fleet.models import Vehicle, VehicleStatus
 from missions.models import VVStatus
 from tests.factories import AREA_ONE, AREA_TWO, VehicleFactory
@@ -31,7 +31,7 @@ def registered(monkeypatch) -> list[str]:
         seen.append(vehicle.name)
 
     monkeypatch.setattr(fleet.services, "vehicle_register", record)
-    monkeypatch.setattr(vvm_worker.services, "vehicle_register", record)
+    monkeypatch.setattr(vvm_worker.services.fleet, "vehicle_register", record)
     return seen
 
 

@@ -1,0 +1,101 @@
+"""What every VVM service shares: the VVM (clock, dispatcher, sensor world, runtime) and the
+small helpers about hosts and pending requests."""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+from dataclasses import dataclass
+from dataclasses import field as dataclass_field
+from typing import Any
+
+from django.db.models import Count, Q
+
+from fleet.geo import Position, distance_m
+from fleet.models import GroundStation
+from fleet.simulation import SensorField
+from missions.models import (
+    ACTIVE_STATUSES,
+    VirtualVehicle,
+)
+from vvm_worker.clock import Clock
+from vvm_worker.dispatch import Dispatcher
+from vvm_worker.runtime import (
+    PendingRequest,
+    Runtime,
+    SyntaxProblem,
+    TaskRequest,
+)
+
+logger = logging.getLogger("cpcc.vvm")
+
+
+@dataclass
+class VVM:
+    """What the services need from the process they run in: the clock, who to tell what to
+    do next, the sensor world, and the VV runtime with its warm contexts."""
+
+    clock: Clock
+    dispatcher: Dispatcher
+    field: SensorField
+    world_seed: int = 0
+    runtime: Runtime = dataclass_field(default_factory=Runtime)
+    # Distributed platform: an RV whose worker has not reported for this long takes no work.
+    # None in `simulate`, where every RV's loop runs in the same process.
+    lease_s: float | None = None
+
+
+class ProgramRejected(ValueError):
+    """A program that cannot be accepted (a syntax error), with where the problem is."""
+
+    def __init__(self, problem: SyntaxProblem) -> None:
+        super().__init__(str(problem))
+        self.problem = problem
+
+
+def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> GroundStation | None:
+    stations = list(
+        GroundStation.objects.annotate(load=Count("vvs", filter=Q(vvs__status__in=ACTIVE_STATUSES)))
+    )
+    if not stations:
+        return None
+    if near is not None:
+        return min(stations, key=lambda gs: (distance_m(near, gs.position), gs.name))
+    return min(stations, key=lambda gs: (gs.load, gs.name))
+
+
+# --- steps -----------------------------------------------------------------------------------
+
+
+def pending_json(p: PendingRequest) -> dict[str, Any]:
+    return {
+        "kind": p.kind,
+        "q": p.q,
+        "r": p.fingerprint,
+        "tasks": [
+            {
+                "position": {"lat": t.lat, "lng": t.lng, "alt": t.alt},
+                "tolerance": t.tolerance_m,
+                "sensors": list(t.sensors),
+            }
+            for t in p.tasks
+        ],
+        "open": list(p.open),
+    }
+
+
+def pending_of(vv: VirtualVehicle) -> PendingRequest | None:
+    data = vv.pending
+    if not data:
+        return None
+    return PendingRequest(
+        kind=data["kind"],
+        q=int(data["q"]),
+        fingerprint=data.get("r"),
+        tasks=tuple(TaskRequest.from_json(t) for t in data["tasks"]),
+        open=tuple(data.get("open", ())),
+    )
+
+
+def as_datetime(vvm: VVM, t_s: float) -> dt.datetime:
+    return dt.datetime.fromtimestamp(vvm.clock.epoch_ms(t_s) / 1000, tz=dt.UTC)

@@ -1,0 +1,228 @@
+"""The vehicle mapper and the migrator: who serves a VV's pending task, and moving the VV there."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Iterable, Sequence
+from functools import lru_cache
+from typing import Any
+
+from django.db.models import Count, Q, QuerySet
+from shapely.geometry import Polygon
+
+from fleet.models import GroundStation, Vehicle, VehicleStatus
+from missions.models import (
+    HostKind,
+    JournalEntry,
+    Migration,
+    Task,
+    TaskStatus,
+    VirtualVehicle,
+    VVStatus,
+)
+from vvm_worker.mapping import MapDecision, VehicleCaps, map_task
+from vvm_worker.runtime import (
+    PendingRequest,
+    TaskRequest,
+    answer_reject,
+)
+from vvm_worker.services.base import VVM, as_datetime, ground_station_for, logger, pending_of
+from vvm_worker.services.journal import journal_append
+
+# --- routing and migration (the vehicle mapper and the migrator) -----------------------------
+
+
+def vehicle_caps(vehicle: Vehicle, open_tasks: int = 0) -> VehicleCaps:
+    """The mapper's view of one RV."""
+    return VehicleCaps(
+        id=vehicle.pk,
+        name=vehicle.name,
+        area=_polygon(json.dumps(vehicle.area)),
+        min_altitude_m=vehicle.min_altitude_m,
+        max_altitude_m=vehicle.max_altitude_m,
+        sensors=_sensor_names(vehicle),
+        active=vehicle.status == VehicleStatus.ACTIVE,
+        position=vehicle.position,
+        max_speed_mps=vehicle.max_speed_mps,
+        open_tasks=open_tasks,
+    )
+
+
+# An RV's sensors, remembered per version of the vehicle row: a step on an RV asks each time
+# whether the RV aboard can serve the next task. Changing the sensors touches the row
+# (fleet.signals), so a new version is read again.
+_sensors_seen: dict[tuple[int, Any], frozenset[str]] = {}
+
+
+def _sensor_names(vehicle: Vehicle) -> frozenset[str]:
+    if "sensors" in getattr(vehicle, "_prefetched_objects_cache", {}):
+        return frozenset(s.name for s in vehicle.sensors.all())
+    key = (vehicle.pk, vehicle.updated)
+    names = _sensors_seen.get(key)
+    if names is None:
+        if len(_sensors_seen) > 10_000:
+            _sensors_seen.clear()
+        names = _sensors_seen[key] = frozenset(vehicle.sensors.values_list("name", flat=True))
+    return names
+
+
+@lru_cache(maxsize=1024)
+def _polygon(area_json: str) -> Polygon:
+    return Polygon([(float(lng), float(lat)) for lat, lng in json.loads(area_json)])
+
+
+def fleet_caps(vvm: VVM) -> list[VehicleCaps]:
+    """The mapper's view of the fleet: every RV that is in service or in maintenance; one whose
+    worker is gone counts as in maintenance (it may come back)."""
+    vehicles = (
+        Vehicle.objects.exclude(status=VehicleStatus.REMOVED)
+        .prefetch_related("sensors")
+        .annotate(open_count=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)))
+    )
+    caps = [vehicle_caps(v, v.open_count) for v in vehicles]
+    if vvm.lease_s is not None:
+        online = set(online_vehicles(vvm).values_list("pk", flat=True))
+        caps = [dataclasses.replace(c, active=c.active and c.id in online) for c in caps]
+    return caps
+
+
+def online_vehicles(vvm: VVM) -> QuerySet[Vehicle]:
+    assert vvm.lease_s is not None
+    since = as_datetime(vvm, vvm.clock.now_s() - vvm.lease_s)
+    return Vehicle.objects.filter(worker_seen__gte=since)
+
+
+def route(vv: VirtualVehicle, vvm: VVM) -> bool:
+    """Find who serves the pending request. True when the VV must step again right here."""
+    pending = pending_of(vv)
+    assert pending is not None
+    open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
+    host = vv.host_rv
+    if host is not None and host.status == VehicleStatus.ACTIVE:
+        # The common case needs no look at the rest of the fleet: the RV aboard can go on.
+        caps = vehicle_caps(host)
+        mine = [t for t in open_tasks if caps.can_serve(request_of(t))]
+        if mine:
+            assign(mine, host, vvm)
+            return False
+        if any(t.vehicle_id == host.pk for t in open_tasks):
+            return False
+    fleet = fleet_caps(vvm)
+    decisions = {t.pk: map_task(request_of(t), fleet) for t in open_tasks}
+    rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
+    # A batch is accepted or rejected as a whole, before any of its tasks is answered.
+    partly_answered = JournalEntry.objects.filter(
+        vv=vv, seq=vv.journal_length - 1, entry__q=pending.q
+    ).exists()
+    if rejected and not partly_answered:
+        if vv.host_rv is not None:
+            migrate_to_ground_station(vv, reason="no vehicle can serve its task", vvm=vvm)
+            return False
+        reject(vv, pending, rejected, vvm)
+        return True
+
+    best = _best_vehicle(open_tasks, decisions)
+    if best is not None:
+        vehicle = Vehicle.objects.get(pk=best.id)
+        release_tasks(vv, vvm)
+        record_migration(vv, to=vehicle, reason="its next task", vvm=vvm)
+        vv.status = VVStatus.MIGRATING
+        vvm.dispatcher.vv_arrived(vv.id)
+        return False
+    # Only RVs in maintenance could serve it: park on a ground station until one returns.
+    if vv.host_rv is not None:
+        migrate_to_ground_station(vv, reason="waiting for a vehicle", vvm=vvm)
+    return False
+
+
+def request_of(task: Task) -> TaskRequest:
+    return TaskRequest(task.lat, task.lng, task.alt, task.tolerance_m, tuple(task.sensors))
+
+
+def _best_vehicle(tasks: Sequence[Task], decisions: dict[int, MapDecision]) -> VehicleCaps | None:
+    """The active RV serving most of the tasks; among equals the best ranked for the first."""
+    score: dict[int, int] = {}
+    rank: dict[int, tuple[int, int]] = {}
+    by_id: dict[int, VehicleCaps] = {}
+    for order, task in enumerate(tasks):
+        for position, caps in enumerate(decisions[task.pk].candidates):
+            score[caps.id] = score.get(caps.id, 0) + 1
+            rank.setdefault(caps.id, (order, position))
+            by_id[caps.id] = caps
+    if not score:
+        return None
+    best = min(score, key=lambda vid: (-score[vid], rank[vid], by_id[vid].name))
+    return by_id[best]
+
+
+def assign(tasks: Iterable[Task], vehicle: Vehicle, vvm: VVM) -> None:
+    ids = [t.pk for t in tasks if t.vehicle_id != vehicle.pk]
+    if ids:
+        Task.objects.filter(pk__in=ids).update(vehicle=vehicle, assigned_s=vvm.clock.now_s())
+        vvm.dispatcher.vehicle_changed(vehicle.pk)
+
+
+def release_tasks(vv: VirtualVehicle, vvm: VVM) -> None:
+    """Take the VV's open tasks off the RVs they were planned on."""
+    held = vv.tasks.filter(status=TaskStatus.OPEN, vehicle__isnull=False)
+    vehicles = set(held.values_list("vehicle_id", flat=True))
+    held.update(vehicle=None)
+    for vehicle_id in sorted(vehicles):
+        vvm.dispatcher.vehicle_changed(vehicle_id)
+
+
+def reject(
+    vv: VirtualVehicle, pending: PendingRequest, rejected: list[tuple[Task, MapDecision]], vvm: VVM
+) -> None:
+    now = vvm.clock.now_s()
+    task, decision = rejected[0]
+    message = decision.reason or "no vehicle can serve the task"
+    if pending.kind == "batch":
+        message = f"task {task.index} of the batch: {message}"
+    journal_append(
+        vv, answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message), vvm
+    )
+    vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).update(
+        status=TaskStatus.REJECTED, message=message, done_s=now
+    )
+    vv.pending = None
+    logger.info("task rejected", extra={"vv": str(vv.id), "reason": message})
+
+
+def record_migration(
+    vv: VirtualVehicle, *, to: GroundStation | Vehicle, reason: str, vvm: VVM
+) -> None:
+    source: GroundStation | Vehicle | None = vv.host_rv or vv.host_gs
+    to_kind = HostKind.RV if isinstance(to, Vehicle) else HostKind.GS
+    if source is not None:
+        Migration.objects.create(
+            vv=vv,
+            from_kind=HostKind.RV if isinstance(source, Vehicle) else HostKind.GS,
+            from_name=source.name,
+            to_kind=to_kind,
+            to_name=to.name,
+            at_s=vvm.clock.now_s(),
+            reason=reason,
+        )
+    if isinstance(to, Vehicle):
+        vv.host_rv, vv.host_gs = to, None
+    else:
+        vv.host_rv, vv.host_gs = None, to
+    # The VV's warm context stays with the host it left: the new host resumes it by replay.
+    vvm.runtime.forget(str(vv.pk))
+    logger.info(
+        "vv migrated",
+        extra={"vv": str(vv.id), "from": getattr(source, "name", None), "to": to.name},
+    )
+
+
+def migrate_to_ground_station(vv: VirtualVehicle, *, reason: str, vvm: VVM) -> None:
+    near = vv.host_rv.position if vv.host_rv is not None else None
+    gs = ground_station_for(vv, near=near)
+    if gs is None:
+        return
+    release_tasks(vv, vvm)
+    record_migration(vv, to=gs, reason=reason, vvm=vvm)
+    vv.status = VVStatus.MIGRATING
+    vvm.dispatcher.vv_arrived(vv.id)

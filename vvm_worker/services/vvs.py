@@ -1,0 +1,349 @@
+"""A VV's life: submission and admission (the loader), steps, the end, task answers, cancelling."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import secrets
+import uuid
+from typing import Any
+
+from django.db import transaction
+from django.db.models import F
+
+from accounts.models import Customer
+from accounts.selectors import customer_catalog, customer_limits
+from fleet.models import Vehicle
+from missions.models import (
+    ACTIVE_STATUSES,
+    LogEntry,
+    StorageDocument,
+    Task,
+    TaskStatus,
+    VirtualVehicle,
+    VVStatus,
+)
+from vvm_worker.runtime import (
+    ErrorKind,
+    Outcome,
+    PendingRequest,
+    StepInput,
+    StepResult,
+    VVError,
+    answer_part,
+    answer_task,
+    check_syntax,
+)
+from vvm_worker.services.base import (
+    VVM,
+    ProgramRejected,
+    ground_station_for,
+    logger,
+    pending_json,
+    pending_of,
+)
+from vvm_worker.services.journal import JournalView, journal_append, journal_full
+from vvm_worker.services.routing import record_migration, release_tasks, route
+
+# Steps one host runs for one VV before it lets other work go first (rejected tasks in a row).
+MAX_STEPS_PER_ADVANCE = 50
+
+# --- submission and admission (the loader) ---------------------------------------------------
+
+
+def vv_submit(
+    *,
+    customer: Customer,
+    name: str,
+    program: str,
+    vvm: VVM,
+    seed: int | None = None,
+    vv_id: uuid.UUID | None = None,
+    refuse_syntax_errors: bool = True,
+    admit: bool = True,
+) -> VirtualVehicle:
+    """Queue a new VV for the customer and, with ``admit``, start it if the quota allows.
+
+    Raises ProgramRejected for a syntax error unless ``refuse_syntax_errors`` is False (a
+    scenario's VV then ends ``failed`` with the line and column when it is loaded).
+    """
+    if refuse_syntax_errors:
+        problem = check_syntax(program)
+        if problem is not None:
+            raise ProgramRejected(problem)
+    now = vvm.clock.now_s()
+    vv = VirtualVehicle.objects.create(
+        id=vv_id or uuid.uuid4(),
+        customer=customer,
+        name=name,
+        program=program,
+        seed=secrets.randbits(31) if seed is None else seed,
+        start_ms=vvm.clock.epoch_ms(now),
+        catalog=customer_catalog(customer=customer),
+        submitted_s=now,
+    )
+    logger.info("vv submitted", extra={"vv": str(vv.id), "customer": customer.slug})
+    if admit:
+        vv_admit_queued(customer_id=customer.pk, vvm=vvm)
+    vv.refresh_from_db()
+    return vv
+
+
+def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
+    """Start the customer's oldest queued VVs while it runs fewer than its quota allows."""
+    with transaction.atomic():
+        customer = Customer.objects.select_for_update().get(pk=customer_id)
+        running = VirtualVehicle.objects.filter(customer=customer, status__in=ACTIVE_STATUSES)
+        free = customer.max_parallel_vvs - running.count()
+        if free <= 0:
+            return []
+        queued = VirtualVehicle.objects.filter(customer=customer, status=VVStatus.QUEUED)
+        admitted = []
+        for vv in queued.order_by("submitted_s", "created", "id")[:free]:
+            gs = ground_station_for(vv)
+            if gs is None:
+                logger.warning("no ground station: VV stays queued", extra={"vv": str(vv.id)})
+                break
+            vv.status = VVStatus.RUNNING
+            vv.host_gs = gs
+            vv.started_s = vvm.clock.now_s()
+            vv.save(update_fields=["status", "host_gs", "started_s", "updated"])
+            admitted.append(vv)
+            vvm.dispatcher.vv_arrived(vv.id)
+        return admitted
+
+
+def _step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
+    full = journal_full(vv)
+    if full is not None:
+        return StepResult(Outcome.KILLED, error=VVError(ErrorKind.QUOTA, full, quota="journal"))
+    step = StepInput(
+        vv_id=str(vv.id),
+        vv_name=vv.name,
+        source=vv.program,
+        seed=vv.seed,
+        start_ms=vv.start_ms,
+        catalog=vv.catalog,
+        journal=JournalView(vv),
+        effects_applied=vv.effects_applied,
+        limits=customer_limits(customer=vv.customer),
+        previous_step_s=vv.last_step_s,
+    )
+    result = vvm.runtime.step(step)
+    _apply_effects(vv, result, vvm)
+    vv.steps += 1
+    vv.last_step_s = result.duration_s
+    if result.outcome is Outcome.SUSPENDED and result.pending is not None:
+        vv.pending = pending_json(result.pending)
+        _create_tasks(vv, result.pending, vvm)
+    return result
+
+
+def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
+    """Apply a step's storage writes and log lines: one upsert, one delete, one insert."""
+    if result.effects:
+        final: dict[str, tuple[str | None, float]] = {}  # key -> (value JSON or None, time)
+        lines = []
+        for effect in result.effects:
+            at_s = vvm.clock.from_epoch_ms(effect.time_ms)
+            if effect.op == "store" and effect.key is not None:
+                final[effect.key] = (effect.value_json, at_s)
+            elif effect.op == "remove" and effect.key is not None:
+                final[effect.key] = (None, at_s)
+            elif effect.op == "log" and effect.message is not None:
+                lines.append(LogEntry(vv=vv, seq=effect.seq, at_s=at_s, message=effect.message))
+        stored = [
+            StorageDocument(
+                vv=vv,
+                key=key,
+                value=json.loads(text),
+                size_bytes=len(key) + len(text),
+                updated_s=at_s,
+            )
+            for key, (text, at_s) in final.items()
+            if text is not None
+        ]
+        if stored:
+            StorageDocument.objects.bulk_create(
+                stored,
+                update_conflicts=True,
+                unique_fields=["vv", "key"],
+                update_fields=["value", "size_bytes", "updated_s"],
+            )
+        removed = [key for key, (text, _) in final.items() if text is None]
+        if removed:
+            StorageDocument.objects.filter(vv=vv, key__in=removed).delete()
+        if lines:
+            # A line is numbered by the program: applying it twice would be a duplicate.
+            LogEntry.objects.bulk_create(lines, ignore_conflicts=True)
+    vv.effects_applied = max(vv.effects_applied, result.effects_total)
+    vv.storage_bytes = result.storage_bytes
+
+
+def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None:
+    # A batch's tasks exist from its first suspension on; a single task is new each time.
+    existing = (
+        set(vv.tasks.filter(q=pending.q).values_list("index", flat=True))
+        if pending.kind == "batch"
+        else set()
+    )
+    now = vvm.clock.now_s()
+    Task.objects.bulk_create(
+        Task(
+            vv=vv,
+            q=pending.q,
+            index=i,
+            lat=t.lat,
+            lng=t.lng,
+            alt=t.alt,
+            tolerance_m=t.tolerance_m,
+            sensors=list(t.sensors),
+            requested_s=now,
+        )
+        for i, t in enumerate(pending.tasks)
+        if i in pending.open and i not in existing
+    )
+
+
+def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
+    """What the host holding a VV does with it: step it, then route its pending task.
+
+    Safe to call twice: a VV that waits for an RV, has ended or is queued is left alone.
+    """
+    with transaction.atomic():
+        vv = (
+            VirtualVehicle.objects.select_for_update(of=("self",))
+            .select_related("customer", "host_gs", "host_rv")
+            .get(pk=vv_id)
+        )
+        if vv.is_ended or vv.status == VVStatus.QUEUED:
+            return
+        if vv.status == VVStatus.MIGRATING:
+            vv.status = VVStatus.RUNNING
+        for _ in range(MAX_STEPS_PER_ADVANCE):
+            if vv.pending is None:
+                result = _step(vv, vvm)
+                if result.outcome is not Outcome.SUSPENDED:
+                    _end(vv, result, vvm)
+                    break
+            if not route(vv, vvm):
+                break
+        else:
+            # A program that keeps asking for tasks nobody can serve: let the host's other
+            # work go first, then carry on (the tasks-per-VV quota bounds it).
+            vvm.dispatcher.vv_arrived(vv.pk)
+        vv.save()
+
+
+def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
+    now = vvm.clock.now_s()
+    if vv.host_rv is not None:
+        gs = ground_station_for(vv, near=vv.host_rv.position)
+        reason = "finished" if result.outcome is Outcome.FINISHED else str(result.outcome)
+        if gs is not None:
+            record_migration(vv, to=gs, reason=reason, vvm=vvm)
+    vv.status = {
+        Outcome.FINISHED: VVStatus.FINISHED,
+        Outcome.FAILED: VVStatus.FAILED,
+        Outcome.KILLED: VVStatus.KILLED,
+    }[result.outcome]
+    vv.pending = None
+    if result.error is not None:
+        vv.error = str(result.error)
+        vv.error_line = result.error.line
+        vv.error_column = result.error.column
+    vv.finished_s = now
+    vv.finished = dt.datetime.fromtimestamp(vvm.clock.epoch_ms(now) / 1000, tz=dt.UTC)
+    release_tasks(vv, vvm)
+    vv.tasks.filter(status=TaskStatus.OPEN).update(status=TaskStatus.CANCELLED)
+    logger.info(
+        "vv ended",
+        extra={"vv": str(vv.id), "customer": vv.customer.slug, "status": vv.status},
+    )
+    vvm.dispatcher.customer_slot_freed(vv.customer_id)
+
+
+# --- task completion (the task executor's answer) -------------------------------------------
+
+
+def task_complete(
+    *,
+    task_id: int,
+    readings: list[dict[str, Any]],
+    vvm: VVM,
+    vehicle_id: int | None = None,
+    vv_id: uuid.UUID | None = None,
+) -> bool:
+    """Record an RV's readings as the answer to a task and resume the VV on that RV.
+
+    Returns False (and changes nothing) when the task is no longer open or no longer this
+    vehicle's (``vehicle_id``): a duplicate delivery, or a VV that was cancelled or moved on
+    meanwhile, e.g. because this RV's worker was taken for gone. A reading is never taken
+    twice.
+    """
+    with transaction.atomic():
+        # Lock the VV before its task, in the same order as vv_advance, so two workers
+        # cannot deadlock.
+        if vv_id is None:
+            vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
+        vv = VirtualVehicle.objects.select_for_update().get(pk=vv_id)
+        task = Task.objects.select_for_update().get(pk=task_id)
+        pending = pending_of(vv)
+        if task.status != TaskStatus.OPEN or pending is None or pending.q != task.q:
+            return False
+        if vehicle_id is not None and (
+            task.vehicle_id != vehicle_id or vv.host_rv_id != vehicle_id
+        ):
+            return False
+        now = vvm.clock.now_s()
+        time_ms = vvm.clock.epoch_ms(now)
+        if pending.kind == "batch":
+            entry = answer_part(pending, index=task.index, time_ms=time_ms, data=readings)
+        else:
+            entry = answer_task(pending, time_ms=time_ms, data=readings)
+        task.status = TaskStatus.DONE
+        task.done_s = now
+        task.readings = readings
+        task.save(update_fields=["status", "done_s", "readings"])
+        if task.vehicle_id is not None:
+            Vehicle.objects.filter(pk=task.vehicle_id).update(tasks_done=F("tasks_done") + 1)
+        journal_append(vv, entry, vvm)
+        vv.pending = None
+        vv.save(update_fields=["journal_length", "journal_bytes", "pending", "updated"])
+    vv_advance(vv_id=vv.pk, vvm=vvm)
+    return True
+
+
+def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
+    """Stop a VV at the customer's request: its open tasks are dropped, what it stored stays.
+
+    Returns False when the VV had already ended. A VV aboard an RV goes back to a ground
+    station, like any VV that ends.
+    """
+    with transaction.atomic():
+        vv = (
+            VirtualVehicle.objects.select_for_update(of=("self",))
+            .select_related("customer", "host_gs", "host_rv")
+            .get(pk=vv_id)
+        )
+        if vv.is_ended:
+            return False
+        now = vvm.clock.now_s()
+        release_tasks(vv, vvm)
+        vv.tasks.filter(status=TaskStatus.OPEN).update(status=TaskStatus.CANCELLED)
+        if vv.host_rv is not None:
+            gs = ground_station_for(vv, near=vv.host_rv.position)
+            if gs is not None:
+                record_migration(vv, to=gs, reason="cancelled", vvm=vvm)
+        was_queued = vv.status == VVStatus.QUEUED
+        vv.status = VVStatus.CANCELLED
+        vv.pending = None
+        vv.error = "cancelled by its owner"
+        vv.finished_s = now
+        vv.finished = dt.datetime.fromtimestamp(vvm.clock.epoch_ms(now) / 1000, tz=dt.UTC)
+        vv.save()
+        vvm.runtime.forget(str(vv.pk))
+        if not was_queued:
+            vvm.dispatcher.customer_slot_freed(vv.customer_id)
+    logger.info("vv cancelled", extra={"vv": str(vv_id)})
+    return True
