@@ -19,6 +19,7 @@ def run_celery(*, queues: list[str], node: str, loglevel: str) -> None:
     """A Celery worker on these queues, its tasks run one at a time in this thread."""
     app.worker_main(
         argv=[
+            "--quiet",  # no start-up banner: the command prints one line of its own
             "worker",
             "--queues",
             ",".join(queues),
