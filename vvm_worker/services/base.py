@@ -54,6 +54,8 @@ class ProgramRejected(ValueError):
 
 
 def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> GroundStation | None:
+    """The ground station for a VV: the nearest to ``near`` (an RV it leaves), else the one
+    with the fewest VVs; None when there is none."""
     stations = list(
         GroundStation.objects.annotate(load=Count("vvs", filter=Q(vvs__status__in=ACTIVE_STATUSES)))
     )
@@ -64,10 +66,8 @@ def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> Grou
     return min(stations, key=lambda gs: (gs.load, gs.name))
 
 
-# --- steps -----------------------------------------------------------------------------------
-
-
 def pending_json(p: PendingRequest) -> dict[str, Any]:
+    """A pending request as the VV row keeps it."""
     return {
         "kind": p.kind,
         "q": p.q,

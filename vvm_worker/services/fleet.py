@@ -24,8 +24,6 @@ from vvm_worker.services.routing import (
     vehicle_caps,
 )
 
-# --- fleet changes -----------------------------------------------------------------------------
-
 
 def vehicle_set_status(*, vehicle: Vehicle, status: VehicleStatus, vvm: VVM) -> None:
     """Put an RV into service, into maintenance, or remove it, without disturbing customers.

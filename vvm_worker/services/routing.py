@@ -30,8 +30,6 @@ from vvm_worker.runtime import (
 from vvm_worker.services.base import VVM, as_datetime, ground_station_for, logger, pending_of
 from vvm_worker.services.journal import journal_append
 
-# --- routing and migration (the vehicle mapper and the migrator) -----------------------------
-
 
 def vehicle_caps(vehicle: Vehicle, open_tasks: int = 0) -> VehicleCaps:
     """The mapper's view of one RV."""

@@ -48,8 +48,6 @@ from vvm_worker.services.routing import record_migration, release_tasks, route
 # Steps one host runs for one VV before it lets other work go first (rejected tasks in a row).
 MAX_STEPS_PER_ADVANCE = 50
 
-# --- submission and admission (the loader) ---------------------------------------------------
-
 
 def vv_submit(
     *,
