@@ -260,3 +260,12 @@ def test_cancelling_a_vv_in_flight_sends_it_home_and_keeps_its_storage(
     assert vv.storage.filter(key="co2").exists()
     assert set(vv.tasks.values_list("status", flat=True)) == {TaskStatus.DONE, TaskStatus.CANCELLED}
     assert Migration.objects.filter(vv=vv).last().reason == "cancelled"
+
+
+def test_late_messages_about_deleted_vvs_or_customers_are_ignored(vvm_factory, db) -> None:
+    import uuid
+
+    from vvm_worker.services import vv_admit_queued, vv_advance
+
+    vv_advance(vv_id=uuid.uuid4(), vvm=vvm_factory())
+    assert vv_admit_queued(customer_id=987654, vvm=vvm_factory()) == []

@@ -90,7 +90,9 @@ def vv_submit(
 def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
     """Start the customer's oldest queued VVs while it runs fewer than its quota allows."""
     with transaction.atomic():
-        customer = Customer.objects.select_for_update().get(pk=customer_id)
+        customer = Customer.objects.select_for_update().filter(pk=customer_id).first()
+        if customer is None:  # a late message about a customer that was deleted
+            return []
         running = VirtualVehicle.objects.filter(customer=customer, status__in=ACTIVE_STATUSES)
         free = customer.max_parallel_vvs - running.count()
         if free <= 0:
@@ -206,15 +208,17 @@ def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None
 def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
     """What the host holding a VV does with it: step it, then route its pending task.
 
-    Safe to call twice: a VV that waits for an RV, has ended or is queued is left alone.
+    Safe to call twice: a VV that waits for an RV, has ended or is queued is left alone, and
+    one that no longer exists (a late message) is ignored.
     """
     with transaction.atomic():
         vv = (
             VirtualVehicle.objects.select_for_update(of=("self",))
             .select_related("customer", "host_gs", "host_rv")
-            .get(pk=vv_id)
+            .filter(pk=vv_id)
+            .first()
         )
-        if vv.is_ended or vv.status == VVStatus.QUEUED:
+        if vv is None or vv.is_ended or vv.status == VVStatus.QUEUED:
             return
         if vv.status == VVStatus.MIGRATING:
             vv.status = VVStatus.RUNNING
