@@ -7,6 +7,7 @@ import hashlib
 import os
 import secrets
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from django.db import transaction
@@ -17,13 +18,14 @@ from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
 from missions.models import VirtualVehicle
 from vvm_worker.scenario import (
     CustomerSpec,
+    FleetEvent,
     Scenario,
     ScenarioError,
     VehicleSpec,
     VVSpec,
     vv_instances,
 )
-from vvm_worker.services import VVM, vv_submit
+from vvm_worker.services import VVM, vehicle_register, vehicle_set_status, vv_submit
 
 PASSWORD_ENV = "CPCC_SCENARIO_PASSWORD"
 
@@ -201,3 +203,28 @@ def scenario_submit_all(
         )
         for spec, name in vv_instances(scenario)
     ]
+
+
+EVENT_STATUS = {
+    "remove": VehicleStatus.REMOVED,
+    "maintenance": VehicleStatus.MAINTENANCE,
+    "return": VehicleStatus.ACTIVE,
+}
+
+
+def scenario_event_apply(
+    event: FleetEvent, *, vvm: VVM, on_added: Callable[[Vehicle], None] | None = None
+) -> Vehicle:
+    """Apply one fleet event of a scenario; returns the vehicle it concerns.
+
+    An added vehicle gets its control loop or worker from ``on_added`` before it is given work.
+    """
+    if event.add_vehicle is not None:
+        vehicle = vehicle_upsert(event.add_vehicle)
+        if on_added is not None:
+            on_added(vehicle)
+        vehicle_register(vehicle=vehicle, vvm=vvm)
+        return vehicle
+    vehicle = Vehicle.objects.get(name=event.vehicle)
+    vehicle_set_status(vehicle=vehicle, status=EVENT_STATUS[event.action], vvm=vvm)
+    return vehicle

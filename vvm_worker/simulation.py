@@ -20,7 +20,7 @@ from typing import Any
 
 from django.conf import settings
 
-from fleet.models import Vehicle, VehicleStatus
+from fleet.models import Vehicle
 from fleet.simulation import SensorField, SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
 from missions.models import ENDED_STATUSES, Migration, Task, TaskStatus, VirtualVehicle
@@ -31,13 +31,11 @@ from vvm_worker.scenario import FleetEvent, Scenario, vv_instances
 from vvm_worker.scenario_loader import (
     LoadedScenario,
     scenario_apply,
+    scenario_event_apply,
     scenario_submit_vv,
-    vehicle_upsert,
 )
 from vvm_worker.services import (
     VVM,
-    vehicle_register,
-    vehicle_set_status,
     vv_admit_queued,
     vv_advance,
 )
@@ -157,20 +155,8 @@ class Simulation:
 
     def _fleet_event(self, event: FleetEvent) -> None:
         assert self.loaded is not None
-        if event.add_vehicle is not None:
-            vehicle = vehicle_upsert(event.add_vehicle)
-            self.loaded.vehicles[vehicle.name] = vehicle
-            self.add_vehicle_loop(vehicle)
-            vehicle_register(vehicle=vehicle, vvm=self.vvm)
-            return
-        assert event.vehicle is not None
-        vehicle = Vehicle.objects.get(name=event.vehicle)
-        status = {
-            "remove": VehicleStatus.REMOVED,
-            "maintenance": VehicleStatus.MAINTENANCE,
-            "return": VehicleStatus.ACTIVE,
-        }[event.action]
-        vehicle_set_status(vehicle=vehicle, status=status, vvm=self.vvm)
+        vehicle = scenario_event_apply(event, vvm=self.vvm, on_added=self.add_vehicle_loop)
+        self.loaded.vehicles[vehicle.name] = vehicle
 
     def start(self) -> LoadedScenario:
         """Load the scenario and schedule its VVs and fleet events (``run`` does this too)."""

@@ -25,7 +25,7 @@ from django.core.management.base import BaseCommand, CommandError, CommandParser
 
 from accounts.models import User
 from cpcc_site.embedded_redis import EmbeddedRedis
-from fleet.models import Vehicle, VehicleStatus
+from fleet.models import Vehicle
 from missions.models import (
     ACTIVE_STATUSES,
     ENDED_STATUSES,
@@ -39,18 +39,12 @@ from vvm_worker.scenario import FleetEvent, Scenario, ScenarioError, load_scenar
 from vvm_worker.scenario_loader import (
     PASSWORD_ENV,
     scenario_apply,
+    scenario_event_apply,
     scenario_submit_all,
-    vehicle_upsert,
 )
-from vvm_worker.services import vehicle_register, vehicle_set_status
 
 DEFAULT_SCENARIO = settings.BASE_DIR / "examples" / "scenarios" / "paper-fig3.json"
 START_TIMEOUT_S = 60.0
-ACTIONS = {
-    "remove": VehicleStatus.REMOVED,
-    "maintenance": VehicleStatus.MAINTENANCE,
-    "return": VehicleStatus.ACTIVE,
-}
 
 
 def _demo_password(name: str) -> str:
@@ -239,13 +233,8 @@ class Command(BaseCommand):
             time.sleep(0.25)
 
     def _apply(self, event: FleetEvent, processes: Processes, manage: str) -> None:
-        vvm = platform_vvm()
-        if event.add_vehicle is not None:
-            vehicle = vehicle_upsert(event.add_vehicle)
+        def start_worker(vehicle: Vehicle) -> None:
             processes.start(f"rvworker {vehicle.name}", manage, "rvworker", vehicle.name)
-            vehicle_register(vehicle=vehicle, vvm=vvm)
-            self.stdout.write(f"  event: {vehicle.name} added")
-            return
-        vehicle = Vehicle.objects.get(name=event.vehicle)
-        vehicle_set_status(vehicle=vehicle, status=ACTIONS[event.action], vvm=vvm)
+
+        vehicle = scenario_event_apply(event, vvm=platform_vvm(), on_added=start_worker)
         self.stdout.write(f"  event: {vehicle.name} {event.action}")
