@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from functools import cached_property
+import json
+from functools import lru_cache
 
 from django.core.exceptions import ValidationError
 from django.core.validators import MaxValueValidator, MinValueValidator
@@ -13,6 +14,13 @@ from fleet.geo import Position
 
 LAT = [MinValueValidator(-90.0), MaxValueValidator(90.0)]
 LNG = [MinValueValidator(-180.0), MaxValueValidator(180.0)]
+
+
+@lru_cache(maxsize=1024)
+def _polygon(area_json: str) -> Polygon:
+    # The mapper asks for the areas of the whole fleet at every routing decision; vehicle rows
+    # are read anew each time, so the polygons are kept by the area's text.
+    return Polygon([(float(lng), float(lat)) for lat, lng in json.loads(area_json)])
 
 
 class SensorKind(models.TextChoices):
@@ -135,10 +143,10 @@ class Vehicle(models.Model):
             return self.depot
         return Position(self.lat, self.lng, self.alt or 0.0)
 
-    @cached_property
+    @property
     def area_polygon(self) -> Polygon:
         """The operation area as a shapely polygon in (lng, lat) coordinates."""
-        return Polygon([(float(lng), float(lat)) for lat, lng in self.area])
+        return _polygon(json.dumps(self.area))
 
     def covers(self, position: Position) -> bool:
         """Whether a position lies in the operation area (its border included)."""

@@ -3,13 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Iterable, Sequence
-from functools import lru_cache
 from typing import Any
 
 from django.db.models import Count, Q, QuerySet
-from shapely.geometry import Polygon
 
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.models import (
@@ -36,7 +33,7 @@ def vehicle_caps(vehicle: Vehicle, open_tasks: int = 0) -> VehicleCaps:
     return VehicleCaps(
         id=vehicle.pk,
         name=vehicle.name,
-        area=_polygon(json.dumps(vehicle.area)),
+        area=vehicle.area_polygon,
         min_altitude_m=vehicle.min_altitude_m,
         max_altitude_m=vehicle.max_altitude_m,
         sensors=_sensor_names(vehicle),
@@ -63,11 +60,6 @@ def _sensor_names(vehicle: Vehicle) -> frozenset[str]:
             _sensors_seen.clear()
         names = _sensors_seen[key] = frozenset(vehicle.sensors.values_list("name", flat=True))
     return names
-
-
-@lru_cache(maxsize=1024)
-def _polygon(area_json: str) -> Polygon:
-    return Polygon([(float(lng), float(lat)) for lat, lng in json.loads(area_json)])
 
 
 def fleet_caps(vvm: VVM) -> list[VehicleCaps]:
