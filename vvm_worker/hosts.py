@@ -29,14 +29,13 @@ from django.db.models import Q
 from django.utils import timezone
 
 from fleet.models import GroundStation, Vehicle
-from fleet.simulation import SensorField, SimVehicle
+from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
 from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus
-from vvm_worker.clock import Clock, SystemClock
-from vvm_worker.dispatch import CeleryDispatcher
+from vvm_worker.clock import Clock
 from vvm_worker.executor import VehicleLoop
 from vvm_worker.planning import DEFAULT_PLANNER, make_planner
-from vvm_worker.runtime import Runtime
+from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     VVM,
     vehicle_heartbeat,
@@ -127,15 +126,9 @@ class RVHost:
     def __init__(self, vehicle: Vehicle, *, speed: float, planner: str = DEFAULT_PLANNER) -> None:
         self.vehicle_id = vehicle.pk
         self.name = vehicle.name
-        self.clock = SystemClock()
+        self.vvm = platform_vvm(local=self)
+        self.clock = self.vvm.clock
         self.scheduler = RealTimeScheduler(self.clock)
-        self.vvm = VVM(
-            clock=self.clock,
-            dispatcher=CeleryDispatcher(local=self),
-            field=SensorField(0),
-            runtime=Runtime(),
-            lease_s=settings.CPCC_RV_LEASE_S,
-        )
         # Simulated flights: time acceleration shortens them (distances stay right).
         scale = INSTANT if speed <= 0 else speed
         driver = SimVehicle(
@@ -227,13 +220,7 @@ class GSHost:
     def __init__(self, station: GroundStation) -> None:
         self.station_id = station.pk
         self.name = station.name
-        self.vvm = VVM(
-            clock=SystemClock(),
-            dispatcher=CeleryDispatcher(),
-            field=SensorField(0),
-            runtime=Runtime(),
-            lease_s=settings.CPCC_RV_LEASE_S,
-        )
+        self.vvm = platform_vvm()
         self._stopping = threading.Event()
         self._watch = threading.Thread(target=self._watch_leases, name="lease-watch", daemon=True)
 
@@ -250,9 +237,7 @@ class GSHost:
         here = VirtualVehicle.objects.filter(host_gs_id=self.station_id, status__in=ACTIVE_STATUSES)
         for vv_id in here.order_by("submitted_s", "id").values_list("pk", flat=True):
             vv_advance(vv_id=vv_id, vvm=self.vvm)
-        waiting = VirtualVehicle.objects.filter(status=VVStatus.QUEUED)
-        for customer_id in waiting.values_list("customer_id", flat=True).distinct():
-            vv_admit_queued(customer_id=customer_id, vvm=self.vvm)
+        _admit_all(self.vvm)
         self._watch.start()
         logger.info("gs worker started", extra={"ground_station": self.name})
 
@@ -261,12 +246,7 @@ class GSHost:
         self._watch.join(timeout=10)
 
     def _watch_leases(self) -> None:
-        vvm = VVM(
-            clock=SystemClock(),
-            dispatcher=CeleryDispatcher(),
-            field=SensorField(0),
-            lease_s=settings.CPCC_RV_LEASE_S,
-        )
+        vvm = platform_vvm()  # a runtime of this thread's own
         try:
             while not self._stopping.wait(min(SWEEP_S, settings.CPCC_RV_LEASE_S / 4)):
                 close_old_connections()
@@ -275,13 +255,18 @@ class GSHost:
                     # Messages are hints: pick up what a lost one would have started.
                     for vv_id in stalled(host_gs_id=self.station_id):
                         vv_advance(vv_id=vv_id, vvm=vvm)
-                    queued = VirtualVehicle.objects.filter(status=VVStatus.QUEUED)
-                    for customer_id in queued.values_list("customer_id", flat=True).distinct():
-                        vv_admit_queued(customer_id=customer_id, vvm=vvm)
+                    _admit_all(vvm)
                 except Exception:
                     logger.exception("sweep failed")
         finally:
             connection.close()
+
+
+def _admit_all(vvm: VVM) -> None:
+    """Start queued VVs of every customer as far as its quota allows."""
+    queued = VirtualVehicle.objects.filter(status=VVStatus.QUEUED)
+    for customer_id in queued.values_list("customer_id", flat=True).distinct():
+        vv_admit_queued(customer_id=customer_id, vvm=vvm)
 
 
 def stalled(**host: int) -> list[uuid.UUID]:

@@ -1,4 +1,4 @@
-"""The VVM as the web application uses it: wall-clock time, and work handed to the hosts'
+"""The VVM as the web application and the workers use it: wall-clock time, and work handed to the hosts'
 workers through Celery once a request's transaction commits."""
 
 from __future__ import annotations
@@ -7,15 +7,16 @@ from django.conf import settings
 
 from fleet.simulation import SensorField
 from vvm_worker.clock import SystemClock
-from vvm_worker.dispatch import CeleryDispatcher
+from vvm_worker.dispatch import CeleryDispatcher, LocalHost
 from vvm_worker.services import VVM
 
 
-def platform_vvm() -> VVM:
-    """A VVM for a request of the web application or an admin action."""
+def platform_vvm(*, local: LocalHost | None = None) -> VVM:
+    """A VVM for a request of the web application, an admin action or a host's worker
+    (``local``: the RV whose own work skips the broker). Each has a runtime of its own."""
     return VVM(
         clock=SystemClock(),
-        dispatcher=CeleryDispatcher(),
+        dispatcher=CeleryDispatcher(local=local),
         field=SensorField(0),
         lease_s=settings.CPCC_RV_LEASE_S,
     )

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from django.conf import settings
+from django.core.management.base import BaseCommand, CommandError
+from django.db.models import Model
 
 from cpcc_site.celery import app
 from cpcc_site.embedded_redis import EmbeddedRedis
+from vvm_worker.hosts import GSHost, RVHost, set_host
 
 
 def ensure_broker() -> None:
@@ -33,3 +38,32 @@ def run_celery(*, queues: list[str], node: str, loglevel: str) -> None:
             loglevel,
         ]
     )
+
+
+def host_named(model: type[Model], name: str, what: str) -> Any:
+    """The ground station or vehicle of that name; CommandError listing the names there are."""
+    try:
+        return model._default_manager.get(name=name)
+    except model.DoesNotExist:  # type: ignore[attr-defined]
+        known = ", ".join(model._default_manager.values_list("name", flat=True)) or "none"
+        raise CommandError(f"no {what} named {name!r} ({what}s: {known})") from None
+
+
+def serve(
+    command: BaseCommand, host: GSHost | RVHost, *, queues: list[str], node: str, loglevel: str
+) -> None:
+    """Run a host's worker: take up its work, then serve its queues until told to stop."""
+    ensure_broker()
+    set_host(host)
+    host.start()
+    command.stdout.write(f"{command_name(host)} {host.name}: queues {', '.join(queues)}")
+    command.stdout.flush()
+    try:
+        run_celery(queues=queues, node=node, loglevel=loglevel)
+    finally:
+        host.stop()
+        set_host(None)
+
+
+def command_name(host: GSHost | RVHost) -> str:
+    return "rvworker" if isinstance(host, RVHost) else "gsworker"

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from django.core.management.base import BaseCommand, CommandError, CommandParser
+from django.core.management.base import BaseCommand, CommandParser
 
 from fleet.models import GroundStation
 from vvm_worker.dispatch import SHARED_QUEUE, gs_queue
-from vvm_worker.hosts import GSHost, set_host
-from vvm_worker.management.commands._worker import ensure_broker, run_celery
+from vvm_worker.hosts import GSHost
+from vvm_worker.management.commands._worker import host_named, serve
 
 
 class Command(BaseCommand):
@@ -20,27 +20,11 @@ class Command(BaseCommand):
         parser.add_argument("--loglevel", default="WARNING")
 
     def handle(self, *args: Any, **options: Any) -> None:
-        try:
-            station = GroundStation.objects.get(name=options["name"])
-        except GroundStation.DoesNotExist:
-            known = ", ".join(GroundStation.objects.values_list("name", flat=True)) or "none"
-            raise CommandError(
-                f"no ground station named {options['name']!r} (ground stations: {known})"
-            ) from None
-        ensure_broker()
-        host = GSHost(station)
-        set_host(host)
-        host.start()
-        self.stdout.write(
-            f"gsworker {station.name}: queues {gs_queue(station.pk)}, {SHARED_QUEUE}", ending="\n"
+        station = host_named(GroundStation, options["name"], "ground station")
+        serve(
+            self,
+            GSHost(station),
+            queues=[gs_queue(station.pk), SHARED_QUEUE],
+            node=f"gs{station.pk}",
+            loglevel=options["loglevel"],
         )
-        self.stdout.flush()
-        try:
-            run_celery(
-                queues=[gs_queue(station.pk), SHARED_QUEUE],
-                node=f"gs{station.pk}",
-                loglevel=options["loglevel"],
-            )
-        finally:
-            host.stop()
-            set_host(None)
