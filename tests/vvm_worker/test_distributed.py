@@ -48,6 +48,29 @@ def assert_paper_results() -> None:
         assert JournalEntry.objects.filter(vv=vv).count() == 4
 
 
+def busy_rv_of_two(workers, tmp_path: Path, monkeypatch) -> Vehicle:
+    """Figure 2 with a second RV over the same field, both workers running: returns the RV
+    that carries VVs once a task is done."""
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    data["vehicles"].append(dict(data["vehicles"][0], name="Heli Two", depot=[48.1100, 12.8650, 0]))
+    load(data, tmp_path, monkeypatch)
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    workers.start("rvworker", "Heli Two")
+    wait_for(
+        lambda: (
+            VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
+            and Task.objects.filter(status=TaskStatus.DONE).exists()
+        ),
+        timeout=120,
+        what="a VV aboard an RV and a task done",
+        details=workers.logs,
+    )
+    busy = Vehicle.objects.filter(vvs__isnull=False).distinct().first()
+    assert busy is not None
+    return busy
+
+
 def test_figure_3_through_separate_gs_and_rv_workers(workers, tmp_path, monkeypatch) -> None:
     load("paper-fig3.json", tmp_path, monkeypatch)
     workers.start("gsworker", "GS Base")
@@ -85,24 +108,7 @@ def test_an_rv_worker_killed_mid_mission_loses_nothing_when_it_comes_back(
 def test_an_rv_removed_mid_mission_hands_its_vvs_to_the_other(
     workers, tmp_path, monkeypatch
 ) -> None:
-    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
-    other = dict(data["vehicles"][0], name="Heli Two", depot=[48.1100, 12.8650, 0])
-    data["vehicles"].append(other)
-    load(data, tmp_path, monkeypatch)
-    workers.start("gsworker", "GS Base")
-    workers.start("rvworker", "Heli One")
-    workers.start("rvworker", "Heli Two")
-    wait_for(
-        lambda: (
-            VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
-            and Task.objects.filter(status=TaskStatus.DONE).exists()
-        ),
-        timeout=120,
-        what="a VV aboard an RV and a task done",
-        details=workers.logs,
-    )
-    busy = Vehicle.objects.filter(vvs__isnull=False).distinct().first()
-    assert busy is not None
+    busy = busy_rv_of_two(workers, tmp_path, monkeypatch)
     vehicle_set_status(vehicle=busy, status=VehicleStatus.REMOVED, vvm=platform_vvm())
     removed_at = Task.objects.filter(status=TaskStatus.DONE).count()
     wait_for(all_ended, timeout=180, what="the VVs to end", details=workers.logs)
@@ -191,23 +197,7 @@ def test_a_vv_submitted_over_rest_by_token_finishes_and_its_results_come_back(
 def test_the_vvs_of_an_rv_worker_that_never_comes_back_move_on_when_its_lease_expires(
     workers, tmp_path, monkeypatch
 ) -> None:
-    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
-    data["vehicles"].append(dict(data["vehicles"][0], name="Heli Two", depot=[48.1100, 12.8650, 0]))
-    load(data, tmp_path, monkeypatch)
-    workers.start("gsworker", "GS Base")
-    workers.start("rvworker", "Heli One")
-    workers.start("rvworker", "Heli Two")
-    wait_for(
-        lambda: (
-            VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
-            and Task.objects.filter(status=TaskStatus.DONE).exists()
-        ),
-        timeout=120,
-        what="a VV aboard an RV and a task done",
-        details=workers.logs,
-    )
-    busy = Vehicle.objects.filter(vvs__isnull=False).distinct().first()
-    assert busy is not None
+    busy = busy_rv_of_two(workers, tmp_path, monkeypatch)
     workers.kill(busy.name)
     killed_at = Task.objects.filter(status=TaskStatus.DONE, vehicle=busy).count()
     wait_for(all_ended, timeout=180, what="the VVs to end on the other RV", details=workers.logs)
