@@ -32,19 +32,6 @@ class Dispatcher(Protocol):
         ...
 
 
-class NullDispatcher:
-    """Records nothing and wakes nobody: for loading data with no hosts running yet."""
-
-    def vv_arrived(self, vv_id: uuid.UUID) -> None:
-        pass
-
-    def vehicle_changed(self, vehicle_id: int) -> None:
-        pass
-
-    def customer_slot_freed(self, customer_id: int) -> None:
-        pass
-
-
 def gs_queue(gs_id: int) -> str:
     return f"gs.{gs_id}"
 

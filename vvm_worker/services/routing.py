@@ -102,10 +102,7 @@ def route(vv: VirtualVehicle, vvm: VVM) -> bool:
     decisions = {t.pk: map_task(request_of(t), fleet) for t in open_tasks}
     rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
     # A batch is accepted or rejected as a whole, before any of its tasks is answered.
-    partly_answered = JournalEntry.objects.filter(
-        vv=vv, seq=vv.journal_length - 1, entry__q=pending.q
-    ).exists()
-    if rejected and not partly_answered:
+    if rejected and not _partly_answered(vv, pending):
         if vv.host_rv is not None:
             migrate_to_ground_station(vv, reason="no vehicle can serve its task", vvm=vvm)
             return False
@@ -124,6 +121,12 @@ def route(vv: VirtualVehicle, vvm: VVM) -> bool:
     if vv.host_rv is not None:
         migrate_to_ground_station(vv, reason="waiting for a vehicle", vvm=vvm)
     return False
+
+
+def _partly_answered(vv: VirtualVehicle, pending: PendingRequest) -> bool:
+    return JournalEntry.objects.filter(
+        vv=vv, seq=vv.journal_length - 1, entry__q=pending.q
+    ).exists()
 
 
 def request_of(task: Task) -> TaskRequest:

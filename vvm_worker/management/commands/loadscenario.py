@@ -6,12 +6,9 @@ from typing import Any
 
 from django.core.management.base import BaseCommand, CommandError, CommandParser
 
-from fleet.simulation import SensorField
-from vvm_worker.clock import SystemClock
-from vvm_worker.dispatch import NullDispatcher
+from vvm_worker.platform import platform_vvm
 from vvm_worker.scenario import ScenarioError, load_scenario
 from vvm_worker.scenario_loader import PASSWORD_ENV, scenario_apply, scenario_submit_all
-from vvm_worker.services import VVM
 
 
 class Command(BaseCommand):
@@ -43,6 +40,5 @@ class Command(BaseCommand):
         if options["no_vvs"]:
             return
         # Queued only: the ground-station workers admit them within each customer's quota.
-        vvm = VVM(clock=SystemClock(), dispatcher=NullDispatcher(), field=SensorField(0))
-        vvs = scenario_submit_all(scenario, loaded, vvm=vvm, admit=False)
+        vvs = scenario_submit_all(scenario, loaded, vvm=platform_vvm(), admit=False)
         self.stdout.write(f"Submitted {len(vvs)} VV(s); they wait queued for the workers.")
