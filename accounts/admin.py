@@ -23,17 +23,7 @@ class CustomerAdmin(admin.ModelAdmin):
         (None, {"fields": ["name", "slug", "privileged"]}),
         (
             "Quotas",
-            {
-                "fields": [
-                    "max_parallel_vvs",
-                    "max_tasks_per_vv",
-                    "storage_bytes",
-                    "cpu_ms_per_step",
-                    "heap_bytes",
-                    "allowed_sensors",
-                    "allowed_api_calls",
-                ]
-            },
+            {"fields": [*Customer.QUOTA_FIELDS, "allowed_sensors", "allowed_api_calls"]},
         ),
     ]
 

@@ -17,6 +17,15 @@ DEFAULT_HEAP_BYTES = 64 * 1024 * 1024
 class Customer(models.Model):
     """A tenant of the platform: owns VVs, has quotas, never sees another customer's data."""
 
+    # The numeric quotas, as the admin, the API and scenario files name them.
+    QUOTA_FIELDS = (
+        "max_parallel_vvs",
+        "max_tasks_per_vv",
+        "storage_bytes",
+        "cpu_ms_per_step",
+        "heap_bytes",
+    )
+
     name = models.CharField(max_length=120, unique=True)
     slug = models.SlugField(max_length=120, unique=True)
     privileged = models.BooleanField(

@@ -89,11 +89,8 @@ def vehicle_upsert(spec: VehicleSpec) -> Vehicle:
 
 
 def _customer_upsert(spec: CustomerSpec) -> Customer:
-    quotas = {
-        "max_parallel_vvs": spec.max_parallel_vvs,
-        "privileged": spec.privileged,
-    }
-    for name in ("max_tasks_per_vv", "storage_bytes", "cpu_ms_per_step", "heap_bytes"):
+    quotas: dict[str, object] = {"privileged": spec.privileged}
+    for name in Customer.QUOTA_FIELDS:  # a quota the scenario leaves out keeps its default
         value = getattr(spec, name)
         if value is not None:
             quotas[name] = value
