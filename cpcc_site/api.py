@@ -9,23 +9,18 @@ from typing import Any
 from rest_framework import serializers, status
 from rest_framework.exceptions import APIException, NotAcceptable
 from rest_framework.negotiation import DefaultContentNegotiation
-from rest_framework.permissions import BasePermission
+from rest_framework.permissions import IsAdminUser
 from rest_framework.renderers import BaseRenderer
 from rest_framework.request import Request
-from rest_framework.views import APIView
 
 
-class IsStaff(BasePermission):
-    """Platform staff only; everyone else gets 403 with a message saying so."""
+class IsStaff(IsAdminUser):
+    """Platform staff only (DRF's is_staff check); everyone else gets 403 saying so."""
 
     message = (
         "Only platform staff may manage the fleet and the customers; "
         "ask an administrator if you need to."
     )
-
-    def has_permission(self, request: Request, view: APIView) -> bool:
-        user = request.user
-        return bool(user and user.is_authenticated and user.is_staff)
 
 
 class Conflict(APIException):

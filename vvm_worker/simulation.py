@@ -24,6 +24,7 @@ from fleet.models import Vehicle
 from fleet.simulation import SensorField, SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
 from missions.models import ENDED_STATUSES, Migration, Task, TaskStatus, VirtualVehicle
+from missions.readings import map_camera_readings
 from vvm_worker.clock import SimulatedClock
 from vvm_worker.executor import VehicleLoop
 from vvm_worker.planning import DEFAULT_PLANNER, make_planner
@@ -297,11 +298,7 @@ def _r(value: float | None) -> float | None:
 
 def _resolve_images(value: Any) -> Any:
     """Camera readings in the summary name their image by its absolute file path."""
-    if isinstance(value, dict):
-        out = {k: _resolve_images(v) for k, v in value.items()}
-        if value.get("kind") == "camera" and isinstance(value.get("image"), str):
-            out["image"] = str(Path(settings.MEDIA_ROOT) / value["image"])
-        return out
-    if isinstance(value, list):
-        return [_resolve_images(v) for v in value]
-    return value
+    media = Path(settings.MEDIA_ROOT)
+    return map_camera_readings(
+        value, lambda reading: {**reading, "image": str(media / reading["image"])}
+    )
