@@ -1,7 +1,12 @@
+from typing import Any
+
 from django.contrib import admin
 from django.contrib.auth.admin import UserAdmin as BaseUserAdmin
+from django.http import HttpRequest
 
 from accounts.models import Customer, User
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import CustomerConfig, customer_create, customer_update
 
 
 class CustomerUserInline(admin.TabularInline):
@@ -13,6 +18,9 @@ class CustomerUserInline(admin.TabularInline):
 
 @admin.register(Customer)
 class CustomerAdmin(admin.ModelAdmin):
+    """Customers with their quotas and users; saved through the services, so more parallel
+    VVs start queued ones at once."""
+
     list_display = ["name", "slug", "privileged", "max_parallel_vvs", "max_tasks_per_vv"]
     list_filter = ["privileged"]
     search_fields = ["name", "slug"]
@@ -26,6 +34,31 @@ class CustomerAdmin(admin.ModelAdmin):
             {"fields": [*Customer.QUOTA_FIELDS, "allowed_sensors", "allowed_api_calls"]},
         ),
     ]
+
+    def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
+        names = form.changed_data if change else form.cleaned_data
+        config: CustomerConfig = {
+            f: form.cleaned_data[f]  # type: ignore[misc]
+            for f in names
+            if f in CustomerConfig.__annotations__
+        }
+        sensors = [s.name for s in form.cleaned_data.get("allowed_sensors", ())]
+        if change:
+            changed_sensors = "allowed_sensors" in form.changed_data
+            customer_update(
+                customer=obj,
+                config=config,
+                allowed_sensors=sensors if changed_sensors else None,
+                vvm=platform_vvm(),
+            )
+        else:
+            obj.pk = customer_create(config=config, allowed_sensors=sensors).pk
+        obj.refresh_from_db()
+
+    def save_related(self, request: HttpRequest, form: Any, formsets: Any, change: bool) -> None:
+        # The service saved the allowed SDC entries; the users inline is saved here.
+        for formset in formsets:
+            self.save_formset(request, form, formset, change=change)
 
 
 @admin.register(User)

@@ -1,27 +1,13 @@
-"""What a customer may do (its quotas as runtime limits, the SDC entries it may use), and the
-customers as staff see them."""
+"""The SDC entries a customer (or a user) may use, and the customers as staff see them."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from django.db.models import Count, Q, QuerySet
+from django.db.models import QuerySet
 
-from accounts.models import Customer
+from accounts.models import Customer, User
 from fleet.models import SensorType
-from missions.models import ENDED_STATUSES
-from vvm_worker.runtime.types import Limits
-
-
-def customer_limits(*, customer: Customer) -> Limits:
-    calls = customer.allowed_api_calls or None
-    return Limits(
-        cpu_s=customer.cpu_ms_per_step / 1000.0,
-        heap_bytes=customer.heap_bytes,
-        storage_bytes=customer.storage_bytes,
-        max_tasks=customer.max_tasks_per_vv,
-        allowed_calls=frozenset(calls) if calls else None,
-    )
 
 
 def customer_catalog(*, customer: Customer) -> list[dict[str, Any]]:
@@ -35,11 +21,19 @@ def customer_catalog(*, customer: Customer) -> list[dict[str, Any]]:
     return [e.as_catalog_entry() for e in entries.order_by("name")]
 
 
+def sensor_list_for_user(*, user: User) -> QuerySet[SensorType]:
+    """The SDC entries a user may use: all of them for staff, the customer's catalog (its
+    allowed entries, privileged ones only for privileged customers) for a customer's user,
+    none for anyone else."""
+    entries = SensorType.objects.order_by("name")
+    if user.is_staff:
+        return entries
+    if user.customer is None:
+        return entries.none()
+    names = [e["name"] for e in customer_catalog(customer=user.customer)]
+    return entries.filter(name__in=names)
+
+
 def customer_list() -> QuerySet[Customer]:
-    """Every customer (staff data) with its allowed SDC entries, its users, and how many of
-    its VVs have not ended."""
-    return (
-        Customer.objects.prefetch_related("allowed_sensors", "users")
-        .annotate(vvs_active=Count("vvs", filter=~Q(vvs__status__in=ENDED_STATUSES)))
-        .order_by("name")
-    )
+    """Every customer (staff data) with its allowed SDC entries and its users."""
+    return Customer.objects.prefetch_related("allowed_sensors", "users").order_by("name")

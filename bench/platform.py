@@ -98,7 +98,7 @@ def main() -> None:
     from vvm_worker.platform import platform_vvm
     from vvm_worker.scenario import parse_scenario
     from vvm_worker.scenario_gen import grid_box, grid_scenario, original_style_program
-    from vvm_worker.scenario_loader import scenario_apply, scenario_submit_all
+    from vvm_worker.services.scenarios import scenario_apply, scenario_submit_all
 
     call_command("migrate", verbosity=0)
     redis = None if settings.REDIS_URL else EmbeddedRedis(settings.EMBEDDED_REDIS_SOCKET).start()
@@ -116,7 +116,7 @@ def main() -> None:
         for c in range(customers)
     ]
     scenario = parse_scenario(data, base_dir=ROOT)
-    loaded = scenario_apply(scenario)
+    loaded = scenario_apply(scenario=scenario)
 
     env = {**os.environ, "REDIS_URL": redis_url}
     children = []
@@ -142,7 +142,7 @@ def main() -> None:
                 raise SystemExit("the workers did not start; see " + str(tmp))
             time.sleep(0.2)
         started = time.time()
-        vvs = scenario_submit_all(scenario, loaded, vvm=platform_vvm())
+        vvs = scenario_submit_all(scenario=scenario, loaded=loaded, vvm=platform_vvm())
         total = len(vvs)
         while VirtualVehicle.objects.filter(status__in=ENDED_STATUSES).count() < total:
             time.sleep(0.5)

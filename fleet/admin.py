@@ -5,7 +5,22 @@ from django.db.models import QuerySet
 from django.http import HttpRequest
 
 from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
-from fleet.services import REACH_FIELDS
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import (
+    GroundStationConfig,
+    VehicleConfig,
+    ground_station_create,
+    ground_station_update,
+    vehicle_create,
+    vehicle_set_status,
+    vehicle_update,
+)
+
+
+def _config(form: Any, fields: Any, only_changed: bool) -> Any:
+    """The form's values of a service's config fields (those the user changed, on an edit)."""
+    names = form.changed_data if only_changed else form.cleaned_data
+    return {f: form.cleaned_data[f] for f in names if f in fields.__annotations__}
 
 
 @admin.register(SensorType)
@@ -17,14 +32,18 @@ class SensorTypeAdmin(admin.ModelAdmin):
 
 @admin.register(GroundStation)
 class GroundStationAdmin(admin.ModelAdmin):
+    """Ground stations; a new one starts the VVs that waited for one."""
+
     list_display = ["name", "lat", "lng", "alt"]
     search_fields = ["name"]
 
-
-def _platform_vvm() -> Any:
-    from vvm_worker.platform import platform_vvm
-
-    return platform_vvm()
+    def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
+        if change:
+            config = _config(form, GroundStationConfig, only_changed=True)
+            ground_station_update(station=obj, config=config)
+        else:
+            config = _config(form, GroundStationConfig, only_changed=False)
+            obj.pk = ground_station_create(config=config, vvm=platform_vvm()).pk
 
 
 @admin.register(Vehicle)
@@ -86,23 +105,28 @@ class VehicleAdmin(admin.ModelAdmin):
         ),
     ]
 
-    def save_related(self, request: HttpRequest, form: Any, formsets: Any, change: bool) -> None:
-        # After the sensors are saved: a new RV takes work at once; one whose reach changed
-        # hands over what it can no longer serve.
-        super().save_related(request, form, formsets, change)
-        from vvm_worker.services import vehicle_reconfigured, vehicle_register
+    def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
+        # Through the services: a new RV takes work at once; one whose reach changed hands
+        # over what it can no longer serve.
+        sensors = [s.name for s in form.cleaned_data.get("sensors", ())]
+        if change:
+            vehicle_update(
+                vehicle=obj,
+                config=_config(form, VehicleConfig, only_changed=True),
+                sensors=sensors if "sensors" in form.changed_data else None,
+                vvm=platform_vvm(),
+            )
+        else:
+            config = _config(form, VehicleConfig, only_changed=False)
+            obj.pk = vehicle_create(config=config, sensors=sensors, vvm=platform_vvm()).pk
 
-        if not change:
-            vehicle_register(vehicle=form.instance, vvm=_platform_vvm())
-        elif "sensors" in form.changed_data or any(f in form.changed_data for f in REACH_FIELDS):
-            vehicle_reconfigured(vehicle=form.instance, vvm=_platform_vvm())
+    def save_related(self, request: HttpRequest, form: Any, formsets: Any, change: bool) -> None:
+        pass  # save_model's service saved the sensors; a vehicle has no inlines
 
     def _set_status(
         self, request: HttpRequest, queryset: QuerySet[Vehicle], status: VehicleStatus
     ) -> None:
-        from vvm_worker.services import vehicle_set_status
-
-        vvm = _platform_vvm()
+        vvm = platform_vvm()
         for vehicle in queryset:
             vehicle_set_status(vehicle=vehicle, status=status, vvm=vvm)
         names = ", ".join(v.name for v in queryset)

@@ -7,13 +7,23 @@ both for a missing VV and for another customer's, so a caller cannot tell them a
 from __future__ import annotations
 
 import uuid
+from typing import TypeVar
 
-from django.db.models import QuerySet, TextField
+from django.db.models import Count, Model, Q, QuerySet, TextField
 from django.db.models.functions import Cast
 
 from accounts.models import User
-from missions.models import LogEntry, StorageDocument, Task, TaskStatus, VirtualVehicle
+from missions.models import (
+    ENDED_STATUSES,
+    LogEntry,
+    StorageDocument,
+    Task,
+    TaskStatus,
+    VirtualVehicle,
+)
 from missions.readings import IMAGE_FILE, image_file, image_references
+
+M = TypeVar("M", bound=Model)
 
 
 class VVNotFound(LookupError):
@@ -26,6 +36,12 @@ class StorageKeyNotFound(LookupError):
 
 class ImageNotFound(LookupError):
     """No reading of this VV references an image of that name."""
+
+
+def with_active_vv_count(queryset: QuerySet[M], *, name: str) -> QuerySet[M]:
+    """Customers, vehicles or ground stations (staff data), each with the number of its VVs
+    (the customer's, those aboard, those held) that have not ended, as attribute ``name``."""
+    return queryset.annotate(**{name: Count("vvs", filter=~Q(vvs__status__in=ENDED_STATUSES))})
 
 
 def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:

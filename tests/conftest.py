@@ -9,7 +9,7 @@ import pytest
 from tests.factories import CustomerFactory, GroundStationFactory, UserFactory, VehicleFactory
 
 # The distributed platform's fixtures (worker processes): see tests/live.py.
-pytest_plugins = ["tests.live"]
+pytest_plugins = ["tests.live", "tests.broker"]
 
 # The paper's examples (../shared/examples), kept in the repository so a clone is complete.
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 from django.urls import reverse
 
-from tests.factories import GroundStationFactory, VehicleFactory
+from tests.factories import AREA_TWO, GroundStationFactory, VehicleFactory
 from vvm_worker.services import vv_submit
 
 MODELS = [
@@ -65,56 +67,145 @@ def test_customers_cannot_open_the_admin(client, user_a) -> None:
     assert "/admin/login/" in response["Location"]
 
 
+# What the admin's vehicle actions and forms do, through the real services on the in-process
+# platform (discrete-event time): a VV aboard asks for two CO2 readings in area one, where
+# Heli One (fast) and Heli Two (slow) both fly, so it goes to Heli One first.
+TWO_TASKS = """
+var co2 = VV.sensor.get('CO2');
+for (var n = 0; n < 2; ++n) {
+  var d = VV.task.execute({type: 'point', tolerance: 2, sensors: [co2],
+                           position: new VV.types.LatLngAlt(48.1101 + n * 0.0004, 12.8622, 50)});
+  VV.storage.store('co2.' + n, d[0]);
+}
+"""
+
+
+@pytest.fixture
+def in_process(platform, ground_station, monkeypatch):
+    """Two RVs over area one flying on the in-process platform, which the admin uses."""
+    import fleet.admin
+
+    monkeypatch.setattr(fleet.admin, "platform_vvm", lambda: platform.vvm)
+    for name, speed in [("Heli One", 10.0), ("Heli Two", 1.0)]:
+        platform.add_vehicle_loop(VehicleFactory(name=name, max_speed_mps=speed))
+    return platform
+
+
+def _vv_aboard_heli_one(platform, customer):
+    from fleet.models import Vehicle
+
+    vv = vv_submit(customer=customer, name="VV", program=TWO_TASKS, vvm=platform.vvm)
+    one = Vehicle.objects.get(name="Heli One")
+    platform.drain(until=lambda: vv.tasks.filter(vehicle=one).exists())
+    return vv
+
+
+def _finished_by(vv) -> list[str]:
+    from missions.models import TaskStatus, VVStatus
+
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED, vv.error
+    assert set(vv.tasks.values_list("status", flat=True)) == {TaskStatus.DONE}
+    assert sorted(vv.storage.values_list("key", flat=True)) == ["co2.0", "co2.1"]
+    return [t.vehicle.name for t in vv.tasks.select_related("vehicle").order_by("q")]
+
+
 def test_admin_actions_take_an_rv_out_of_service_and_back(
-    client, staff, populated, monkeypatch
+    client, staff, in_process, customer_a
 ) -> None:
     from fleet.models import Vehicle, VehicleStatus
 
-    calls = []
-    monkeypatch.setattr(
-        "vvm_worker.services.vehicle_set_status",
-        lambda *, vehicle, status, vvm: calls.append((vehicle.name, status)),
-    )
     client.force_login(staff)
+    vv = _vv_aboard_heli_one(in_process, customer_a)
     heli = Vehicle.objects.get(name="Heli One")
     url = reverse("admin:fleet_vehicle_changelist")
-    for action, status in [
-        ("put_into_maintenance", VehicleStatus.MAINTENANCE),
-        ("return_to_service", VehicleStatus.ACTIVE),
-        ("remove_from_fleet", VehicleStatus.REMOVED),
-    ]:
+
+    def act(action: str) -> None:
         response = client.post(url, {"action": action, "_selected_action": [heli.pk]}, follow=True)
         assert response.status_code == 200
-        assert calls[-1] == ("Heli One", status)
+        in_process.drain()
+        heli.refresh_from_db()
+
+    act("put_into_maintenance")
+    assert heli.status == VehicleStatus.MAINTENANCE
+    assert _finished_by(vv) == ["Heli Two", "Heli Two"], "handed over before its first reading"
+    assert ("Heli One", "Heli Two") in vv.migrations.values_list("from_name", "to_name")
+    act("return_to_service")
+    assert heli.status == VehicleStatus.ACTIVE
+    again = _vv_aboard_heli_one(in_process, customer_a)
+    act("remove_from_fleet")
+    assert heli.status == VehicleStatus.REMOVED
+    assert _finished_by(again) == ["Heli Two", "Heli Two"]
 
 
-def test_a_vehicle_added_in_the_admin_takes_work(client, staff, db, monkeypatch) -> None:
-    from fleet.models import SensorType
+def _vehicle_form(vehicle, **changes) -> dict:
+    data = {
+        "name": vehicle.name,
+        "driver": vehicle.driver,
+        "driver_url": vehicle.driver_url,
+        "depot_lat": vehicle.depot_lat,
+        "depot_lng": vehicle.depot_lng,
+        "depot_alt": vehicle.depot_alt,
+        "area": json.dumps(vehicle.area),
+        "min_altitude_m": vehicle.min_altitude_m,
+        "max_altitude_m": vehicle.max_altitude_m,
+        "max_speed_mps": vehicle.max_speed_mps,
+        "climb_rate_mps": vehicle.climb_rate_mps,
+        "battery_s": vehicle.battery_s or "",
+        "sensors": list(vehicle.sensors.values_list("pk", flat=True)),
+    }
+    return data | changes
 
-    registered = []
-    monkeypatch.setattr(
-        "vvm_worker.services.vehicle_register",
-        lambda *, vehicle, vvm: registered.append(vehicle.name),
-    )
+
+def test_a_vehicle_added_in_the_admin_takes_work(client, staff, in_process, customer_a) -> None:
+    from fleet.models import SensorType, Vehicle, VehicleStatus
+    from vvm_worker.services import vehicle_set_status
+
+    vv = _vv_aboard_heli_one(in_process, customer_a)
+    for name in ("Heli One", "Heli Two"):
+        vehicle = Vehicle.objects.get(name=name)
+        vehicle_set_status(vehicle=vehicle, status=VehicleStatus.MAINTENANCE, vvm=in_process.vvm)
+    in_process.drain()
+    vv.refresh_from_db()
+    assert vv.host_gs is not None and vv.pending is not None, "waits for an RV on the GS"
     client.force_login(staff)
-    gps = SensorType.objects.get(name="GPS")
+    template = Vehicle.objects.get(name="Heli One")
+    co2 = SensorType.objects.get(name="CO2")
     response = client.post(
         reverse("admin:fleet_vehicle_add"),
-        {
-            "name": "Heli Three",
-            "driver": "sim",
-            "driver_url": "",
-            "depot_lat": 48.11,
-            "depot_lng": 12.86,
-            "depot_alt": 0,
-            "area": "[[48.109, 12.859], [48.109, 12.868], [48.114, 12.868], [48.109, 12.859]]",
-            "min_altitude_m": 0,
-            "max_altitude_m": 100,
-            "max_speed_mps": 10,
-            "climb_rate_mps": 3,
-            "battery_s": "",
-            "sensors": [gps.pk],
-        },
+        _vehicle_form(template, name="Heli Three", sensors=[co2.pk]),
     )
     assert response.status_code == 302, response.content.decode()[:2000]
-    assert registered == ["Heli Three"]
+    three = Vehicle.objects.get(name="Heli Three")
+    assert three.status == VehicleStatus.ACTIVE
+    assert list(three.sensors.values_list("name", flat=True)) == ["CO2"]
+    in_process.add_vehicle_loop(three)
+    in_process.drain()
+    assert _finished_by(vv) == ["Heli Three", "Heli Three"]
+
+
+def test_editing_an_rvs_sensors_or_area_in_the_admin_reroutes_its_vvs(
+    client, staff, in_process, customer_a
+) -> None:
+    from fleet.models import SensorType, Vehicle
+
+    client.force_login(staff)
+    heli = Vehicle.objects.get(name="Heli One")
+    change = reverse("admin:fleet_vehicle_change", args=[heli.pk])
+    vv = _vv_aboard_heli_one(in_process, customer_a)
+    gps = SensorType.objects.get(name="GPS")
+    response = client.post(change, _vehicle_form(heli, sensors=[gps.pk]))
+    assert response.status_code == 302, response.content.decode()[:2000]
+    in_process.drain()
+    assert _finished_by(vv) == ["Heli Two", "Heli Two"], "Heli One has no CO2 sensor any more"
+
+    heli.refresh_from_db()
+    co2 = SensorType.objects.get(name="CO2")
+    client.post(change, _vehicle_form(heli, sensors=[co2.pk, gps.pk]))
+    again = _vv_aboard_heli_one(in_process, customer_a)
+    response = client.post(change, _vehicle_form(heli, area=json.dumps(AREA_TWO)))
+    assert response.status_code == 302, response.content.decode()[:2000]
+    heli.refresh_from_db()
+    assert heli.area == AREA_TWO
+    in_process.drain()
+    assert _finished_by(again) == ["Heli Two", "Heli Two"], "area one is no longer Heli One's"

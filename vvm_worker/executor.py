@@ -19,7 +19,7 @@ from fleet.models import SensorType, Vehicle, VehicleStatus
 from missions.models import Task, TaskStatus
 from vvm_worker.planning import Planner, PlanTask
 from vvm_worker.sensing import read_sensors
-from vvm_worker.services import VVM, task_complete
+from vvm_worker.services import VVM, task_complete, vehicle_record_state
 
 logger = logging.getLogger("cpcc.executor")
 
@@ -159,11 +159,9 @@ class VehicleLoop:
         return max(0.0, min(1.0, remaining / self.battery_s))
 
     def _save_state(self, now: float) -> None:
-        here = self.driver.position_at(now)
-        Vehicle.objects.filter(pk=self.vehicle_id).update(
-            lat=here.lat,
-            lng=here.lng,
-            alt=here.alt,
+        vehicle_record_state(
+            vehicle_id=self.vehicle_id,
+            position=self.driver.position_at(now),
             phase=self.driver.phase_at(now),
             distance_m=self.driver.distance_m(now),
             flight_s=self.driver.flight_s(now),

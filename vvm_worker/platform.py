@@ -6,8 +6,9 @@ from __future__ import annotations
 from django.conf import settings
 
 from fleet.simulation import SensorField
+from vvm_worker.celery_dispatch import CeleryDispatcher
 from vvm_worker.clock import SystemClock
-from vvm_worker.dispatch import CeleryDispatcher, LocalHost
+from vvm_worker.dispatch import LocalHost
 from vvm_worker.services import VVM
 
 

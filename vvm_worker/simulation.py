@@ -29,16 +29,16 @@ from vvm_worker.clock import SimulatedClock
 from vvm_worker.executor import VehicleLoop
 from vvm_worker.planning import DEFAULT_PLANNER, make_planner
 from vvm_worker.scenario import FleetEvent, Scenario, vv_instances
-from vvm_worker.scenario_loader import (
-    LoadedScenario,
-    scenario_apply,
-    scenario_event_apply,
-    scenario_submit_vv,
-)
 from vvm_worker.services import (
     VVM,
     vv_admit_queued,
     vv_advance,
+)
+from vvm_worker.services.scenarios import (
+    LoadedScenario,
+    scenario_apply,
+    scenario_event_apply,
+    scenario_submit_vv,
 )
 
 logger = logging.getLogger("cpcc.simulation")
@@ -156,7 +156,7 @@ class Simulation:
 
     def _fleet_event(self, event: FleetEvent) -> None:
         assert self.loaded is not None
-        vehicle = scenario_event_apply(event, vvm=self.vvm, on_added=self.add_vehicle_loop)
+        vehicle = scenario_event_apply(event=event, vvm=self.vvm, on_added=self.add_vehicle_loop)
         self.loaded.vehicles[vehicle.name] = vehicle
 
     def start(self) -> LoadedScenario:
@@ -167,7 +167,7 @@ class Simulation:
 
     def _setup(self) -> None:
         assert self.scenario is not None
-        self.loaded = scenario_apply(self.scenario)
+        self.loaded = scenario_apply(scenario=self.scenario)
         for vehicle in self.loaded.vehicles.values():
             self.add_vehicle_loop(vehicle)
         for spec, name in vv_instances(self.scenario):

@@ -11,13 +11,14 @@ import uuid
 
 from celery import shared_task
 
+from vvm_worker.dispatch import ADMIT_TASK, VEHICLE_CHANGED_TASK, VV_ADVANCE_TASK
 from vvm_worker.hosts import GSHost, current_host
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_admit_queued
 from vvm_worker.services import vv_advance as advance
 
 
-@shared_task(name="cpcc.vv_advance", acks_late=True, ignore_result=True)
+@shared_task(name=VV_ADVANCE_TASK, acks_late=True, ignore_result=True)
 def vv_advance(vv_id: str) -> None:
     """The VV arrived on this worker's host (or must be looked at again): step and route it."""
     host = current_host()
@@ -27,7 +28,7 @@ def vv_advance(vv_id: str) -> None:
         host.advance(uuid.UUID(vv_id))
 
 
-@shared_task(name="cpcc.vehicle_changed", acks_late=True, ignore_result=True)
+@shared_task(name=VEHICLE_CHANGED_TASK, acks_late=True, ignore_result=True)
 def vehicle_changed(vehicle_id: int) -> None:
     """This worker's vehicle has new work or a new status: its control loop re-plans."""
     host = current_host()
@@ -35,7 +36,7 @@ def vehicle_changed(vehicle_id: int) -> None:
         host.wake()
 
 
-@shared_task(name="cpcc.admit", acks_late=True, ignore_result=True)
+@shared_task(name=ADMIT_TASK, acks_late=True, ignore_result=True)
 def admit(customer_id: int) -> None:
     """Start the customer's queued VVs as far as its quota allows (any ground station)."""
     host = current_host()

@@ -7,7 +7,8 @@ from typing import Any
 from rest_framework import serializers
 
 from accounts.models import Customer
-from accounts.services import VVM_API_CALLS, CustomerConfig
+from vvm_worker.runtime import VVM_API_CALLS
+from vvm_worker.services import CustomerConfig
 
 
 class CustomerInSerializer(serializers.Serializer):

@@ -18,9 +18,10 @@ from rest_framework.serializers import as_serializer_error
 from accounts.api.serializers import CustomerInSerializer, CustomerOutSerializer
 from accounts.models import Customer
 from accounts.selectors import customer_list
-from accounts.services import CustomerBusy, customer_create, customer_delete, customer_update
 from cpcc_site.api import Conflict, DetailSerializer, IsStaff
+from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
+from vvm_worker.services import CustomerBusy, customer_create, customer_delete, customer_update
 
 STAFF_ERRORS = {403: DetailSerializer, 404: DetailSerializer}
 BAD_INPUT = {400: OpenApiTypes.OBJECT}
@@ -54,7 +55,7 @@ class CustomerViewSet(
     serializer_class = CustomerOutSerializer
 
     def get_queryset(self) -> QuerySet[Customer]:
-        return customer_list()
+        return with_active_vv_count(customer_list(), name="vvs_active")
 
     def get_object(self) -> Customer:
         try:
@@ -73,7 +74,7 @@ class CustomerViewSet(
         return super().handle_exception(exc)
 
     def _shown(self, customer: Customer, code: int = status.HTTP_200_OK) -> Response:
-        fresh = customer_list().get(pk=customer.pk)
+        fresh = self.get_queryset().get(pk=customer.pk)
         return Response(self.get_serializer(fresh).data, status=code)
 
     def create(self, request: Request) -> Response:

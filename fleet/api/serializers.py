@@ -7,7 +7,7 @@ from typing import Any
 from rest_framework import serializers
 
 from fleet.models import Driver, GroundStation, SensorType, Vehicle
-from fleet.services import GroundStationConfig, VehicleConfig
+from vvm_worker.services import GroundStationConfig, VehicleConfig
 
 
 def _check_lat_lng(lat: float, lng: float, where: str) -> None:

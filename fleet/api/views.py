@@ -20,6 +20,7 @@ from rest_framework.request import Request
 from rest_framework.response import Response
 from rest_framework.serializers import as_serializer_error
 
+from accounts.selectors import sensor_list_for_user
 from cpcc_site.api import Conflict, DetailSerializer, IsStaff
 from fleet.api.serializers import (
     GroundStationInSerializer,
@@ -30,17 +31,18 @@ from fleet.api.serializers import (
     VehicleOutSerializer,
 )
 from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
-from fleet.selectors import ground_station_list, sensor_list_for_user, vehicle_list
-from fleet.services import (
+from fleet.selectors import ground_station_list, vehicle_list
+from missions.selectors import with_active_vv_count
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import (
     GroundStationBusy,
     ground_station_create,
     ground_station_delete,
     ground_station_update,
     vehicle_create,
+    vehicle_set_status,
     vehicle_update,
 )
-from vvm_worker.platform import platform_vvm
-from vvm_worker.services import vehicle_set_status
 
 STAFF_ERRORS = {403: DetailSerializer, 404: DetailSerializer}
 # Model fields that the API shows as one field.
@@ -129,10 +131,14 @@ class VehicleViewSet(
     noun = "vehicle"
 
     def get_queryset(self) -> QuerySet[Vehicle]:
-        return vehicle_list(status=self.request.query_params.get("status") or None)
+        return self._vehicles(status=self.request.query_params.get("status") or None)
+
+    @staticmethod
+    def _vehicles(status: str | None = None) -> QuerySet[Vehicle]:
+        return with_active_vv_count(vehicle_list(status=status), name="vvs_aboard")
 
     def _shown(self, vehicle: Vehicle, code: int = status.HTTP_200_OK) -> Response:
-        fresh = vehicle_list().get(pk=vehicle.pk)
+        fresh = self._vehicles().get(pk=vehicle.pk)
         return Response(self.get_serializer(fresh).data, status=code)
 
     def create(self, request: Request) -> Response:
@@ -211,10 +217,10 @@ class GroundStationViewSet(
     noun = "ground station"
 
     def get_queryset(self) -> QuerySet[GroundStation]:
-        return ground_station_list()
+        return with_active_vv_count(ground_station_list(), name="vvs_here")
 
     def _shown(self, station: GroundStation, code: int = status.HTTP_200_OK) -> Response:
-        fresh = ground_station_list().get(pk=station.pk)
+        fresh = self.get_queryset().get(pk=station.pk)
         return Response(self.get_serializer(fresh).data, status=code)
 
     def create(self, request: Request) -> Response:

@@ -44,7 +44,13 @@ from missions.selectors import (
     vv_storage_get_for_user,
     vv_tasks_for_user,
 )
-from missions.services import NotACustomer, VVAlreadyEnded, vv_cancel_for_user, vv_create_for_user
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import (
+    NotACustomer,
+    VVAlreadyEnded,
+    vv_cancel_for_user,
+    vv_create_for_user,
+)
 
 NO_SUCH_VV = (
     "No virtual vehicle with this id among yours: check the id (GET /api/v1/vvs/ lists them)."
@@ -119,7 +125,11 @@ class VirtualVehicleViewSet(
         given = VVCreateSerializer(data=request.data)
         given.is_valid(raise_exception=True)
         try:
-            vv, problem = vv_create_for_user(user=request.user, **given.validated_data)  # type: ignore[arg-type]
+            vv, problem = vv_create_for_user(
+                user=request.user,  # type: ignore[arg-type]
+                vvm=platform_vvm(),
+                **given.validated_data,
+            )
         except NotACustomer:
             raise PermissionDenied("Only a customer's users can submit VVs.") from None
         if problem is not None:
@@ -137,7 +147,7 @@ class VirtualVehicleViewSet(
     )
     @action(detail=True, methods=["post"])
     def cancel(self, request: Request, pk: str) -> Response:
-        vv = vv_cancel_for_user(user=request.user, vv_id=pk)  # type: ignore[arg-type]
+        vv = vv_cancel_for_user(user=request.user, vv_id=pk, vvm=platform_vvm())  # type: ignore[arg-type]
         return Response(self.get_serializer(vv).data)
 
 

@@ -6,8 +6,9 @@ import pytest
 from django.db import IntegrityError
 
 from accounts.models import Customer
-from accounts.selectors import customer_catalog, customer_limits
+from accounts.selectors import customer_catalog
 from fleet.models import SensorType
+from vvm_worker.services import customer_limits
 
 
 @pytest.mark.django_db

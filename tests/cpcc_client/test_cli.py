@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 from rest_framework.authtoken.models import Token
 
-import missions.services
+import missions.api.views
 from cpcc_client import cli
 from missions.models import VirtualVehicle, VVStatus
 from tests.api_fixtures import MISSION, MISSION_KEYS
@@ -26,7 +26,7 @@ pytestmark = pytest.mark.django_db(transaction=True, serialized_rollback=True)
 def _platform_behind_the_api(platform, monkeypatch) -> None:
     """VVs submitted through the API go to the in-process platform (instead of the Celery
     workers), which admits and flies them when the test drains it."""
-    monkeypatch.setattr(missions.services, "platform_vvm", lambda: platform.vvm)
+    monkeypatch.setattr(missions.api.views, "platform_vvm", lambda: platform.vvm)
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@ import pytest
 
 from fleet.models import VehicleStatus
 from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
-from tests.factories import AREA_TWO, GroundStationFactory, VehicleFactory
+from tests.factories import AREA_TWO, VehicleFactory
 from vvm_worker.services import ProgramRejected, task_complete, vehicle_set_status, vv_submit
 
 ONE_TASK = """
@@ -215,10 +215,21 @@ def test_a_vv_waits_on_a_ground_station_while_its_only_rv_is_in_maintenance(
     assert vv.status == VVStatus.FINISHED
 
 
-def test_without_ground_station_a_vv_stays_queued(customer_a, vvm_factory) -> None:
-    vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=vvm_factory())
-    assert vv.status == VVStatus.QUEUED
-    GroundStationFactory(name="Late GS")
+def test_without_ground_station_a_vv_stays_queued_until_one_is_added(platform, customer_a) -> None:
+    from vvm_worker.services import ground_station_create
+
+    platform.add_vehicle_loop(VehicleFactory(name="Heli One"))
+    vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=platform.vvm)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.QUEUED and vv.host_gs is None
+    late = ground_station_create(
+        config={"name": "Late GS", "lat": 48.11, "lng": 12.86, "alt": 0}, vvm=platform.vvm
+    )
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED, vv.error
+    assert vv.host_gs == late and vv.storage.filter(key="co2").exists()
 
 
 def test_a_vv_asking_again_and_again_for_rejected_tasks_ends_at_its_tasks_quota(
@@ -262,10 +273,18 @@ def test_cancelling_a_vv_in_flight_sends_it_home_and_keeps_its_storage(
     assert Migration.objects.filter(vv=vv).last().reason == "cancelled"
 
 
-def test_late_messages_about_deleted_vvs_or_customers_are_ignored(vvm_factory, db) -> None:
+def test_late_messages_about_deleted_vvs_or_customers_are_ignored(vvm_factory, customer_a) -> None:
     import uuid
 
     from vvm_worker.services import vv_admit_queued, vv_advance
 
-    vv_advance(vv_id=uuid.uuid4(), vvm=vvm_factory())
-    assert vv_admit_queued(customer_id=987654, vvm=vvm_factory()) == []
+    waiting = vv_submit(customer=customer_a, name="VV", program=program(), vvm=vvm_factory())
+    vvm = vvm_factory()
+    vv_advance(vv_id=uuid.uuid4(), vvm=vvm)
+    assert vv_admit_queued(customer_id=987654, vvm=vvm) == []
+    dispatched = vvm.dispatcher
+    assert (dispatched.arrived, dispatched.vehicles, dispatched.slots) == ([], [], [])
+    assert list(VirtualVehicle.objects.values_list("pk", "status", "updated")) == [
+        (waiting.pk, VVStatus.QUEUED, waiting.updated)
+    ]
+    assert not Task.objects.exists() and not Migration.objects.exists()

@@ -15,6 +15,7 @@ from vvm_worker.runtime.engine import (
 )
 from vvm_worker.runtime.instrument import ReservedNameError, instrument
 from vvm_worker.runtime.types import (
+    VVM_API_CALLS,
     Effect,
     ErrorKind,
     Limits,
@@ -27,6 +28,7 @@ from vvm_worker.runtime.types import (
 )
 
 __all__ = [
+    "VVM_API_CALLS",
     "Effect",
     "ErrorKind",
     "Limits",

@@ -27,6 +27,21 @@ class ErrorKind(enum.StrEnum):
     PLATFORM = "platform"
 
 
+# The VVM-API calls a customer's VVs may be limited to (the names prelude.js checks with
+# allowed(...)).
+VVM_API_CALLS = (
+    "log",
+    "sensor.get",
+    "sensor.list",
+    "storage.list",
+    "storage.load",
+    "storage.remove",
+    "storage.store",
+    "task.execute",
+    "task.executeAll",
+)
+
+
 @dataclass(frozen=True, slots=True)
 class Limits:
     """The quotas a step enforces (DESIGN.md section 2)."""

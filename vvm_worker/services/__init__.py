@@ -1,7 +1,11 @@
-"""The virtual vehicle monitor (VVM): loader, vehicle mapper, migrator and VV steps.
+"""Every state change of the platform, one named function each (the VVM's services).
 
-Every function here changes state in one transaction and then tells the dispatcher which host
-must act next (DESIGN.md section 3). A VV moves through its life like this:
+The modules by subject: ``vvs`` (a VV's life), ``routing`` (the vehicle mapper and the
+migrator), ``journal``, ``fleet`` (RVs and ground stations), ``customers`` (tenants, quotas and
+logins) and ``scenarios``. Edges (REST views, pages, admin, Celery tasks, commands) call these
+functions and nothing else that writes. Each changes state in one transaction and then tells
+the dispatcher which host must act next (DESIGN.md section 3). A VV moves through its life like
+this:
 
 - ``vv_submit`` queues it; ``vv_admit_queued`` starts as many as the customer's quota of
   parallel VVs allows, each on a ground station (the loader).
@@ -15,11 +19,30 @@ must act next (DESIGN.md section 3). A VV moves through its life like this:
 """
 
 from vvm_worker.services.base import VVM, ProgramRejected
+from vvm_worker.services.customers import (
+    CustomerBusy,
+    CustomerConfig,
+    customer_create,
+    customer_delete,
+    customer_limits,
+    customer_update,
+    user_set_login,
+)
 from vvm_worker.services.fleet import (
+    REACH_FIELDS,
+    GroundStationBusy,
+    GroundStationConfig,
+    VehicleConfig,
+    ground_station_create,
+    ground_station_delete,
+    ground_station_update,
+    vehicle_create,
     vehicle_heartbeat,
     vehicle_reconfigured,
+    vehicle_record_state,
     vehicle_register,
     vehicle_set_status,
+    vehicle_update,
     vehicles_check_leases,
     vvs_reroute_waiting,
 )
@@ -27,29 +50,54 @@ from vvm_worker.services.journal import JournalView
 from vvm_worker.services.routing import fleet_caps, vehicle_caps
 from vvm_worker.services.vvs import (
     MAX_STEPS_PER_ADVANCE,
+    NotACustomer,
+    VVAlreadyEnded,
     task_complete,
     vv_admit_queued,
     vv_advance,
     vv_cancel,
+    vv_cancel_for_user,
+    vv_create_for_user,
     vv_submit,
 )
 
 __all__ = [
     "MAX_STEPS_PER_ADVANCE",
+    "REACH_FIELDS",
     "VVM",
+    "CustomerBusy",
+    "CustomerConfig",
+    "GroundStationBusy",
+    "GroundStationConfig",
     "JournalView",
+    "NotACustomer",
     "ProgramRejected",
+    "VVAlreadyEnded",
+    "VehicleConfig",
+    "customer_create",
+    "customer_delete",
+    "customer_limits",
+    "customer_update",
     "fleet_caps",
+    "ground_station_create",
+    "ground_station_delete",
+    "ground_station_update",
     "task_complete",
+    "user_set_login",
     "vehicle_caps",
+    "vehicle_create",
     "vehicle_heartbeat",
     "vehicle_reconfigured",
+    "vehicle_record_state",
     "vehicle_register",
     "vehicle_set_status",
+    "vehicle_update",
     "vehicles_check_leases",
     "vv_admit_queued",
     "vv_advance",
     "vv_cancel",
+    "vv_cancel_for_user",
+    "vv_create_for_user",
     "vv_submit",
     "vvs_reroute_waiting",
 ]

@@ -5,14 +5,17 @@ from __future__ import annotations
 
 import datetime as dt
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
 from typing import Any
 
+from django.core.exceptions import ValidationError
 from django.db.models import Count, Q
 
 from fleet.geo import Position, distance_m
-from fleet.models import GroundStation
+from fleet.models import GroundStation, SensorType
+from fleet.selectors import UnknownSensors, sensors_by_name
 from fleet.simulation import SensorField
 from missions.models import (
     ACTIVE_STATUSES,
@@ -99,3 +102,11 @@ def pending_of(vv: VirtualVehicle) -> PendingRequest | None:
 
 def as_datetime(vvm: VVM, t_s: float) -> dt.datetime:
     return dt.datetime.fromtimestamp(vvm.clock.epoch_ms(t_s) / 1000, tz=dt.UTC)
+
+
+def sensor_entries(names: Sequence[str], *, field: str) -> list[SensorType]:
+    """The SDC entries of these names; a ValidationError on ``field`` names the unknown ones."""
+    try:
+        return sensors_by_name(names=names)
+    except UnknownSensors as exc:
+        raise ValidationError({field: str(exc)}) from None

@@ -1,10 +1,16 @@
-"""Fleet changes and RV workers' leases, and what they mean for the VVs aboard."""
+"""The fleet: adding and configuring RVs and ground stations, RVs entering and leaving
+service, their workers' leases and live state, and what each change means for the VVs aboard."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any, TypedDict
+
+from django.core.exceptions import ValidationError
 from django.db import transaction
 
-from fleet.models import Vehicle, VehicleStatus
+from fleet.geo import Position
+from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.models import (
     ACTIVE_STATUSES,
     ENDED_STATUSES,
@@ -13,7 +19,7 @@ from missions.models import (
     VirtualVehicle,
     VVStatus,
 )
-from vvm_worker.services.base import VVM, as_datetime, logger
+from vvm_worker.services.base import VVM, as_datetime, logger, sensor_entries
 from vvm_worker.services.routing import (
     fleet_caps,
     migrate_to_ground_station,
@@ -23,6 +29,57 @@ from vvm_worker.services.routing import (
     request_of,
     vehicle_caps,
 )
+
+# Changing any of these may leave tasks planned on the RV that it can no longer serve.
+REACH_FIELDS = ("area", "min_altitude_m", "max_altitude_m")
+
+
+class VehicleConfig(TypedDict, total=False):
+    """What a provider configures on an RV (model field names)."""
+
+    name: str
+    driver: str
+    driver_url: str
+    depot_lat: float
+    depot_lng: float
+    depot_alt: float
+    area: list[list[float]]
+    min_altitude_m: float
+    max_altitude_m: float
+    max_speed_mps: float
+    climb_rate_mps: float
+    battery_s: float | None
+
+
+class GroundStationConfig(TypedDict, total=False):
+    """What a provider configures on a ground station (model field names)."""
+
+    name: str
+    lat: float
+    lng: float
+    alt: float
+
+
+class GroundStationBusy(RuntimeError):
+    """The ground station holds VVs that have not ended, so it cannot go."""
+
+    def __init__(self, station: GroundStation, count: int) -> None:
+        super().__init__(f"{station.name} holds {count} VV(s) that have not ended")
+        self.station = station
+        self.count = count
+
+
+def _validate_vehicle(vehicle: Vehicle) -> None:
+    # The database constraint would only say "constraint violated"; name the field instead.
+    if (
+        vehicle.max_altitude_m is not None
+        and vehicle.min_altitude_m is not None
+        and vehicle.max_altitude_m < vehicle.min_altitude_m
+    ):
+        raise ValidationError(
+            {"max_altitude_m": f"must not be below min_altitude_m ({vehicle.min_altitude_m:g} m)"}
+        )
+    vehicle.full_clean()  # field ranges, a unique name, and the area (Vehicle.clean)
 
 
 def vehicle_set_status(*, vehicle: Vehicle, status: VehicleStatus, vvm: VVM) -> None:
@@ -149,3 +206,106 @@ def vehicle_reconfigured(*, vehicle: Vehicle, vvm: VVM) -> None:
         vvm.dispatcher.vehicle_changed(vehicle.pk)
     if vehicle.status == VehicleStatus.ACTIVE:
         vehicle_register(vehicle=vehicle, vvm=vvm)
+
+
+def vehicle_create(*, config: VehicleConfig, sensors: Sequence[str], vvm: VVM) -> Vehicle:
+    """Add an RV to the fleet, in service: it takes work at once (``vehicle_register``).
+
+    Raises ValidationError naming the field: a bad area (not closed, fewer than 3 points,
+    crossing itself), an altitude range upside down, a name in use, unknown sensor names.
+    """
+    entries = sensor_entries(sensors, field="sensors")
+    with transaction.atomic():
+        vehicle = Vehicle(**config)
+        _validate_vehicle(vehicle)
+        vehicle.save()
+        vehicle.sensors.set(entries)
+    vehicle_register(vehicle=vehicle, vvm=vvm)
+    return vehicle
+
+
+def vehicle_update(
+    *, vehicle: Vehicle, config: VehicleConfig, sensors: Sequence[str] | None, vvm: VVM
+) -> Vehicle:
+    """Change an RV's configuration; ``sensors`` None keeps its sensors.
+
+    When its reach changes (area, altitude range, sensors), the tasks planned on it are taken
+    off it and the VVs aboard route them again: they stay if it can still serve them and move
+    to an RV that can otherwise; an RV in service with a larger reach takes work at once.
+    Raises ValidationError naming the field, like ``vehicle_create``.
+    """
+    entries = None if sensors is None else sensor_entries(sensors, field="sensors")
+    reach_changed = entries is not None or any(f in config for f in REACH_FIELDS)
+    with transaction.atomic():
+        vehicle = Vehicle.objects.select_for_update().get(pk=vehicle.pk)
+        for name, value in config.items():
+            setattr(vehicle, name, value)
+        _validate_vehicle(vehicle)
+        vehicle.save()
+        if entries is not None:
+            vehicle.sensors.set(entries)
+    if reach_changed:
+        vehicle_reconfigured(vehicle=vehicle, vvm=vvm)
+    return vehicle
+
+
+def ground_station_create(*, config: GroundStationConfig, vvm: VVM) -> GroundStation:
+    """Add a ground station. VVs waiting in a queue because there was none start now.
+
+    Raises ValidationError naming the field (position out of range, name in use).
+    """
+    with transaction.atomic():
+        station = GroundStation(**config)
+        station.full_clean()
+        station.save()
+        waiting = (
+            VirtualVehicle.objects.filter(status=VVStatus.QUEUED)
+            .values_list("customer_id", flat=True)
+            .distinct()
+        )
+        for customer_id in sorted(waiting):
+            vvm.dispatcher.customer_slot_freed(customer_id)
+    return station
+
+
+def ground_station_update(*, station: GroundStation, config: GroundStationConfig) -> GroundStation:
+    """Rename or move a ground station. Raises ValidationError naming the field."""
+    with transaction.atomic():
+        station = GroundStation.objects.select_for_update().get(pk=station.pk)
+        for name, value in config.items():
+            setattr(station, name, value)
+        station.full_clean()
+        station.save()
+    return station
+
+
+def ground_station_delete(*, station: GroundStation) -> None:
+    """Remove a ground station; GroundStationBusy while it holds VVs that have not ended."""
+    with transaction.atomic():
+        station = GroundStation.objects.select_for_update().get(pk=station.pk)
+        busy = station.vvs.exclude(status__in=ENDED_STATUSES).count()
+        if busy:
+            raise GroundStationBusy(station, busy)
+        station.delete()
+
+
+def vehicle_record_state(
+    *,
+    vehicle_id: int,
+    position: Position,
+    phase: str,
+    distance_m: float,
+    flight_s: float,
+    planner_state: Any,
+) -> None:
+    """What an RV's control loop reports of its vehicle: where it is, its flight phase, its
+    odometer and flight time, and the planner's state (kept for a restarted worker)."""
+    Vehicle.objects.filter(pk=vehicle_id).update(
+        lat=position.lat,
+        lng=position.lng,
+        alt=position.alt,
+        phase=phase,
+        distance_m=distance_m,
+        flight_s=flight_s,
+        planner_state=planner_state,
+    )

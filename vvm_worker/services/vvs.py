@@ -11,8 +11,8 @@ from typing import Any
 from django.db import transaction
 from django.db.models import F
 
-from accounts.models import Customer
-from accounts.selectors import customer_catalog, customer_limits
+from accounts.models import Customer, User
+from accounts.selectors import customer_catalog
 from fleet.models import Vehicle
 from missions.models import (
     ACTIVE_STATUSES,
@@ -23,12 +23,14 @@ from missions.models import (
     VirtualVehicle,
     VVStatus,
 )
+from missions.selectors import vv_get_for_user
 from vvm_worker.runtime import (
     ErrorKind,
     Outcome,
     PendingRequest,
     StepInput,
     StepResult,
+    SyntaxProblem,
     VVError,
     answer_part,
     answer_task,
@@ -42,8 +44,22 @@ from vvm_worker.services.base import (
     pending_json,
     pending_of,
 )
+from vvm_worker.services.customers import customer_limits
 from vvm_worker.services.journal import JournalView, journal_append, journal_full
 from vvm_worker.services.routing import record_migration, release_tasks, route
+
+
+class NotACustomer(PermissionError):
+    """The user belongs to no customer, so it cannot own VVs."""
+
+
+class VVAlreadyEnded(RuntimeError):
+    """The VV had already ended, so there is nothing to cancel."""
+
+    def __init__(self, vv: VirtualVehicle) -> None:
+        super().__init__(f"{vv.name} has already ended ({vv.status})")
+        self.vv = vv
+
 
 # Steps one host runs for one VV before it lets other work go first (rejected tasks in a row).
 MAX_STEPS_PER_ADVANCE = 50
@@ -349,3 +365,37 @@ def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
             vvm.dispatcher.customer_slot_freed(vv.customer_id)
     logger.info("vv cancelled", extra={"vv": str(vv_id)})
     return True
+
+
+def vv_create_for_user(
+    *, user: User, name: str, program: str, vvm: VVM
+) -> tuple[VirtualVehicle | None, SyntaxProblem | None]:
+    """Queue a new VV of the user's customer, from the web or the REST API; a program with a
+    syntax error is refused with where the error is (and nothing is created).
+
+    The VV is returned queued: once the transaction commits, the ground-station workers are
+    asked to admit the customer's queued VVs within its quota of parallel VVs. Raises
+    NotACustomer for a user of no customer.
+    """
+    if user.customer is None:
+        raise NotACustomer(f"{user.username} belongs to no customer")
+    try:
+        with transaction.atomic():
+            vv = vv_submit(customer=user.customer, name=name, program=program, vvm=vvm, admit=False)
+            vvm.dispatcher.customer_slot_freed(user.customer.pk)
+    except ProgramRejected as exc:
+        return None, exc.problem
+    return vv, None
+
+
+def vv_cancel_for_user(*, user: User, vv_id: uuid.UUID | str, vvm: VVM) -> VirtualVehicle:
+    """Cancel one of the user's VVs: its open tasks are dropped, what it stored stays.
+
+    Raises VVNotFound for a missing VV or another customer's, and VVAlreadyEnded when it had
+    already finished, failed, been killed or cancelled. Returns the VV as it is afterwards.
+    """
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    if not vv_cancel(vv_id=vv.pk, vvm=vvm):
+        vv.refresh_from_db()
+        raise VVAlreadyEnded(vv)
+    return vv_get_for_user(user=user, vv_id=vv.pk)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import accounts.api.views
 from accounts.models import DEFAULT_MAX_PARALLEL_VVS, Customer
-from accounts.services import VVM_API_CALLS
+from vvm_worker.runtime import VVM_API_CALLS
 from vvm_worker.services import vv_submit
 
 PRELUDE = Path(__file__).resolve().parents[3] / "vvm_worker" / "runtime" / "prelude.js"
@@ -65,7 +65,7 @@ def test_bad_quotas_are_refused_naming_the_field(api_staff, customer_a) -> None:
             "task.teleport",
         ),
         ({"name": "X", "max_parallel_vvs": 0}, "max_parallel_vvs", "greater than or equal to 1"),
-        ({"name": "X", "heap_bytes": 10}, "heap_bytes", ""),
+        ({"name": "X", "heap_bytes": 10}, "heap_bytes", "greater than or equal to 1048576"),
         ({"name": "Customer A"}, "name", "already exists"),
         ({}, "name", "required"),
     ]

@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 
 import fleet.api.views
-import fleet.services
 import vvm_worker.services.fleet
 from fleet.models import Vehicle, VehicleStatus
 from missions.models import VVStatus
@@ -23,14 +22,14 @@ NEW = {
 
 
 @pytest.fixture
-def registered(monkeypatch) -> list[str]:
-    """The vehicles given work through vehicle_register (recorded, not run)."""
+def register_calls(monkeypatch) -> list[str]:
+    """The calls of vehicle_register, recorded instead of run: for the tests that are about
+    whether the API asks for it at all (the real thing: test_staff_add_a_vehicle_that_gets_work_at_once)."""
     seen: list[str] = []
 
     def record(*, vehicle, vvm) -> None:
         seen.append(vehicle.name)
 
-    monkeypatch.setattr(fleet.services, "vehicle_register", record)
     monkeypatch.setattr(vvm_worker.services.fleet, "vehicle_register", record)
     return seen
 
@@ -51,19 +50,39 @@ def test_customers_are_refused_with_a_clear_message(api_a, heli_one) -> None:
     assert heli_one.status == VehicleStatus.ACTIVE
 
 
-def test_staff_add_a_vehicle_that_gets_work_at_once(api_staff, registered) -> None:
+def test_staff_add_a_vehicle_that_gets_work_at_once(
+    api_staff, platform, ground_station, customer_a, monkeypatch
+) -> None:
+    monkeypatch.setattr(fleet.api.views, "platform_vvm", lambda: platform.vvm)
+    program = """
+    var co2 = VV.sensor.get('CO2');
+    var d = VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(48.1135, 12.8655, 50),
+                             tolerance: 2, sensors: [co2]});
+    VV.storage.store('co2', d[0]);
+    """
+    # A slow RV over the same area has the VV's task when the new one comes.
+    slow = VehicleFactory(name="Heli Slow", area=AREA_TWO, max_speed_mps=0.5)
+    platform.add_vehicle_loop(slow)
+    vv = vv_submit(customer=customer_a, name="VV", program=program, vvm=platform.vvm)
+    platform.drain(until=lambda: vv.tasks.filter(vehicle=slow).exists())
     response = api_staff.post("/api/v1/vehicles/", NEW, format="json")
     assert response.status_code == 201, response.content
     body = response.json()
     assert body["name"] == "Heli Three" and body["status"] == "active"
     assert body["depot"] == [48.1135, 12.86, 0.0] and body["area"] == AREA_TWO
     assert body["sensors"] == ["CO2", "GPS"] and body["min_altitude_m"] == 0.0
-    assert body["position"] is None and body["vvs_aboard"] == 0
-    assert registered == ["Heli Three"]
+    assert body["position"] is None
+    assert body["vvs_aboard"] == 1, "the VV moved to the new, faster RV at once"
     vehicle = Vehicle.objects.get(name="Heli Three")
+    platform.add_vehicle_loop(vehicle)
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED, vv.error
+    assert vv.tasks.get().vehicle == vehicle and vv.storage.filter(key="co2").exists()
+    assert ("Heli Slow", "Heli Three") in vv.migrations.values_list("from_name", "to_name")
     assert sorted(vehicle.sensors.values_list("name", flat=True)) == ["CO2", "GPS"]
     listed = api_staff.get("/api/v1/vehicles/").json()
-    assert [v["name"] for v in listed["results"]] == ["Heli Three"]
+    assert [v["name"] for v in listed["results"]] == ["Heli Slow", "Heli Three"]
     assert api_staff.get(f"/api/v1/vehicles/{vehicle.pk}/").json()["name"] == "Heli Three"
 
 
@@ -78,26 +97,26 @@ def test_staff_add_a_vehicle_that_gets_work_at_once(api_staff, registered) -> No
             "not a valid polygon",
         ),
         ({"area": [[48.1, 12.8], [91, 12.9], [48.2, 12.9], [48.1, 12.8]]}, "area", "latitude 91"),
-        ({"area": "a box"}, "area", ""),
+        ({"area": "a box"}, "area", "Expected a list of items"),
         ({"sensors": ["CO2", "Sonar", "Lidar"]}, "sensors", "'Lidar', 'Sonar'"),
         ({"min_altitude_m": 150}, "max_altitude_m", "must not be below min_altitude_m"),
         ({"depot": [48.1, 200]}, "depot", "longitude 200"),
-        ({"max_speed_mps": 0}, "max_speed_mps", ""),
-        ({"driver": "rocket"}, "driver", ""),
+        ({"max_speed_mps": 0}, "max_speed_mps", "greater than or equal to 0.1"),
+        ({"driver": "rocket"}, "driver", '"rocket" is not a valid choice'),
     ],
 )
 def test_bad_configurations_are_refused_naming_the_field(
-    api_staff, registered, change, field, words
+    api_staff, register_calls, change, field, words
 ) -> None:
     response = api_staff.post("/api/v1/vehicles/", {**NEW, **change}, format="json")
     assert response.status_code == 400
     errors = response.json()
     assert list(errors) == [field], errors
     assert words in str(errors[field])
-    assert not Vehicle.objects.exists() and registered == []
+    assert not Vehicle.objects.exists() and register_calls == []
 
 
-def test_a_name_in_use_and_missing_fields_are_named(api_staff, heli_one, registered) -> None:
+def test_a_name_in_use_and_missing_fields_are_named(api_staff, heli_one, register_calls) -> None:
     taken = api_staff.post("/api/v1/vehicles/", {**NEW, "name": "Heli One"}, format="json")
     assert taken.status_code == 400 and "already exists" in str(taken.json()["name"])
     missing = api_staff.post("/api/v1/vehicles/", {"name": "X"}, format="json")
@@ -105,17 +124,17 @@ def test_a_name_in_use_and_missing_fields_are_named(api_staff, heli_one, registe
     assert {"depot", "area", "max_altitude_m", "max_speed_mps"} <= set(missing.json())
 
 
-def test_staff_change_a_configuration(api_staff, heli_one, registered) -> None:
+def test_staff_change_a_configuration(api_staff, heli_one, register_calls) -> None:
     url = f"/api/v1/vehicles/{heli_one.pk}/"
     response = api_staff.patch(
         url, {"max_speed_mps": 12.5, "depot": [48.1, 12.86, 3]}, format="json"
     )
     assert response.status_code == 200, response.content
     assert response.json()["max_speed_mps"] == 12.5 and response.json()["depot"] == [48.1, 12.86, 3]
-    assert registered == [], "its reach did not change"
+    assert register_calls == [], "its reach did not change"
     response = api_staff.patch(url, {"sensors": ["GPS"], "area": AREA_TWO}, format="json")
     assert response.json()["sensors"] == ["GPS"] and response.json()["area"] == AREA_TWO
-    assert registered == ["Heli One"]
+    assert register_calls == ["Heli One"]
     bad = api_staff.patch(url, {"area": AREA_TWO[:3]}, format="json")
     assert bad.status_code == 400 and "closed" in str(bad.json()["area"])
     assert api_staff.put(url, NEW, format="json").status_code == 405

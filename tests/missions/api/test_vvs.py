@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from rest_framework.test import APIClient
 
-import missions.services
 from missions.models import VirtualVehicle, VVStatus
+from tests.broker import queued
+from vvm_worker.dispatch import SHARED_QUEUE
 
 PROGRAM = "var gps = VV.sensor.get('GPS');\nVV.log('hello');\n"
 
@@ -21,14 +22,16 @@ def test_a_customer_submits_a_program_by_token(api_a, customer_a) -> None:
 
 
 def test_the_workers_are_asked_to_admit_a_new_vv_once_it_is_committed(
-    api_a, customer_a, vvm_factory, monkeypatch
+    api_a, customer_a, broker, django_capture_on_commit_callbacks
 ) -> None:
-    vvm = vvm_factory()
-    monkeypatch.setattr(missions.services, "platform_vvm", lambda: vvm)
-    api_a.post("/api/v1/vvs/", {"name": "first", "program": PROGRAM}, format="json")
-    assert vvm.dispatcher.slots == [customer_a.pk]
-    api_a.post("/api/v1/vvs/", {"name": "bad", "program": "var = ;"}, format="json")
-    assert vvm.dispatcher.slots == [customer_a.pk], "nothing to admit for a refused program"
+    with django_capture_on_commit_callbacks(execute=True):
+        api_a.post("/api/v1/vvs/", {"name": "first", "program": PROGRAM}, format="json")
+        assert queued(broker, SHARED_QUEUE) == [], "nothing is sent before the commit"
+    assert queued(broker, SHARED_QUEUE) == [("cpcc.admit", [customer_a.pk])]
+    with django_capture_on_commit_callbacks(execute=True) as callbacks:
+        api_a.post("/api/v1/vvs/", {"name": "bad", "program": "var = ;"}, format="json")
+    assert callbacks == [], "nothing to admit for a refused program"
+    assert queued(broker, SHARED_QUEUE) == [("cpcc.admit", [customer_a.pk])]
 
 
 def test_a_program_with_a_syntax_error_is_refused_with_line_and_column(api_a) -> None:

@@ -23,21 +23,15 @@ from django.conf import settings
 from django.core.management import call_command
 from django.core.management.base import BaseCommand, CommandError, CommandParser
 
-from accounts.models import User
 from cpcc_site.embedded_redis import EmbeddedRedis
 from fleet.models import Vehicle
-from missions.models import (
-    ACTIVE_STATUSES,
-    ENDED_STATUSES,
-    Task,
-    TaskStatus,
-    VirtualVehicle,
-    VVStatus,
-)
+from missions.models import ENDED_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.platform import platform_vvm
 from vvm_worker.scenario import FleetEvent, Scenario, ScenarioError, load_scenario
-from vvm_worker.scenario_loader import (
+from vvm_worker.services import user_set_login
+from vvm_worker.services.scenarios import (
     PASSWORD_ENV,
+    demo_reset,
     scenario_apply,
     scenario_event_apply,
     scenario_submit_all,
@@ -140,9 +134,10 @@ class Command(BaseCommand):
             if redis is not None:
                 redis.start()
             os.environ[PASSWORD_ENV] = env[PASSWORD_ENV]
-            admin_password = self._admin()
-            self._retire_previous_runs()
-            loaded = scenario_apply(scenario)
+            admin_password = os.environ.get("CPCC_ADMIN_PASSWORD") or _demo_password("admin")
+            user_set_login(username="admin", password=admin_password, staff=True)
+            demo_reset(reason="cancelled: demo restarted")
+            loaded = scenario_apply(scenario=scenario)
             manage = str(Path(settings.BASE_DIR) / "manage.py")
             processes.start(
                 "web",
@@ -159,7 +154,7 @@ class Command(BaseCommand):
                 processes.start(f"gsworker {name}", manage, "gsworker", name)
             for name in loaded.vehicles:
                 processes.start(f"rvworker {name}", manage, "rvworker", name)
-            vvs = scenario_submit_all(scenario, loaded, vvm=platform_vvm())
+            vvs = scenario_submit_all(scenario=scenario, loaded=loaded, vvm=platform_vvm())
             url = f"http://{options['host']}:{options['port']}/"
             self.stdout.write(self.style.SUCCESS(f"CPCC is running at {url}"))
             self.stdout.write(f"  admin: admin / {admin_password}  ({url}admin/)")
@@ -182,29 +177,6 @@ class Command(BaseCommand):
             processes.stop()
             if redis is not None:
                 redis.stop()
-
-    def _admin(self) -> str:
-        password = os.environ.get("CPCC_ADMIN_PASSWORD") or _demo_password("admin")
-        user, _ = User.objects.get_or_create(
-            username="admin", defaults={"is_staff": True, "is_superuser": True}
-        )
-        user.is_staff = user.is_superuser = True
-        user.set_password(password)
-        user.save()
-        return password
-
-    def _retire_previous_runs(self) -> None:
-        """VVs an interrupted demo left unfinished are cancelled; vehicles start at their depot."""
-        VirtualVehicle.objects.filter(status__in=(VVStatus.QUEUED, *ACTIVE_STATUSES)).update(
-            status=VVStatus.CANCELLED, host_rv=None, pending=None, error="cancelled: demo restarted"
-        )
-        Task.objects.filter(status=TaskStatus.OPEN).update(
-            status=TaskStatus.CANCELLED, vehicle=None
-        )
-        for vehicle in Vehicle.objects.all():
-            Vehicle.objects.filter(pk=vehicle.pk).update(
-                lat=vehicle.depot_lat, lng=vehicle.depot_lng, alt=vehicle.depot_alt, phase="landed"
-            )
 
     def _follow(
         self, scenario: Scenario, vv_ids: list[Any], speed: float, processes: Processes, manage: str
@@ -236,5 +208,5 @@ class Command(BaseCommand):
         def start_worker(vehicle: Vehicle) -> None:
             processes.start(f"rvworker {vehicle.name}", manage, "rvworker", vehicle.name)
 
-        vehicle = scenario_event_apply(event, vvm=platform_vvm(), on_added=start_worker)
+        vehicle = scenario_event_apply(event=event, vvm=platform_vvm(), on_added=start_worker)
         self.stdout.write(f"  event: {vehicle.name} {event.action}")

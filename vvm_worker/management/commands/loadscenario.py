@@ -8,7 +8,7 @@ from django.core.management.base import BaseCommand, CommandError, CommandParser
 
 from vvm_worker.platform import platform_vvm
 from vvm_worker.scenario import ScenarioError, load_scenario
-from vvm_worker.scenario_loader import PASSWORD_ENV, scenario_apply, scenario_submit_all
+from vvm_worker.services.scenarios import PASSWORD_ENV, scenario_apply, scenario_submit_all
 
 
 class Command(BaseCommand):
@@ -27,7 +27,7 @@ class Command(BaseCommand):
     def handle(self, *args: Any, **options: Any) -> None:
         try:
             scenario = load_scenario(options["scenario"])
-            loaded = scenario_apply(scenario)
+            loaded = scenario_apply(scenario=scenario)
         except ScenarioError as exc:
             raise CommandError(f"scenario error: {exc}") from None
         self.stdout.write(
@@ -40,5 +40,5 @@ class Command(BaseCommand):
         if options["no_vvs"]:
             return
         # Queued only: the ground-station workers admit them within each customer's quota.
-        vvs = scenario_submit_all(scenario, loaded, vvm=platform_vvm(), admit=False)
+        vvs = scenario_submit_all(scenario=scenario, loaded=loaded, vvm=platform_vvm(), admit=False)
         self.stdout.write(f"Submitted {len(vvs)} VV(s); they wait queued for the workers.")

@@ -1,5 +1,6 @@
-"""Putting a scenario's catalog additions, ground stations, vehicles and customers into the
-database (idempotent), and submitting its VVs."""
+"""Scenarios: putting a scenario's catalog additions, ground stations, vehicles and customers
+into the database (idempotent), submitting its VVs, applying its fleet events; and what a demo
+does before it starts."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from django.utils.text import slugify
 
 from accounts.models import Customer, User
 from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
-from missions.models import VirtualVehicle
+from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle, VVStatus
 from vvm_worker.scenario import (
     CustomerSpec,
     FleetEvent,
@@ -25,7 +26,9 @@ from vvm_worker.scenario import (
     VVSpec,
     vv_instances,
 )
-from vvm_worker.services import VVM, vehicle_register, vehicle_set_status, vv_submit
+from vvm_worker.services.base import VVM
+from vvm_worker.services.fleet import vehicle_register, vehicle_set_status
+from vvm_worker.services.vvs import vv_submit
 
 PASSWORD_ENV = "CPCC_SCENARIO_PASSWORD"
 
@@ -61,7 +64,7 @@ def _check_sensors(scenario: Scenario) -> None:
                 )
 
 
-def vehicle_upsert(spec: VehicleSpec) -> Vehicle:
+def vehicle_upsert(*, spec: VehicleSpec) -> Vehicle:
     """Create or update an RV from its scenario description (in service, at its depot)."""
     vehicle, _ = Vehicle.objects.update_or_create(
         name=spec.name,
@@ -117,7 +120,7 @@ def _login_for(customer: Customer) -> tuple[str, str | None]:
     return username, password
 
 
-def scenario_apply(scenario: Scenario) -> LoadedScenario:
+def scenario_apply(*, scenario: Scenario) -> LoadedScenario:
     """Put the scenario's SDC additions, ground stations, RVs and customers (with a login user
     each) into the database. Running it twice changes nothing the second time.
 
@@ -143,7 +146,7 @@ def scenario_apply(scenario: Scenario) -> LoadedScenario:
                 defaults={"lat": gs.position.lat, "lng": gs.position.lng, "alt": gs.position.alt},
             )
         for spec in scenario.vehicles:
-            loaded.vehicles[spec.name] = vehicle_upsert(spec)
+            loaded.vehicles[spec.name] = vehicle_upsert(spec=spec)
         for customer_spec in scenario.customers:
             customer = _customer_upsert(customer_spec)
             loaded.customers[customer_spec.name] = customer
@@ -187,7 +190,7 @@ def scenario_submit_vv(
 
 
 def scenario_submit_all(
-    scenario: Scenario, loaded: LoadedScenario, *, vvm: VVM, admit: bool = True
+    *, scenario: Scenario, loaded: LoadedScenario, vvm: VVM, admit: bool = True
 ) -> list[VirtualVehicle]:
     """Submit every VV of the scenario now (``submit_at_s`` is for ``simulate``)."""
     return [
@@ -210,14 +213,14 @@ EVENT_STATUS = {
 
 
 def scenario_event_apply(
-    event: FleetEvent, *, vvm: VVM, on_added: Callable[[Vehicle], None] | None = None
+    *, event: FleetEvent, vvm: VVM, on_added: Callable[[Vehicle], None] | None = None
 ) -> Vehicle:
     """Apply one fleet event of a scenario; returns the vehicle it concerns.
 
     An added vehicle gets its control loop or worker from ``on_added`` before it is given work.
     """
     if event.add_vehicle is not None:
-        vehicle = vehicle_upsert(event.add_vehicle)
+        vehicle = vehicle_upsert(spec=event.add_vehicle)
         if on_added is not None:
             on_added(vehicle)
         vehicle_register(vehicle=vehicle, vvm=vvm)
@@ -225,3 +228,20 @@ def scenario_event_apply(
     vehicle = Vehicle.objects.get(name=event.vehicle)
     vehicle_set_status(vehicle=vehicle, status=EVENT_STATUS[event.action], vvm=vvm)
     return vehicle
+
+
+def demo_reset(*, reason: str) -> None:
+    """Start a demo afresh on a database an interrupted one left behind: its unfinished VVs
+    are cancelled (with ``reason``), their open tasks dropped, and every vehicle stands
+    landed at its depot."""
+    with transaction.atomic():
+        VirtualVehicle.objects.filter(status__in=(VVStatus.QUEUED, *ACTIVE_STATUSES)).update(
+            status=VVStatus.CANCELLED, host_rv=None, pending=None, error=reason
+        )
+        Task.objects.filter(status=TaskStatus.OPEN).update(
+            status=TaskStatus.CANCELLED, vehicle=None
+        )
+        for vehicle in Vehicle.objects.all():
+            Vehicle.objects.filter(pk=vehicle.pk).update(
+                lat=vehicle.depot_lat, lng=vehicle.depot_lng, alt=vehicle.depot_alt, phase="landed"
+            )

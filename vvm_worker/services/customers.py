@@ -1,4 +1,4 @@
-"""Managing customers (tenants) and their quotas through the REST API."""
+"""Customers (tenants), their quotas and their users; the staff's own login."""
 
 from __future__ import annotations
 
@@ -9,25 +9,10 @@ from django.core.exceptions import ValidationError
 from django.db import transaction
 from django.utils.text import slugify
 
-from accounts.models import Customer
-from fleet.models import SensorType
-from fleet.selectors import UnknownSensors, sensors_by_name
+from accounts.models import Customer, User
 from missions.models import ENDED_STATUSES
-from vvm_worker.services import VVM
-
-# The VVM-API calls a customer's VVs may be limited to (the names vvm_worker/runtime/prelude.js
-# checks with allowed(...)).
-VVM_API_CALLS = (
-    "log",
-    "sensor.get",
-    "sensor.list",
-    "storage.list",
-    "storage.load",
-    "storage.remove",
-    "storage.store",
-    "task.execute",
-    "task.executeAll",
-)
+from vvm_worker.runtime import VVM_API_CALLS, Limits
+from vvm_worker.services.base import VVM, sensor_entries
 
 
 class CustomerConfig(TypedDict, total=False):
@@ -53,11 +38,16 @@ class CustomerBusy(RuntimeError):
         self.count = count
 
 
-def _sensor_entries(names: Sequence[str]) -> list[SensorType]:
-    try:
-        return sensors_by_name(names=names)
-    except UnknownSensors as exc:
-        raise ValidationError({"allowed_sensors": str(exc)}) from None
+def customer_limits(*, customer: Customer) -> Limits:
+    """The customer's quotas as the limits the runtime enforces on each step."""
+    calls = customer.allowed_api_calls or None
+    return Limits(
+        cpu_s=customer.cpu_ms_per_step / 1000.0,
+        heap_bytes=customer.heap_bytes,
+        storage_bytes=customer.storage_bytes,
+        max_tasks=customer.max_tasks_per_vv,
+        allowed_calls=frozenset(calls) if calls else None,
+    )
 
 
 def _validate(customer: Customer) -> None:
@@ -82,7 +72,7 @@ def customer_create(
     """Add a customer with its quotas (defaults for those not given); ``allowed_sensors``
     empty or None means every unprivileged SDC entry (privileged ones too for a privileged
     customer). Raises ValidationError naming the field."""
-    entries = _sensor_entries(allowed_sensors or [])
+    entries = sensor_entries(allowed_sensors or [], field="allowed_sensors")
     with transaction.atomic():
         customer = Customer(**config)
         _validate(customer)
@@ -103,7 +93,11 @@ def customer_update(
     New quotas hold for the next step of each VV; more parallel VVs admit queued ones at once.
     VVs keep the SDC entries they were submitted with. Raises ValidationError naming the field.
     """
-    entries = None if allowed_sensors is None else _sensor_entries(allowed_sensors)
+    entries = (
+        None
+        if allowed_sensors is None
+        else sensor_entries(allowed_sensors, field="allowed_sensors")
+    )
     with transaction.atomic():
         customer = Customer.objects.select_for_update().get(pk=customer.pk)
         before = customer.max_parallel_vvs
@@ -127,3 +121,19 @@ def customer_delete(*, customer: Customer) -> None:
         if busy:
             raise CustomerBusy(customer, busy)
         customer.delete()
+
+
+def user_set_login(
+    *, username: str, password: str, customer: Customer | None = None, staff: bool = False
+) -> User:
+    """Create the user (or take the existing one) and set its password; ``customer`` makes it
+    one of that customer's users, ``staff`` an administrator of the platform."""
+    with transaction.atomic():
+        user, _ = User.objects.get_or_create(username=username)
+        if customer is not None:
+            user.customer = customer
+        if staff:
+            user.is_staff = user.is_superuser = True
+        user.set_password(password)
+        user.save()
+    return user

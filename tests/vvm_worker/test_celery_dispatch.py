@@ -1,0 +1,56 @@
+"""The distributed platform's dispatcher: messages reach the broker (the test run's real Redis)
+only once the transaction that made the work commits, and never for a rolled-back change."""
+
+from __future__ import annotations
+
+import pytest
+from django.db import transaction
+
+from missions.models import VirtualVehicle
+from tests.broker import queued
+from vvm_worker.dispatch import SHARED_QUEUE, gs_queue
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import vv_create_for_user, vv_submit
+
+PROGRAM = "VV.log('hello');"
+
+
+def test_a_submission_is_announced_to_the_workers_after_it_commits(
+    user_a, customer_a, broker, django_capture_on_commit_callbacks
+) -> None:
+    with django_capture_on_commit_callbacks(execute=False) as callbacks:
+        vv, problem = vv_create_for_user(
+            user=user_a, name="VV", program=PROGRAM, vvm=platform_vvm()
+        )
+        assert vv is not None and problem is None
+        assert queued(broker, SHARED_QUEUE) == [], "nothing is sent before the commit"
+    for callback in callbacks:
+        callback()
+    assert queued(broker, SHARED_QUEUE) == [("cpcc.admit", [customer_a.pk])]
+
+
+def test_a_rolled_back_submission_sends_nothing(
+    user_a, broker, django_capture_on_commit_callbacks
+) -> None:
+    def failing_request() -> None:
+        with transaction.atomic():
+            vv_create_for_user(user=user_a, name="VV", program=PROGRAM, vvm=platform_vvm())
+            raise RuntimeError("the request failed after the submission")
+
+    with (
+        django_capture_on_commit_callbacks(execute=True) as callbacks,
+        pytest.raises(RuntimeError, match="failed after the submission"),
+    ):
+        failing_request()
+    assert callbacks == []
+    assert queued(broker, SHARED_QUEUE) == []
+    assert not VirtualVehicle.objects.exists()
+
+
+def test_a_vv_is_sent_to_the_queue_of_the_host_it_is_on(
+    customer_a, ground_station, broker, django_capture_on_commit_callbacks
+) -> None:
+    with django_capture_on_commit_callbacks(execute=True):
+        vv = vv_submit(customer=customer_a, name="VV", program=PROGRAM, vvm=platform_vvm())
+    assert vv.host_gs == ground_station
+    assert queued(broker, gs_queue(ground_station.pk)) == [("cpcc.vv_advance", [str(vv.pk)])]

@@ -1,0 +1,78 @@
+"""The distributed platform's dispatcher: work handed to the hosts' Celery workers by message,
+once the transaction that made it commits."""
+
+from __future__ import annotations
+
+import logging
+import uuid
+from collections.abc import Callable
+from typing import Any
+
+from django.db import transaction
+
+from cpcc_site.celery import app
+from missions.models import VirtualVehicle
+from vvm_worker.dispatch import (
+    ADMIT_TASK,
+    SHARED_QUEUE,
+    VEHICLE_CHANGED_TASK,
+    VV_ADVANCE_TASK,
+    LocalHost,
+    gs_queue,
+    rv_queue,
+)
+
+logger = logging.getLogger("cpcc.dispatch")
+
+
+class CeleryDispatcher:
+    """Hands work to the hosts' Celery workers, once the transaction that made it commits.
+
+    A VV goes to the queue of the host it is on at that moment, a vehicle's wake-up to the
+    vehicle's queue. ``local`` lets a host do its own work in its own thread without a round
+    trip through Redis (an RV resuming a VV it keeps, or re-planning after new work).
+    """
+
+    def __init__(self, local: LocalHost | None = None) -> None:
+        self.local = local
+
+    def vv_arrived(self, vv_id: uuid.UUID) -> None:
+        transaction.on_commit(lambda: _safely(self._send_vv, vv_id))
+
+    def vehicle_changed(self, vehicle_id: int) -> None:
+        transaction.on_commit(lambda: _safely(self._send_vehicle, vehicle_id))
+
+    def customer_slot_freed(self, customer_id: int) -> None:
+        transaction.on_commit(lambda: _safely(_send_admit, customer_id))
+
+    def _send_vv(self, vv_id: uuid.UUID) -> None:
+        host = (
+            VirtualVehicle.objects.filter(pk=vv_id).values_list("host_gs_id", "host_rv_id").first()
+        )
+        if host is None:
+            return
+        gs_id, rv_id = host
+        if rv_id is not None and self.local is not None and self.local.is_vehicle(rv_id):
+            self.local.advance_later(vv_id)
+            return
+        queue = rv_queue(rv_id) if rv_id is not None else gs_queue(gs_id) if gs_id else SHARED_QUEUE
+        app.send_task(VV_ADVANCE_TASK, args=[str(vv_id)], queue=queue)
+
+    def _send_vehicle(self, vehicle_id: int) -> None:
+        if self.local is not None and self.local.is_vehicle(vehicle_id):
+            self.local.wake_later()
+            return
+        app.send_task(VEHICLE_CHANGED_TASK, args=[vehicle_id], queue=rv_queue(vehicle_id))
+
+
+def _send_admit(customer_id: int) -> None:
+    app.send_task(ADMIT_TASK, args=[customer_id], queue=SHARED_QUEUE)
+
+
+def _safely(send: Callable[[Any], None], arg: Any) -> None:
+    """Send a message; if the broker is unreachable, say so and go on: the state is committed,
+    and the hosts' periodic sweeps find the work (a message is only a hint)."""
+    try:
+        send(arg)
+    except Exception:
+        logger.exception("could not hand work to a worker; the hosts' sweeps will find it")
