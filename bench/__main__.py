@@ -20,6 +20,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from fleet.geo import Position
+from fleet.simulation import SensorSpec, render_camera
 from vvm_worker.runtime import Outcome, Runtime, StepInput, answer_task, run_step
 from vvm_worker.scenario_gen import grid_box, grid_scenario, original_style_program
 
@@ -118,6 +120,20 @@ def simulate(data_or_path: dict[str, Any] | str) -> None:
         )
 
 
+def cameras() -> None:
+    """One 640x480 PNG per view of the camera, as an RV renders it at every camera reading
+    (a per-pixel Python loop would take seconds; the target is well under 100 ms)."""
+    position = Position(47.0707, 15.4395, 60.0)
+    for view in ("front", "belly", "fpv"):
+        sensor = SensorSpec(
+            "Camera 640x480", "camera", params={"width": 640, "height": 480, "view": view}
+        )
+        show(
+            f"camera picture 640x480, {view} view (render and PNG encoding)",
+            repeat(lambda s=sensor: render_camera(s, position, 0.0, seed=1), 20),
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--long", action="store_true", help="also run a 5,000-task VV (minutes)")
@@ -166,6 +182,8 @@ def main() -> None:
     print(f"{'memory per idle VV (warm context), resident':<62} {per_vv:9.2f} MB   (50 VVs)")
     show("  V8 heap used per idle VV", heaps, unit="MB")
     idle.close()
+
+    cameras()
 
     show(
         "simulate paper-fig3 --speed 0 (whole process)",

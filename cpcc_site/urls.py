@@ -1,7 +1,10 @@
-"""URL routes of the web application."""
+"""URL routes of the web application.
 
-from django.conf import settings
-from django.conf.urls.static import static
+MEDIA_ROOT is not served here in any mode, not even with DEBUG on: its camera pictures belong to
+the customer whose VV took them, and the REST API serves each one only to that customer
+(``/api/v1/vvs/{id}/images/{file}``, session or token).
+"""
+
 from django.contrib import admin
 from django.urls import include, path
 from drf_spectacular.views import (
@@ -26,5 +29,3 @@ urlpatterns = [
     ),
     path("", include("missions.urls")),
 ]
-if settings.DEBUG:
-    urlpatterns += static(settings.MEDIA_URL, document_root=settings.MEDIA_ROOT)

@@ -6,10 +6,12 @@ import fcntl
 import json
 import os
 import pty
+import select
 import struct
 import subprocess
 import sys
 import termios
+import time
 from pathlib import Path
 
 import pytest
@@ -141,24 +143,49 @@ def test_simulate_shows_a_progress_bar_on_a_terminal(tmp_path: Path) -> None:
         env=env,
         stdout=subprocess.PIPE,
         stderr=child,
-        text=True,
     )
     os.close(child)
-    shown = b""
-    while True:
-        try:
-            chunk = os.read(main, 4096)
-        except OSError:  # the terminal closes when the command exits
-            break
-        if not chunk:
-            break
-        shown += chunk
-    stdout, _ = process.communicate(timeout=120)
-    os.close(main)
+    try:
+        shown, stdout = read_until_closed(process, terminal=main, timeout_s=120)
+    finally:
+        os.close(main)
+        if process.poll() is None:
+            process.kill()
+        process.wait(timeout=10)
     assert process.returncode == 0
     assert "3/3 VVs ended" in shown.decode(errors="replace")
     assert "12 tasks done" in shown.decode(errors="replace")
-    json.loads(stdout.strip().splitlines()[-1])  # stdout still ends with the summary
+    json.loads(stdout.decode().strip().splitlines()[-1])  # stdout still ends with the summary
+
+
+def read_until_closed(
+    process: subprocess.Popen[bytes], *, terminal: int, timeout_s: float
+) -> tuple[bytes, bytes]:
+    """What a command wrote to its terminal and to its stdout pipe, read until it closed both;
+    fails naming what it showed if that takes longer than ``timeout_s`` (a hung command)."""
+    assert process.stdout is not None
+    pipe = process.stdout.fileno()
+    received = {terminal: b"", pipe: b""}
+    open_fds = {terminal, pipe}
+    deadline = time.monotonic() + timeout_s
+    while open_fds:
+        left = deadline - time.monotonic()
+        ready = select.select(list(open_fds), [], [], max(left, 0))[0]
+        if not ready:
+            pytest.fail(
+                f"simulate did not end within {timeout_s:g} s; its terminal showed "
+                f"{received[terminal][-2000:].decode(errors='replace')!r}"
+            )
+        for fd in ready:
+            try:
+                chunk = os.read(fd, 65536)
+            except OSError:  # the terminal closes when the command exits
+                chunk = b""
+            if chunk:
+                received[fd] += chunk
+            else:
+                open_fds.discard(fd)
+    return received[terminal], received[pipe]
 
 
 def test_simulate_human_output_has_a_table(tmp_path: Path) -> None:

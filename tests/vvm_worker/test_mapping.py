@@ -11,11 +11,14 @@ from vvm_worker.runtime import TaskRequest
 ONE = Polygon([(12.859, 48.109), (12.864, 48.109), (12.864, 48.114), (12.859, 48.114)])
 TWO = Polygon([(12.864, 48.109), (12.868, 48.109), (12.868, 48.114), (12.864, 48.114)])
 SENSORS = frozenset({"CO2", "Thermometer", "GPS"})
+# One id per vehicle name, numbered in the order the names first appear: distinct, and the same
+# whatever PYTHONHASHSEED is.
+IDS: dict[str, int] = {}
 
 
 def caps(name: str, area: Polygon, **kw) -> VehicleCaps:
     base = {
-        "id": hash(name) % 1000,
+        "id": IDS.setdefault(name, len(IDS) + 1),
         "name": name,
         "area": area,
         "min_altitude_m": 0.0,

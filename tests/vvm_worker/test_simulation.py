@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import copy
 import json
+from itertools import pairwise
 from pathlib import Path
 
 import pytest
 from PIL import Image
 
+from fleet.geo import Position, distance_m, ground_distance_m
 from tests.conftest import SCENARIOS
 from vvm_worker.planning import PLANNER_NAMES
 from vvm_worker.scenario import load_scenario, parse_scenario
@@ -19,6 +21,28 @@ KEYS = {f"p{n}.{k}" for n in range(4) for k in range(3)}
 
 def run(path: Path, **kw) -> dict:
     return Simulation(load_scenario(path), **kw).run()
+
+
+def stops(summary: dict) -> list[Position]:
+    """The points where the RVs read sensors, in the order they did."""
+    done = sorted((t["done_s"], tuple(t["position"])) for vv in summary["vvs"] for t in vv["tasks"])
+    points = [Position(*position) for _, position in done]
+    return [p for n, p in enumerate(points) if n == 0 or p != points[n - 1]]
+
+
+def flown(
+    depot: Position, points: list[Position], *, speed_mps: float, climb_mps: float
+) -> tuple[float, float]:
+    """Distance (m) and time (s) of a vertical take-off at ``depot``, straight legs through
+    ``points`` and a vertical landing back at ``depot``; each leg lasts as long as its slower
+    part, the horizontal at ``speed_mps`` or the vertical at ``climb_mps``."""
+    path = [depot, depot.with_alt(points[0].alt), *points, depot.with_alt(points[-1].alt), depot]
+    legs = list(pairwise(path))
+    distance = sum(distance_m(a, b) for a, b in legs)
+    seconds = sum(
+        max(ground_distance_m(a, b) / speed_mps, abs(b.alt - a.alt) / climb_mps) for a, b in legs
+    )
+    return distance, seconds
 
 
 def rv_to_rv(summary: dict) -> list[dict]:
@@ -44,15 +68,21 @@ def test_figure_2_one_rv_serves_three_vvs() -> None:
             with Image.open(picture["image"]) as image:
                 assert image.size == (640, 480)
                 assert image.format == "PNG"
+    # Heli One (10 m/s, climbing at 3 m/s) takes off at its depot, flies straight to each point
+    # in the order it read them, and lands at its depot: what its odometer and flight time say.
+    distance, seconds = flown(
+        Position(48.1135, 12.86, 0.0), stops(summary), speed_mps=10.0, climb_mps=3.0
+    )
     assert summary["vehicles"] == [
         {
             "name": "Heli One",
-            "distance_m": summary["vehicles"][0]["distance_m"],
+            "distance_m": pytest.approx(distance, abs=0.01),
             "tasks_done": 12,
-            "flight_s": summary["vehicles"][0]["flight_s"],
+            "flight_s": pytest.approx(seconds, abs=0.01),
         }
     ]
-    assert summary["vehicles"][0]["distance_m"] > 1000
+    # It is airborne from the first task at 0 s until it lands after the last VV finished.
+    assert summary["vehicles"][0]["flight_s"] > summary["makespan_s"]
     assert rv_to_rv(summary) == []
     assert summary["makespan_s"] == max(v["finished_s"] for v in summary["vvs"])
 
