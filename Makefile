@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 SCENARIO ?= examples/scenarios/paper-fig3.json
 
-.PHONY: demo test lint check bench simulate-fig2 simulate-fig3 clean
+.PHONY: demo test lint check bench simulate-fig2 simulate-fig3 vendor clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
@@ -42,6 +42,10 @@ simulate-fig3: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m bench
 	$(PY) -m bench.platform
+
+# Re-creates static/vendor/ (Leaflet, Leaflet-Geoman) from npm; see static/vendor/README.md.
+vendor:
+	sh static/vendor/update.sh
 
 clean:
 	rm -rf $(VENV) var

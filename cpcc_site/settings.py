@@ -49,6 +49,9 @@ INSTALLED_APPS = [
 
 MIDDLEWARE = [
     "django.middleware.security.SecurityMiddleware",
+    # Static files in every mode, under daphne (ASGI) too: Django serves them only under
+    # runserver.
+    "whitenoise.middleware.WhiteNoiseMiddleware",
     "django.contrib.sessions.middleware.SessionMiddleware",
     "django.middleware.common.CommonMiddleware",
     "django.middleware.csrf.CsrfViewMiddleware",
@@ -110,6 +113,24 @@ USE_TZ = True
 STATIC_URL = "static/"
 STATICFILES_DIRS = [BASE_DIR / "static"]
 STATIC_ROOT = VAR_DIR / "staticfiles"
+# With DEBUG off, WhiteNoise serves what `collectstatic` put in STATIC_ROOT: names with a hash
+# of the content (cached for ever) and gzip copies. With DEBUG on (development, tests, `make
+# demo`) it serves the apps' and static/'s files as they are, no collectstatic needed.
+STORAGES = {
+    "default": {"BACKEND": "django.core.files.storage.FileSystemStorage"},
+    "staticfiles": {
+        "BACKEND": "django.contrib.staticfiles.storage.StaticFilesStorage"
+        if DEBUG
+        else "whitenoise.storage.CompressedManifestStaticFilesStorage"
+    },
+}
+# Fixed here because WhiteNoise would read DEBUG only when the first request comes, and tests
+# run with DEBUG switched off after the settings were read.
+WHITENOISE_USE_FINDERS = DEBUG
+WHITENOISE_AUTOREFRESH = DEBUG
+# Camera pictures (vvm_worker/sensing.py). No URL serves MEDIA_ROOT: a picture belongs to the
+# customer whose VV took it, and only the REST API (GET /api/v1/vvs/{id}/images/{file}) serves
+# it, to that customer. MEDIA_URL only names the storage's base URL, which nothing links to.
 MEDIA_URL = "/media/"
 MEDIA_ROOT = Path(env_str("CPCC_MEDIA_ROOT", str(VAR_DIR / "media")))
 DEFAULT_AUTO_FIELD = "django.db.models.BigAutoField"
@@ -134,6 +155,12 @@ CHANNEL_LAYERS = {
         "CONFIG": {"hosts": [_channels_host]},
     }
 }
+# The live map's feed (missions/events.py): a stream of changes and the RVs' latest states.
+CPCC_FEED_REDIS_URL = _channels_host
+# The live map: each RV worker publishes its vehicle's state this often; a map socket sends
+# its browser at most one frame per batch interval, with everything that came meanwhile.
+CPCC_MAP_TICK_S = env_float("CPCC_MAP_TICK_S", 0.5, minimum=0.05)
+CPCC_MAP_BATCH_S = env_float("CPCC_MAP_BATCH_S", 0.1, minimum=0.0)
 CELERY_TASK_ACKS_LATE = True
 CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
@@ -180,8 +207,9 @@ CPCC_SIM_SPEED = env_float("CPCC_SIM_SPEED", 1.0, minimum=0.0)
 CPCC_JOURNAL_WARN_ENTRIES = int(env_float("CPCC_JOURNAL_WARN_ENTRIES", 10_000, minimum=1))
 CPCC_JOURNAL_MAX_ENTRIES = int(env_float("CPCC_JOURNAL_MAX_ENTRIES", 50_000, minimum=1))
 CPCC_JOURNAL_MAX_BYTES = int(env_float("CPCC_JOURNAL_MAX_BYTES", 50_000_000, minimum=1))
-# Map tiles: empty means no tile layer (works offline); set to e.g. an OpenStreetMap URL.
-CPCC_TILE_URL = env_str("CPCC_TILE_URL", "")
+# Map tiles, a Leaflet URL template ({z}/{x}/{y}); empty: no tile layer, the maps draw on a
+# plain background (they work offline).
+CPCC_MAP_TILES = env_str("CPCC_MAP_TILES", "")
 
 LOGGING = {
     "version": 1,

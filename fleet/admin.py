@@ -1,10 +1,19 @@
+from datetime import datetime
 from typing import Any
 
+from django.conf import settings
 from django.contrib import admin, messages
+from django.core.exceptions import PermissionDenied
 from django.db.models import QuerySet
 from django.http import HttpRequest
+from django.template.response import TemplateResponse
+from django.urls import URLPattern, path, reverse
+from django.utils import timezone
 
 from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
+from fleet.selectors import ground_station_list, vehicle_list
+from fleet.widgets import AreaWidget, map_media
+from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     GroundStationConfig,
@@ -21,6 +30,52 @@ def _config(form: Any, fields: Any, only_changed: bool) -> Any:
     """The form's values of a service's config fields (those the user changed, on an edit)."""
     names = form.changed_data if only_changed else form.cleaned_data
     return {f: form.cleaned_data[f] for f in names if f in fields.__annotations__}
+
+
+def _station(station: GroundStation) -> dict[str, Any]:
+    return {"name": station.name, "lat": station.lat, "lng": station.lng}
+
+
+def _age(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s ago"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min ago"
+    if seconds < 172800:
+        return f"{seconds / 3600:.0f} h ago"
+    return f"{seconds / 86400:.0f} days ago"
+
+
+def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]:
+    """What the fleet overview shows of an RV (annotated with ``vvs_aboard``)."""
+    if vehicle.worker_seen is None:
+        lease, lease_text = "never", "never reported"
+    else:
+        age_s = max(0.0, (now - vehicle.worker_seen).total_seconds())
+        lease = "fresh" if age_s < lease_s else "expired"
+        lease_text = f"{lease}, {_age(age_s)}"
+    battery = None
+    if vehicle.battery_s:
+        # What the simulated vehicle's battery reports: endurance less the time flown.
+        battery = round(100 * max(0.0, 1 - vehicle.flight_s / vehicle.battery_s))
+    position = vehicle.position
+    return {
+        "name": vehicle.name,
+        "url": reverse("admin:fleet_vehicle_change", args=[vehicle.pk]),
+        "status": vehicle.status,
+        "status_label": vehicle.get_status_display(),
+        "phase": vehicle.phase,
+        "lat": position.lat,
+        "lng": position.lng,
+        "alt": position.alt,
+        "reported": vehicle.lat is not None,
+        "battery": battery,
+        "tasks_done": vehicle.tasks_done,
+        "vvs_aboard": vehicle.vvs_aboard,
+        "lease": lease,
+        "lease_text": lease_text,
+        "area": vehicle.area,
+    }
 
 
 @admin.register(SensorType)
@@ -104,6 +159,57 @@ class VehicleAdmin(admin.ModelAdmin):
             },
         ),
     ]
+
+    def get_form(
+        self, request: HttpRequest, obj: Any = None, change: bool = False, **kwargs: Any
+    ) -> Any:
+        # The area on a map, with the other RVs' areas and the ground stations around it.
+        others = [
+            {"name": v.name, "status": v.status, "area": v.area}
+            for v in vehicle_list()
+            if v.status != VehicleStatus.REMOVED and (obj is None or v.pk != obj.pk)
+        ]
+        stations = [_station(gs) for gs in ground_station_list()]
+        widget = AreaWidget(others=others, stations=stations)
+        kwargs["widgets"] = {**kwargs.get("widgets", {}), "area": widget}
+        return super().get_form(request, obj, change=change, **kwargs)
+
+    def get_urls(self) -> list[URLPattern]:
+        overview = path(
+            "overview/",
+            self.admin_site.admin_view(self.overview_view),
+            name="fleet_vehicle_overview",
+        )
+        return [overview, *super().get_urls()]
+
+    def overview_view(self, request: HttpRequest) -> TemplateResponse:
+        """The whole fleet on a map and in a table: status, position, battery, tasks done,
+        VVs aboard and whether the RV's worker holds its lease."""
+        if not self.has_view_permission(request):
+            raise PermissionDenied
+        now = timezone.now()
+        lease_s = settings.CPCC_RV_LEASE_S
+        vehicles = [
+            _overview_row(v, now, lease_s)
+            for v in with_active_vv_count(vehicle_list(), name="vvs_aboard")
+        ]
+        stations = [
+            {**_station(gs), "alt": gs.alt, "vvs_here": gs.vvs_here}
+            for gs in with_active_vv_count(ground_station_list(), name="vvs_here")
+        ]
+        context = {
+            **self.admin_site.each_context(request),
+            "title": "Fleet overview",
+            "opts": self.opts,
+            "media": map_media(js=("js/admin/fleet-overview.js",)),
+            "vehicles": vehicles,
+            "stations": stations,
+            "map_data": {"vehicles": vehicles, "stations": stations},
+            "tiles": settings.CPCC_MAP_TILES,
+            "lease_s": lease_s,
+            "now": now,
+        }
+        return TemplateResponse(request, "admin/fleet/vehicle/overview.html", context)
 
     def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
         # Through the services: a new RV takes work at once; one whose reach changed hands

@@ -203,9 +203,33 @@ class Migration(models.Model):
     to_name = models.CharField(max_length=80)
     at_s = models.FloatField()
     reason = models.CharField(max_length=200, blank=True)
+    # Where the two hosts were at that moment (the map's red line); empty for a host whose
+    # position was not known (an RV that never reported one).
+    from_lat = models.FloatField(null=True, blank=True)
+    from_lng = models.FloatField(null=True, blank=True)
+    to_lat = models.FloatField(null=True, blank=True)
+    to_lng = models.FloatField(null=True, blank=True)
 
     class Meta:
         ordering = ["at_s", "id"]
 
     def __str__(self) -> str:
         return f"{self.vv.name}: {self.from_name} -> {self.to_name}"
+
+
+class TrackPoint(models.Model):
+    """Where a VV was while an RV carried it: a point at every start and end of a flight leg,
+    so the straight legs between them are its path (the map's green line, a mission's replay)."""
+
+    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="track")
+    t_s = models.FloatField()
+    lat = models.FloatField()
+    lng = models.FloatField()
+    alt = models.FloatField()
+
+    class Meta:
+        ordering = ["vv", "t_s", "id"]
+        indexes = [models.Index(fields=["vv", "t_s"])]
+
+    def __str__(self) -> str:
+        return f"{self.vv_id} at {self.t_s:.1f} s"

@@ -7,12 +7,14 @@ both for a missing VV and for another customer's, so a caller cannot tell them a
 from __future__ import annotations
 
 import uuid
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from django.db.models import Count, Model, Q, QuerySet, TextField
 from django.db.models.functions import Cast
 
 from accounts.models import User
+from fleet.models import GroundStation, Vehicle, VehicleStatus
+from missions.events import event_for, migration_event, task_event, vv_event
 from missions.models import (
     ENDED_STATUSES,
     LogEntry,
@@ -118,3 +120,62 @@ def vv_image_for_user(*, user: User, vv_id: uuid.UUID | str, file: str) -> str:
         if image_file(reference) == file:
             return reference
     raise ImageNotFound(file)
+
+
+# --- the live map ---------------------------------------------------------------------------
+
+# What a map's snapshot holds at most: the VVs that have not ended and those that ended
+# recently, and per VV its latest tasks and track points.
+MAP_ENDED_VVS = 50
+MAP_TASKS_PER_VV = 2_000
+MAP_TRACK_PER_VV = 2_000
+
+
+def map_snapshot_for_user(*, user: User, vv_id: uuid.UUID | str | None = None) -> dict[str, Any]:
+    """The live map's state as this user may see it, from the database: operation areas,
+    ground stations, and VVs with their tasks, migrations and tracks (the vehicles' live
+    positions come from the feed). A customer sees only its own VVs and neither a vehicle's
+    nor a ground station's name; ``vv_id`` narrows it to one VV (VVNotFound for another
+    customer's). Shapes as in missions/events.py."""
+    staff = bool(user.is_staff)
+    customer_id = user.customer_id
+    vvs = vv_list_for_user(user=user).select_related("host_rv", "host_gs")
+    if vv_id is not None:
+        chosen = [vv_get_for_user(user=user, vv_id=vv_id)]
+    else:
+        running = list(vvs.exclude(status__in=ENDED_STATUSES).order_by("submitted_s", "id"))
+        ended = list(vvs.filter(status__in=ENDED_STATUSES).order_by("-updated")[:MAP_ENDED_VVS])
+        chosen = running + ended
+
+    def shown(event: dict[str, Any]) -> dict[str, Any] | None:
+        return event_for(event, customer_id=customer_id, staff=staff)
+
+    listed = []
+    for vv in chosen:
+        tasks = vv.tasks.order_by("-q", "-index")[:MAP_TASKS_PER_VV]
+        track = vv.track.order_by("-t_s", "-id").values_list("t_s", "lat", "lng")
+        listed.append(
+            shown(vv_event(vv))
+            | {
+                "tasks": [shown(task_event(t, vv.customer_id)) for t in reversed(list(tasks))],
+                "migrations": [
+                    shown(migration_event(m, vv.customer_id)) for m in vv.migrations.all()
+                ],
+                "track": [[t, lat, lng] for t, lat, lng in reversed(track[:MAP_TRACK_PER_VV])],
+            }
+        )
+    areas = Vehicle.objects.exclude(status=VehicleStatus.REMOVED).order_by("name")
+    return {
+        "staff": staff,
+        "areas": [
+            {"name": v.name, "status": v.status, "area": v.area} if staff else {"area": v.area}
+            for v in areas
+        ],
+        "stations": [
+            {"name": gs.name, "lat": gs.lat, "lng": gs.lng}
+            if staff
+            else {"lat": gs.lat, "lng": gs.lng}
+            for gs in GroundStation.objects.order_by("name")
+        ],
+        "vvs": listed,
+    }

@@ -46,6 +46,7 @@ def broker_url(tmp_path_factory: pytest.TempPathFactory):
     socket = tmp_path_factory.mktemp("redis") / "redis.sock"
     with EmbeddedRedis(socket):
         app.conf.broker_url = f"redis+socket://{socket}"
+        settings.CPCC_FEED_REDIS_URL = f"unix://{socket}"  # the live map's feed
         yield f"unix://{socket}"
 
 

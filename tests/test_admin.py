@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import html
 import json
+import re
+from datetime import timedelta
 
 import pytest
+from django.conf import settings
 from django.urls import reverse
+from django.utils import timezone
 
-from tests.factories import AREA_TWO, GroundStationFactory, VehicleFactory
+from tests.factories import AREA_ONE, AREA_TWO, GroundStationFactory, UserFactory, VehicleFactory
 from vvm_worker.services import vv_submit
 
 MODELS = [
@@ -209,3 +214,190 @@ def test_editing_an_rvs_sensors_or_area_in_the_admin_reroutes_its_vvs(
     assert heli.area == AREA_TWO
     in_process.drain()
     assert _finished_by(again) == ["Heli Two", "Heli Two"], "area one is no longer Heli One's"
+
+
+# The operation area on a map (fleet/widgets.py, static/js/admin/area-widget.js): the page
+# carries what the map draws; the browser writes the drawn ring into the textarea as compact
+# JSON, which the form saves through the services like any other edit.
+
+
+def _json_script(page: str, element_id: str):
+    found = re.search(rf'<script id="{element_id}" type="application/json">(.*?)</script>', page)
+    assert found, f"no #{element_id} on the page"
+    return json.loads(found.group(1))
+
+
+def test_the_vehicle_change_page_draws_the_area_on_a_map(client, staff, db) -> None:
+    from fleet.models import VehicleStatus
+
+    heli = VehicleFactory(name="Heli One")
+    VehicleFactory(name="Heli Two", area=AREA_TWO)
+    VehicleFactory(name="Heli Gone", status=VehicleStatus.REMOVED)
+    GroundStationFactory(name="GS Base")
+    client.force_login(staff)
+    page = client.get(reverse("admin:fleet_vehicle_change", args=[heli.pk])).text
+
+    assert 'id="id_area_map" data-area-map' in page
+    assert 'data-input="id_area" data-context="id_area_context"' in page
+    assert 'data-state="loading" data-points="0"' in page, "the script reports when it drew"
+    textarea = re.search(r'<textarea name="area"[^>]*>(.*?)</textarea>', page, re.DOTALL)
+    assert textarea and json.loads(html.unescape(textarea.group(1))) == AREA_ONE
+    context = _json_script(page, "id_area_context")
+    assert context["others"] == [{"name": "Heli Two", "status": "active", "area": AREA_TWO}]
+    assert context["stations"] == [{"name": "GS Base", "lat": 48.1132, "lng": 12.8598}]
+    for script in [
+        "vendor/leaflet/leaflet.js",
+        "js/admin/map-common.js",
+        "vendor/leaflet-geoman/leaflet-geoman.min.js",
+        "js/admin/area-widget.js",
+    ]:
+        assert f'src="/static/{script}"' in page, script
+    assert page.index("vendor/leaflet/leaflet.js") < page.index("js/admin/area-widget.js")
+    assert 'href="/static/vendor/leaflet-geoman/leaflet-geoman.css"' in page
+
+
+def test_the_add_page_shows_the_fleet_on_the_map(client, staff, db) -> None:
+    VehicleFactory(name="Heli One")
+    client.force_login(staff)
+    page = client.get(reverse("admin:fleet_vehicle_add")).text
+    assert "data-area-map" in page
+    assert [o["name"] for o in _json_script(page, "id_area_context")["others"]] == ["Heli One"]
+
+
+@pytest.fixture
+def spied_vehicle_update(monkeypatch):
+    """The admin's calls of the vehicle_update service (which still runs)."""
+    import fleet.admin
+
+    calls: list[dict] = []
+    real = fleet.admin.vehicle_update
+
+    def spy(**kwargs):
+        calls.append(kwargs)
+        return real(**kwargs)
+
+    monkeypatch.setattr(fleet.admin, "vehicle_update", spy)
+    return calls
+
+
+def test_saving_an_area_drawn_on_the_map_updates_it_through_the_services(
+    client, staff, in_process, spied_vehicle_update
+) -> None:
+    from fleet.models import Vehicle
+
+    client.force_login(staff)
+    heli = Vehicle.objects.get(name="Heli One")
+    drawn = [
+        [48.1095, 12.8595],
+        [48.109612, 12.863507],
+        [48.1135, 12.8632],
+        [48.1131, 12.859701],
+        [48.1095, 12.8595],
+    ]
+    response = client.post(
+        reverse("admin:fleet_vehicle_change", args=[heli.pk]),
+        _vehicle_form(heli, area=json.dumps(drawn, separators=(",", ":"))),
+    )
+    assert response.status_code == 302, response.content.decode()[:2000]
+    heli.refresh_from_db()
+    assert heli.area == drawn
+    [call] = spied_vehicle_update
+    assert call["config"] == {"area": drawn}, "only what changed"
+    assert call["sensors"] is None
+
+
+def test_an_area_that_is_not_a_closed_ring_is_refused_with_the_reason(
+    client, staff, in_process, spied_vehicle_update
+) -> None:
+    from fleet.models import Vehicle
+
+    client.force_login(staff)
+    heli = Vehicle.objects.get(name="Heli One")
+    open_ring = [[48.1095, 12.8595], [48.1096, 12.8635], [48.1135, 12.8632]]
+    response = client.post(
+        reverse("admin:fleet_vehicle_change", args=[heli.pk]),
+        _vehicle_form(heli, area=json.dumps(open_ring)),
+    )
+    assert response.status_code == 200
+    assert "must be closed" in response.text
+    assert "data-area-map" in response.text, "the map is shown again with the form"
+    heli.refresh_from_db()
+    assert heli.area == AREA_ONE
+    assert spied_vehicle_update == []
+
+
+# The fleet overview (VehicleAdmin.overview_view).
+
+
+def _overview_row(page: str, name: str) -> tuple[dict[str, str], str]:
+    found = re.search(
+        rf'<tr data-vehicle="{re.escape(name)}" data-status="(\w+)" data-lease="(\w+)">(.*?)</tr>',
+        page,
+        re.DOTALL,
+    )
+    assert found, f"no row for {name}"
+    return {"status": found.group(1), "lease": found.group(2)}, found.group(3)
+
+
+def test_the_fleet_overview_shows_each_rv_to_staff(client, staff, in_process, customer_a) -> None:
+    from fleet.models import Vehicle, VehicleStatus
+    from vvm_worker.services import vehicle_set_status
+
+    _vv_aboard_heli_one(in_process, customer_a)
+    now = timezone.now()
+    expired = now - timedelta(seconds=settings.CPCC_RV_LEASE_S + 300)  # minutes ago
+    Vehicle.objects.filter(name="Heli One").update(worker_seen=now, battery_s=100, flight_s=25)
+    Vehicle.objects.filter(name="Heli Two").update(worker_seen=expired)
+    two = Vehicle.objects.get(name="Heli Two")
+    vehicle_set_status(vehicle=two, status=VehicleStatus.MAINTENANCE, vvm=in_process.vvm)
+    VehicleFactory(name="Heli Three")
+
+    client.force_login(staff)
+    response = client.get(reverse("admin:fleet_vehicle_overview"))
+    assert response.status_code == 200
+    page = response.text
+    assert "<h1>Fleet overview</h1>" in page
+
+    one, cells = _overview_row(page, "Heli One")
+    assert one == {"status": "active", "lease": "fresh"}
+    assert "Active" in cells and 'data-vvs-aboard="1"' in cells and "75 %" in cells
+    assert re.search(r"fresh, \d+ s ago", cells)
+    two_row, cells = _overview_row(page, "Heli Two")
+    assert two_row == {"status": "maintenance", "lease": "expired"}
+    assert "In maintenance" in cells and 'data-vvs-aboard="0"' in cells
+    assert re.search(r"expired, \d+ min ago", cells)
+    three, cells = _overview_row(page, "Heli Three")
+    assert three == {"status": "active", "lease": "never"}
+    assert "never reported" in cells and "(depot)" in cells
+    assert '<tr data-station="GS Base">' in page
+
+    data = _json_script(page, "fleet-overview-data")
+    aboard = {v["name"]: (v["status"], v["vvs_aboard"]) for v in data["vehicles"]}
+    assert aboard == {
+        "Heli One": ("active", 1),
+        "Heli Three": ("active", 0),
+        "Heli Two": ("maintenance", 0),
+    }
+    assert data["vehicles"][0]["area"] == AREA_ONE
+    assert data["stations"][0]["name"] == "GS Base"
+    assert 'src="/static/js/admin/fleet-overview.js"' in page
+
+
+def test_the_fleet_overview_is_linked_from_the_index_and_the_vehicle_list(client, staff) -> None:
+    client.force_login(staff)
+    overview = reverse("admin:fleet_vehicle_overview")
+    assert f'href="{overview}"' in client.get(reverse("admin:index")).text
+    assert f'href="{overview}"' in client.get(reverse("admin:fleet_vehicle_changelist")).text
+
+
+def test_the_fleet_overview_is_closed_to_customers_and_staff_without_permission(
+    client, user_a, db
+) -> None:
+    overview = reverse("admin:fleet_vehicle_overview")
+    client.force_login(user_a)
+    response = client.get(overview)
+    assert response.status_code == 302
+    assert "/admin/login/" in response["Location"]
+    client.force_login(UserFactory(username="helpdesk", is_staff=True))
+    assert client.get(overview).status_code == 403
+    assert f'href="{overview}"' not in client.get(reverse("admin:index")).text

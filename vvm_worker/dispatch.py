@@ -11,7 +11,7 @@ task names), so the services, the Celery tasks and the dispatcher never import e
 from __future__ import annotations
 
 import uuid
-from typing import Protocol
+from typing import Any, Protocol
 
 
 class Dispatcher(Protocol):
@@ -52,3 +52,18 @@ class LocalHost(Protocol):
     def is_vehicle(self, vehicle_id: int) -> bool: ...
     def advance_later(self, vv_id: uuid.UUID) -> None: ...
     def wake_later(self) -> None: ...
+
+
+class Announcer(Protocol):
+    """Who hears of changes as they happen (the live map): the services announce a change with
+    what it is; an announcer in the distributed platform publishes it once the transaction
+    commits, so a rolled-back change is never announced."""
+
+    def announce(self, event: dict[str, Any]) -> None: ...
+
+
+class Silent:
+    """The announcer of `simulate` and of tests: nobody listens."""
+
+    def announce(self, event: dict[str, Any]) -> None:
+        pass

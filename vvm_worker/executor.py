@@ -16,10 +16,11 @@ from typing import Any, Protocol
 
 from fleet.geo import Position, distance_m
 from fleet.models import SensorType, Vehicle, VehicleStatus
-from missions.models import Task, TaskStatus
+from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.planning import Planner, PlanTask
 from vvm_worker.sensing import read_sensors
 from vvm_worker.services import VVM, task_complete, vehicle_record_state
+from vvm_worker.services.base import announcing
 
 logger = logging.getLogger("cpcc.executor")
 
@@ -71,14 +72,26 @@ class VehicleLoop:
         self.returning = False
         self._token = 0  # invalidates the arrival of a leg that was replaced
         self._sdc: tuple[float, dict[str, dict[str, Any]]] | None = None
+        # What the live map shows of this RV between two plans: its status, the VVs aboard
+        # and the open tasks in the order it means to serve them.
+        self.status = VehicleStatus.ACTIVE
+        self.aboard: list[dict[str, Any]] = []
+        self.route: list[Position] = []
+        self._last_track: Position | None = None
 
     # --- events ------------------------------------------------------------------------------
 
     def wake(self) -> None:
         """The vehicle's tasks or status changed: re-plan unless its target still stands."""
+        now = self.vvm.clock.now_s()
         if self.target is not None and self._assigned().filter(pk=self.target).exists():
+            if announcing(self.vvm):  # the map shows new work and VVs at once
+                here = self.driver.position_at(now)
+                plan = [PlanTask(t.pk, t.position, t.requested_s) for t in self._assigned()]
+                self.route = [t.position for t in self.planner.route(here, plan)]
+                self.aboard = self._aboard()
             return
-        self._plan(self.vvm.clock.now_s())
+        self._plan(now)
 
     def _arrive(self, token: int) -> None:
         if token != self._token:
@@ -124,12 +137,15 @@ class VehicleLoop:
 
     def _plan(self, now: float) -> None:
         status = Vehicle.objects.values_list("status", flat=True).get(pk=self.vehicle_id)
+        self.status = VehicleStatus(status)
         tasks = list(self._assigned()) if status == VehicleStatus.ACTIVE else []
         here = self.driver.position_at(now)
         choice = None
+        self.route = []
         if tasks:
             plan = [PlanTask(t.pk, t.position, t.requested_s) for t in tasks]
             choice = self.planner.next_task(here, plan)
+            self.route = [t.position for t in self.planner.route(here, plan)]
         self._token += 1
         token = self._token
         if choice is not None:
@@ -158,10 +174,44 @@ class VehicleLoop:
             return None
         return max(0.0, min(1.0, remaining / self.battery_s))
 
+    def _aboard(self) -> list[dict[str, Any]]:
+        return [
+            {"id": str(pk), "name": name, "customer": customer_id}
+            for pk, name, customer_id in VirtualVehicle.objects.filter(
+                host_rv_id=self.vehicle_id, status__in=ACTIVE_STATUSES
+            )
+            .order_by("submitted_s", "id")
+            .values_list("pk", "name", "customer_id")
+        ]
+
+    def live_state(self, now: float) -> dict[str, Any]:
+        """The RV as the live map shows it now (positions as [lat, lng])."""
+        here = self.driver.position_at(now)
+        ahead = self.route if not self.returning else []
+        return {
+            "id": self.vehicle_id,
+            "lat": here.lat,
+            "lng": here.lng,
+            "alt": here.alt,
+            "phase": self.driver.phase_at(now),
+            "status": self.status,
+            "battery": self._battery_fraction(now),
+            "vvs": self.aboard,
+            "route": [[here.lat, here.lng]] + [[p.lat, p.lng] for p in ahead],
+            "t": self.vvm.clock.epoch_ms(now) / 1000,
+        }
+
     def _save_state(self, now: float) -> None:
+        here = self.driver.position_at(now)
+        self.aboard = self._aboard()
+        # A leg is straight: its two ends are the path the VVs aboard travel.
+        moved = here != self._last_track
+        self._last_track = here
         vehicle_record_state(
             vehicle_id=self.vehicle_id,
-            position=self.driver.position_at(now),
+            t_s=now,
+            carrying=[vv["id"] for vv in self.aboard] if moved else [],
+            position=here,
             phase=self.driver.phase_at(now),
             distance_m=self.driver.distance_m(now),
             flight_s=self.driver.flight_s(now),

@@ -34,6 +34,7 @@ from fleet.simulation import VehicleSpec as KinematicSpec
 from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus
 from vvm_worker.clock import Clock
 from vvm_worker.executor import VehicleLoop
+from vvm_worker.live import publish_vehicle
 from vvm_worker.planning import DEFAULT_PLANNER, make_planner
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
@@ -200,6 +201,13 @@ class RVHost:
         vehicle_register(vehicle=vehicle, vvm=self.vvm)
         self.loop.wake()
         self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
+        self._beacon()
+
+    def _beacon(self) -> None:
+        """Tell the live maps where the vehicle is, what it carries and where it goes next."""
+        now = self.clock.now_s()
+        publish_vehicle(self.loop.live_state(now) | {"name": self.name})
+        self.scheduler.call_at(now + settings.CPCC_MAP_TICK_S, self._beacon)
 
     def _heartbeat(self) -> None:
         vehicle_heartbeat(vehicle_id=self.vehicle_id, vvm=self.vvm)

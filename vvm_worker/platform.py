@@ -9,6 +9,7 @@ from fleet.simulation import SensorField
 from vvm_worker.celery_dispatch import CeleryDispatcher
 from vvm_worker.clock import SystemClock
 from vvm_worker.dispatch import LocalHost
+from vvm_worker.live import FeedAnnouncer
 from vvm_worker.services import VVM
 
 
@@ -20,4 +21,5 @@ def platform_vvm(*, local: LocalHost | None = None) -> VVM:
         dispatcher=CeleryDispatcher(local=local),
         field=SensorField(0),
         lease_s=settings.CPCC_RV_LEASE_S,
+        announcer=FeedAnnouncer(),
     )

@@ -22,7 +22,7 @@ from missions.models import (
     VirtualVehicle,
 )
 from vvm_worker.clock import Clock
-from vvm_worker.dispatch import Dispatcher
+from vvm_worker.dispatch import Announcer, Dispatcher, Silent
 from vvm_worker.runtime import (
     PendingRequest,
     Runtime,
@@ -46,6 +46,8 @@ class VVM:
     # Distributed platform: an RV whose worker has not reported for this long takes no work.
     # None in `simulate`, where every RV's loop runs in the same process.
     lease_s: float | None = None
+    # Who hears of changes as they happen (the live map's feed).
+    announcer: Announcer = dataclass_field(default_factory=Silent)
 
 
 class ProgramRejected(ValueError):
@@ -110,3 +112,8 @@ def sensor_entries(names: Sequence[str], *, field: str) -> list[SensorType]:
         return sensors_by_name(names=names)
     except UnknownSensors as exc:
         raise ValidationError({field: str(exc)}) from None
+
+
+def announcing(vvm: VVM) -> bool:
+    """Whether anyone listens for changes (the map), so that nobody pays for events unheard."""
+    return not isinstance(vvm.announcer, Silent)

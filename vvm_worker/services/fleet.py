@@ -16,6 +16,7 @@ from missions.models import (
     ENDED_STATUSES,
     Task,
     TaskStatus,
+    TrackPoint,
     VirtualVehicle,
     VVStatus,
 )
@@ -292,14 +293,22 @@ def ground_station_delete(*, station: GroundStation) -> None:
 def vehicle_record_state(
     *,
     vehicle_id: int,
+    t_s: float,
     position: Position,
     phase: str,
     distance_m: float,
     flight_s: float,
     planner_state: Any,
+    carrying: Sequence[str] = (),
 ) -> None:
-    """What an RV's control loop reports of its vehicle: where it is, its flight phase, its
-    odometer and flight time, and the planner's state (kept for a restarted worker)."""
+    """What an RV's control loop reports of its vehicle at ``t_s``: where it is, its flight
+    phase, its odometer and flight time, and the planner's state (kept for a restarted worker);
+    ``carrying`` names the VVs aboard whose track gets this point."""
+    if carrying:
+        TrackPoint.objects.bulk_create(
+            TrackPoint(vv_id=vv_id, t_s=t_s, lat=position.lat, lng=position.lng, alt=position.alt)
+            for vv_id in carrying
+        )
     Vehicle.objects.filter(pk=vehicle_id).update(
         lat=position.lat,
         lng=position.lng,

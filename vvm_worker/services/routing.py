@@ -9,6 +9,7 @@ from typing import Any
 from django.db.models import Count, Q, QuerySet
 
 from fleet.models import GroundStation, Vehicle, VehicleStatus
+from missions.events import migration_event, task_event
 from missions.models import (
     HostKind,
     JournalEntry,
@@ -24,7 +25,14 @@ from vvm_worker.runtime import (
     TaskRequest,
     answer_reject,
 )
-from vvm_worker.services.base import VVM, as_datetime, ground_station_for, logger, pending_of
+from vvm_worker.services.base import (
+    VVM,
+    announcing,
+    as_datetime,
+    ground_station_for,
+    logger,
+    pending_of,
+)
 from vvm_worker.services.journal import journal_append
 
 
@@ -176,9 +184,12 @@ def reject(
     journal_append(
         vv, answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message), vvm
     )
-    vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).update(
-        status=TaskStatus.REJECTED, message=message, done_s=now
-    )
+    rejected_now = vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN)
+    if announcing(vvm):
+        for task in rejected_now:
+            task.status, task.done_s = TaskStatus.REJECTED, now
+            vvm.announcer.announce(task_event(task, vv.customer_id))
+    rejected_now.update(status=TaskStatus.REJECTED, message=message, done_s=now)
     vv.pending = None
     logger.info("task rejected", extra={"vv": str(vv.id), "reason": message})
 
@@ -189,7 +200,9 @@ def record_migration(
     source: GroundStation | Vehicle | None = vv.host_rv or vv.host_gs
     to_kind = HostKind.RV if isinstance(to, Vehicle) else HostKind.GS
     if source is not None:
-        Migration.objects.create(
+        # An RV's last reported position (its depot before its first flight).
+        here, there = source.position, to.position
+        migration = Migration.objects.create(
             vv=vv,
             from_kind=HostKind.RV if isinstance(source, Vehicle) else HostKind.GS,
             from_name=source.name,
@@ -197,7 +210,13 @@ def record_migration(
             to_name=to.name,
             at_s=vvm.clock.now_s(),
             reason=reason,
+            from_lat=here.lat,
+            from_lng=here.lng,
+            to_lat=there.lat,
+            to_lng=there.lng,
         )
+        if announcing(vvm):
+            vvm.announcer.announce(migration_event(migration, vv.customer_id))
     if isinstance(to, Vehicle):
         vv.host_rv, vv.host_gs = to, None
     else:

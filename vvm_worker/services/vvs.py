@@ -14,6 +14,7 @@ from django.db.models import F
 from accounts.models import Customer, User
 from accounts.selectors import customer_catalog
 from fleet.models import Vehicle
+from missions.events import task_event, vv_event
 from missions.models import (
     ACTIVE_STATUSES,
     LogEntry,
@@ -39,6 +40,7 @@ from vvm_worker.runtime import (
 from vvm_worker.services.base import (
     VVM,
     ProgramRejected,
+    announcing,
     ground_station_for,
     logger,
     pending_json,
@@ -97,6 +99,8 @@ def vv_submit(
         submitted_s=now,
     )
     logger.info("vv submitted", extra={"vv": str(vv.id), "customer": customer.slug})
+    if announcing(vvm):
+        vvm.announcer.announce(vv_event(vv))
     if admit:
         vv_admit_queued(customer_id=customer.pk, vvm=vvm)
     vv.refresh_from_db()
@@ -124,6 +128,8 @@ def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
             vv.host_gs = gs
             vv.started_s = vvm.clock.now_s()
             vv.save(update_fields=["status", "host_gs", "started_s", "updated"])
+            if announcing(vvm):
+                vvm.announcer.announce(vv_event(vv))
             admitted.append(vv)
             vvm.dispatcher.vv_arrived(vv.id)
         return admitted
@@ -204,7 +210,7 @@ def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None
         else set()
     )
     now = vvm.clock.now_s()
-    Task.objects.bulk_create(
+    created = Task.objects.bulk_create(
         Task(
             vv=vv,
             q=pending.q,
@@ -219,6 +225,9 @@ def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None
         for i, t in enumerate(pending.tasks)
         if i in pending.open and i not in existing
     )
+    if announcing(vvm):
+        for task in created:
+            vvm.announcer.announce(task_event(task, vv.customer_id))
 
 
 def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
@@ -251,6 +260,8 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
             # work go first, then carry on (the tasks-per-VV quota bounds it).
             vvm.dispatcher.vv_arrived(vv.pk)
         vv.save()
+        if announcing(vvm):
+            vvm.announcer.announce(vv_event(vv))
 
 
 def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
@@ -273,12 +284,21 @@ def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
     vv.finished_s = now
     vv.finished = dt.datetime.fromtimestamp(vvm.clock.epoch_ms(now) / 1000, tz=dt.UTC)
     release_tasks(vv, vvm)
-    vv.tasks.filter(status=TaskStatus.OPEN).update(status=TaskStatus.CANCELLED)
+    _cancel_open_tasks(vv, vvm)
     logger.info(
         "vv ended",
         extra={"vv": str(vv.id), "customer": vv.customer.slug, "status": vv.status},
     )
     vvm.dispatcher.customer_slot_freed(vv.customer_id)
+
+
+def _cancel_open_tasks(vv: VirtualVehicle, vvm: VVM) -> None:
+    open_tasks = vv.tasks.filter(status=TaskStatus.OPEN)
+    if announcing(vvm):
+        for task in open_tasks:
+            task.status = TaskStatus.CANCELLED
+            vvm.announcer.announce(task_event(task, vv.customer_id))
+    open_tasks.update(status=TaskStatus.CANCELLED)
 
 
 # --- task completion (the task executor's answer) -------------------------------------------
@@ -323,6 +343,8 @@ def task_complete(
         task.done_s = now
         task.readings = readings
         task.save(update_fields=["status", "done_s", "readings"])
+        if announcing(vvm):
+            vvm.announcer.announce(task_event(task, vv.customer_id))
         if task.vehicle_id is not None:
             Vehicle.objects.filter(pk=task.vehicle_id).update(tasks_done=F("tasks_done") + 1)
         journal_append(vv, entry, vvm)
@@ -348,7 +370,7 @@ def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
             return False
         now = vvm.clock.now_s()
         release_tasks(vv, vvm)
-        vv.tasks.filter(status=TaskStatus.OPEN).update(status=TaskStatus.CANCELLED)
+        _cancel_open_tasks(vv, vvm)
         if vv.host_rv is not None:
             gs = ground_station_for(vv, near=vv.host_rv.position)
             if gs is not None:
@@ -360,6 +382,8 @@ def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
         vv.finished_s = now
         vv.finished = dt.datetime.fromtimestamp(vvm.clock.epoch_ms(now) / 1000, tz=dt.UTC)
         vv.save()
+        if announcing(vvm):
+            vvm.announcer.announce(vv_event(vv))
         vvm.runtime.forget(str(vv.pk))
         if not was_queued:
             vvm.dispatcher.customer_slot_freed(vv.customer_id)

@@ -124,6 +124,9 @@ class Command(BaseCommand):
         except ScenarioError as exc:
             raise CommandError(f"scenario error: {exc}") from None
         call_command("migrate", verbosity=0, interactive=False)
+        # For the web server's WhiteNoise when DEBUG is off (with DEBUG on it serves the
+        # files where they are); copies only what changed since the last run.
+        call_command("collectstatic", verbosity=0, interactive=False)
         signal.signal(signal.SIGTERM, _interrupt)  # a service manager stops with SIGTERM
         redis = EmbeddedRedis(settings.EMBEDDED_REDIS_SOCKET) if not settings.REDIS_URL else None
         redis_url = settings.REDIS_URL or f"unix://{settings.EMBEDDED_REDIS_SOCKET}"

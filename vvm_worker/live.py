@@ -1,0 +1,69 @@
+"""The live map's feed as the workers write it (missions/events.py says what it is).
+
+`FeedAnnouncer` appends the changes the services announce to a Redis stream once their
+transaction commits; `publish_vehicle` keeps an RV's latest state in a Redis hash. Redis being
+away costs the map its updates, never the platform its work: failures are logged and dropped,
+and a browser that reconnects starts again from a snapshot of the database.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+from typing import Any
+
+import redis
+from django.conf import settings
+from django.db import transaction
+
+from missions.events import (
+    EVENTS_STREAM,
+    POSITIONS_MAXLEN,
+    POSITIONS_STREAM,
+    STREAM_MAXLEN,
+    VEHICLES_HASH,
+)
+
+logger = logging.getLogger("cpcc.live")
+
+
+def feed_client() -> redis.Redis:
+    """A client (with its connection pool) of the Redis that carries the feed."""
+    return _client_for(settings.CPCC_FEED_REDIS_URL)
+
+
+@functools.cache
+def _client_for(url: str) -> redis.Redis:
+    return redis.Redis.from_url(url, socket_timeout=1.0, socket_connect_timeout=1.0)
+
+
+class FeedAnnouncer:
+    """Publishes announced changes after their transaction commits (at once outside one)."""
+
+    def __init__(self, client: redis.Redis | None = None) -> None:
+        self._client = client
+
+    def announce(self, event: dict[str, Any]) -> None:
+        data = json.dumps(event, separators=(",", ":"))
+        transaction.on_commit(lambda: self._publish(data), robust=True)
+
+    def _publish(self, data: str) -> None:
+        client = self._client or feed_client()
+        try:
+            client.xadd(EVENTS_STREAM, {"e": data}, maxlen=STREAM_MAXLEN, approximate=True)
+        except redis.RedisError as exc:
+            logger.warning("live map: change not published: %s", exc)
+
+
+def publish_vehicle(state: dict[str, Any], client: redis.Redis | None = None) -> None:
+    """Tell the maps an RV's state (position, VVs aboard, planned route): appended to the
+    positions stream for the sockets, kept as the latest in the hash for snapshots."""
+    data = json.dumps(state, separators=(",", ":"))
+    try:
+        pipe = (client or feed_client()).pipeline(transaction=False)
+        pipe.hset(VEHICLES_HASH, str(state["id"]), data)
+        pipe.xadd(POSITIONS_STREAM, {"v": data}, maxlen=POSITIONS_MAXLEN, approximate=True)
+        pipe.execute()
+    except redis.RedisError as exc:
+        logger.warning("live map: vehicle state not published: %s", exc)
