@@ -98,6 +98,8 @@ class VehicleLoop:
             return
         now = self.vvm.clock.now_s()
         self.target = None
+        # The end of the leg is on the track of the VVs aboard, before any of them leaves.
+        self._save_state(now)
         here = self.driver.position_at(now)
         served = [
             t

@@ -1,0 +1,68 @@
+"""A mission's history for the map and its replay: tasks, the path while carried, migrations."""
+
+from __future__ import annotations
+
+from django.urls import reverse
+
+from fleet.geo import Position, distance_m
+from missions.selectors import map_snapshot_for_user
+from tests.factories import VehicleFactory
+from vvm_worker.services import vv_submit
+
+TWO_TASKS = """
+var co2 = VV.sensor.get('CO2');
+for (var n = 0; n < 2; ++n) {
+  VV.task.execute({type: 'point', tolerance: 2, sensors: [co2],
+                   position: new VV.types.LatLngAlt(48.1101 + n * 0.0004, 12.8622, 50)});
+}
+"""
+
+
+def _flown(platform, ground_station, customer):
+    platform.add_vehicle_loop(VehicleFactory(name="Heli One"))
+    vv = vv_submit(customer=customer, name="VV", program=TWO_TASKS, vvm=platform.vvm)
+    platform.drain()
+    return vv
+
+
+def test_a_finished_vvs_track_passes_through_every_task_it_had_done(
+    platform, ground_station, customer_a, user_a
+) -> None:
+    vv = _flown(platform, ground_station, customer_a)
+    (shown,) = map_snapshot_for_user(user=user_a, vv_id=vv.pk)["vvs"]
+    assert shown["status"] == "finished"
+    done = [t for t in shown["tasks"] if t["status"] == "done"]
+    assert len(done) == 2 and all(t["done_s"] >= t["requested_s"] for t in done)
+    track = shown["track"]
+    assert [t for t, _, _ in track] == sorted(t for t, _, _ in track)
+    for task in done:
+        nearest = min(
+            distance_m(Position(lat, lng, 0), Position(task["lat"], task["lng"], 0))
+            for _, lat, lng in track
+        )
+        assert nearest <= 2.0, f"task {task['q']} is {nearest:.1f} m off the track"
+    moves = shown["migrations"]
+    assert [m["from_kind"] + ">" + m["to_kind"] for m in moves] == ["gs>rv", "rv>gs"]
+    assert all(m["from_pos"] and m["to_pos"] for m in moves)
+    assert moves[0]["from_pos"] == [ground_station.lat, ground_station.lng]
+
+
+def test_a_customer_sees_its_mission_without_vehicle_or_station_names(
+    platform, ground_station, customer_a, user_a, client
+) -> None:
+    vv = _flown(platform, ground_station, customer_a)
+    client.force_login(user_a)
+    response = client.get(reverse("vv-map-history", args=[vv.pk]))
+    assert response.status_code == 200
+    body = response.json()
+    assert [v["name"] for v in body["vvs"]] == ["VV"]
+    assert "Heli One" not in response.text and ground_station.name not in response.text
+    assert body["staff"] is False
+
+
+def test_another_customers_mission_is_a_404(
+    platform, ground_station, customer_a, user_b, client
+) -> None:
+    vv = _flown(platform, ground_station, customer_a)
+    client.force_login(user_b)
+    assert client.get(reverse("vv-map-history", args=[vv.pk])).status_code == 404
