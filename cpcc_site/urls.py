@@ -6,14 +6,16 @@ the customer whose VV took them, and the REST API serves each one only to that c
 """
 
 from django.contrib import admin
+from django.shortcuts import redirect
+from django.templatetags.static import static
 from django.urls import include, path
-from drf_spectacular.views import (
-    SpectacularAPIView,
-    SpectacularRedocView,
-    SpectacularSwaggerView,
-)
+from drf_spectacular.views import SpectacularAPIView, SpectacularSwaggerView
+
+from cpcc_site.docs import OfflineRedocView, redoc_bundle
 
 urlpatterns = [
+    # Browsers ask for /favicon.ico on every page that names no icon (Swagger UI, ReDoc).
+    path("favicon.ico", lambda request: redirect(static("img/favicon.svg"), permanent=True)),
     path("admin/", admin.site.urls),
     path("accounts/", include("django.contrib.auth.urls")),
     path("api/v1/", include("missions.api.urls")),
@@ -21,11 +23,9 @@ urlpatterns = [
     path("api/v1/", include("accounts.api.urls")),
     path("api/schema/", SpectacularAPIView.as_view(), name="schema"),
     path("api/docs/", SpectacularSwaggerView.as_view(url_name="schema"), name="api-docs"),
-    path(
-        "api/redoc/",
-        # drf-spectacular's own ReDoc page loads web fonts from Google: ours works offline.
-        SpectacularRedocView.as_view(url_name="schema", template_name="api/redoc.html"),
-        name="api-redoc",
-    ),
+    # drf-spectacular's own ReDoc page loads web fonts and a logo from the internet: ours
+    # works offline (cpcc_site/docs.py).
+    path("api/redoc/", OfflineRedocView.as_view(url_name="schema"), name="api-redoc"),
+    path("api/redoc/redoc.standalone.js", redoc_bundle, name="api-redoc-bundle"),
     path("", include("missions.urls")),
 ]

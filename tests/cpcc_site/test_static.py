@@ -13,7 +13,8 @@ from django.contrib.staticfiles.storage import staticfiles_storage
 from django.core.management import call_command
 
 ROOT = Path(settings.BASE_DIR)
-ASSET = re.compile(r"""(?:src|href)\s*=\s*["'](/static/[^"']+)["']""")
+# Static files, and ReDoc's bundle, which cpcc_site/docs.py serves made offline.
+ASSET = re.compile(r"""(?:src|href)\s*=\s*["'](/static/[^"']+|/api/redoc/[^"']+\.js)["']""")
 
 
 def _fetch(client, url: str, **headers: str):
@@ -79,6 +80,7 @@ def test_with_debug_off_the_api_docs_assets_are_served(client, db, production_st
                 "text/javascript",
                 "text/css",
                 "image/png",
+                "image/svg+xml",
             }, asset
 
 
