@@ -176,6 +176,11 @@ CELERY_TASK_PUBLISH_RETRY_POLICY = {
     "interval_max": 0.5,
 }
 CELERY_BROKER_CONNECTION_TIMEOUT = 2.0
+# Batteries: an RV keeps this fraction of its endurance (battery_s) in reserve: it takes a task
+# only if it can still fly home afterwards with the reserve left, else it hands its work over,
+# flies home and recharges for CPCC_RECHARGE_S (simulated vehicles; time acceleration applies).
+CPCC_BATTERY_RESERVE = env_float("CPCC_BATTERY_RESERVE", 0.2, minimum=0.0)
+CPCC_RECHARGE_S = env_float("CPCC_RECHARGE_S", 600.0, minimum=0.0)
 # An RV worker that has not reported for this long is taken as gone: its VVs move on.
 CPCC_RV_LEASE_S = env_float("CPCC_RV_LEASE_S", 20.0, minimum=1.0)
 

@@ -75,6 +75,8 @@ class GroundStation(models.Model):
 class VehicleStatus(models.TextChoices):
     ACTIVE = "active", "Active"
     MAINTENANCE = "maintenance", "In maintenance"
+    # Gone home to recharge: its worker puts it back into service once it is full.
+    CHARGING = "charging", "Recharging"
     REMOVED = "removed", "Removed"
 
 

@@ -19,7 +19,7 @@ from fleet.models import SensorType, Vehicle, VehicleStatus
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.planning import Planner, PlanTask
 from vvm_worker.sensing import read_sensors
-from vvm_worker.services import VVM, task_complete, vehicle_record_state
+from vvm_worker.services import VVM, task_complete, vehicle_record_state, vehicle_set_status
 from vvm_worker.services.base import announcing
 
 logger = logging.getLogger("cpcc.executor")
@@ -47,6 +47,9 @@ class Driver(Protocol):
     def distance_m(self, t: float) -> float: ...
     def flight_s(self, t: float) -> float: ...
     def battery_remaining_s(self, t: float) -> float | None: ...
+    def time_to_s(self, target: Position, now_s: float) -> float: ...
+    def time_home_s(self, start: Position) -> float: ...
+    def recharge(self, now_s: float, duration_s: float) -> float: ...
 
 
 class VehicleLoop:
@@ -61,6 +64,8 @@ class VehicleLoop:
         vvm: VVM,
         scheduler: Scheduler,
         battery_s: float | None = None,
+        reserve: float = 0.0,
+        recharge_s: float = 0.0,
     ) -> None:
         self.vehicle_id = vehicle_id
         self.driver = driver
@@ -68,6 +73,10 @@ class VehicleLoop:
         self.vvm = vvm
         self.scheduler = scheduler
         self.battery_s = battery_s
+        # Endurance kept for the unexpected: never planned away (seconds of flight).
+        self.reserve_s = reserve * battery_s if battery_s else 0.0
+        self.recharge_s = recharge_s
+        self._charged_at: float | None = None  # when a charge under way is done
         self.target: int | None = None  # the task the vehicle is flying to
         self.returning = False
         self._token = 0  # invalidates the arrival of a leg that was replaced
@@ -130,7 +139,46 @@ class VehicleLoop:
         if token != self._token:
             return
         self.returning = False
-        self._save_state(self.vvm.clock.now_s())
+        now = self.vvm.clock.now_s()
+        if self.status == VehicleStatus.CHARGING:
+            self._charge(now)
+        self._save_state(now)
+
+    # --- the battery ---------------------------------------------------------------------------
+
+    def _within_battery(self, now: float, target: Position) -> bool:
+        """Whether the vehicle can fly to ``target`` and home from there with its reserve left."""
+        remaining = self.driver.battery_remaining_s(now)
+        if remaining is None:
+            return True
+        need = self.driver.time_to_s(target, now) + self.driver.time_home_s(target)
+        if remaining - need >= self.reserve_s:
+            return True
+        if self.driver.is_landed_at(now) and remaining >= (self.battery_s or 0.0):
+            # Full, and still too far: no charge helps; the mapper does not know the range.
+            logger.warning("task beyond the battery's range", extra={"vehicle": self.vehicle_id})
+            return True
+        return False
+
+    def _run_low(self) -> None:
+        """Hand the work over and go home to recharge: the VVs aboard move to RVs that can
+        serve them (or wait), and this RV takes no work until it is full again."""
+        logger.info("battery low: recharging", extra={"vehicle": self.vehicle_id})
+        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+        vehicle_set_status(vehicle=vehicle, status=VehicleStatus.CHARGING, vvm=self.vvm)
+        self.status = VehicleStatus.CHARGING
+
+    def _charge(self, now: float) -> None:
+        if self._charged_at is None:
+            self._charged_at = self.driver.recharge(now, self.recharge_s)
+            self.scheduler.call_at(self._charged_at, self._charged)
+
+    def _charged(self) -> None:
+        self._charged_at = None
+        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+        if vehicle.status == VehicleStatus.CHARGING:  # unless the provider decided otherwise
+            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.ACTIVE, vvm=self.vvm)
+        self.wake()
 
     # --- planning ------------------------------------------------------------------------------
 
@@ -148,6 +196,11 @@ class VehicleLoop:
             plan = [PlanTask(t.pk, t.position, t.requested_s) for t in tasks]
             choice = self.planner.next_task(here, plan)
             self.route = [t.position for t in self.planner.route(here, plan)]
+            if choice is not None and not self._within_battery(now, choice.position):
+                self._run_low()
+                choice, self.route = None, []
+        if self.status == VehicleStatus.CHARGING and self.driver.is_landed_at(now):
+            self._charge(now)
         self._token += 1
         token = self._token
         if choice is not None:

@@ -130,13 +130,15 @@ class RVHost:
         self.vvm = platform_vvm(local=self)
         self.clock = self.vvm.clock
         self.scheduler = RealTimeScheduler(self.clock)
-        # Simulated flights: time acceleration shortens them (distances stay right).
+        # Simulated flights: time acceleration shortens them (distances stay right), and the
+        # battery and its charging with them.
         scale = INSTANT if speed <= 0 else speed
+        battery_s = None if vehicle.battery_s is None else vehicle.battery_s / scale
         driver = SimVehicle(
             KinematicSpec(
                 max_speed_mps=vehicle.max_speed_mps * scale,
                 climb_rate_mps=vehicle.climb_rate_mps * scale,
-                battery_s=vehicle.battery_s,
+                battery_s=battery_s,
             ),
             vehicle.depot,
             now_s=self.clock.now_s(),
@@ -147,7 +149,9 @@ class RVHost:
             planner=make_planner(planner),
             vvm=self.vvm,
             scheduler=self.scheduler,
-            battery_s=vehicle.battery_s,
+            battery_s=battery_s,
+            reserve=settings.CPCC_BATTERY_RESERVE,
+            recharge_s=settings.CPCC_RECHARGE_S / scale,
         )
         self._thread = threading.Thread(target=self._run, name=f"rv-{vehicle.pk}", daemon=True)
 

@@ -150,6 +150,8 @@ class Simulation:
             vvm=self.vvm,
             scheduler=self.queue,
             battery_s=vehicle.battery_s,
+            reserve=settings.CPCC_BATTERY_RESERVE,
+            recharge_s=settings.CPCC_RECHARGE_S,
         )
         self.loops[vehicle.pk] = loop
         return loop

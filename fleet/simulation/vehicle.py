@@ -110,6 +110,8 @@ class SimVehicle:
         self._steps: list[_Step] = []
         # Parallel list of leg start times, kept for bisect.
         self._starts: list[float] = []
+        # Finished charges: (when the battery was full again, flight time by then).
+        self._charges: list[tuple[float, float]] = []
 
     @property
     def last_command_s(self) -> float:
@@ -163,6 +165,41 @@ class SimVehicle:
             t = self._append(t, here, above, PHASE_CRUISE)
         # Appended even with zero length: it is what marks the vehicle as landed.
         return self._append(t, above, self.depot, PHASE_LANDING, landed_after=True)
+
+    def recharge(self, now_s: float, duration_s: float) -> float:
+        """Charge the battery on the ground: full again ``duration_s`` after ``now_s``.
+
+        Returns when it is full. Raises ValueError when the vehicle is not landed at ``now_s``
+        or the duration is negative; commands after ``now_s`` stay allowed (a vehicle that
+        takes off before the end is simply not charged).
+        """
+        if not self.is_landed_at(now_s):
+            raise ValueError(f"the vehicle is not landed at {now_s!r} s: it cannot charge")
+        if duration_s < 0 or not math.isfinite(duration_s):
+            raise ValueError(f"duration_s must be a finite number >= 0, got {duration_s!r}")
+        done_s = now_s + duration_s
+        self._charges.append((done_s, self.flight_s(now_s)))
+        return done_s
+
+    # Estimates (the plan is not changed)
+
+    def time_to_s(self, target: Position, now_s: float) -> float:
+        """How long ``fly_to(target, now_s)`` would take from where the vehicle is then."""
+        here = self.position_at(now_s)
+        seconds = 0.0
+        if self.is_landed_at(now_s):
+            climb_to = max(target.alt, self.spec.takeoff_alt_m)
+            if climb_to > here.alt:
+                top = here.with_alt(climb_to)
+                seconds += self._duration(here, top)
+                here = top
+        return seconds + self._duration(here, target)
+
+    def time_home_s(self, start: Position) -> float:
+        """How long ``return_to_depot`` would take from ``start`` in the air: cruise to above
+        the depot, then land."""
+        above = self.depot.with_alt(max(start.alt, self.spec.takeoff_alt_m, self.depot.alt))
+        return self._duration(start, above) + self._duration(above, self.depot)
 
     # Queries
 
@@ -236,9 +273,19 @@ class SimVehicle:
         """
         if self.spec.battery_s is None:
             return None
-        return max(0.0, self.spec.battery_s - self.flight_s(t))
+        full_at = 0.0
+        for done_s, flown_s in self._charges:
+            if done_s <= t:
+                full_at = flown_s
+        return max(0.0, self.spec.battery_s - (self.flight_s(t) - full_at))
 
     # Internals
+
+    def _duration(self, start: Position, end: Position) -> float:
+        """A straight leg's duration: cruise at max speed while climbing at the climb rate."""
+        horizontal = ground_distance_m(start, end)
+        vertical = abs(end.alt - start.alt)
+        return max(horizontal / self.spec.max_speed_mps, vertical / self.spec.climb_rate_mps)
 
     def _index_at(self, t: float) -> int:
         """Index of the last step started at or before t, or -1."""
@@ -297,10 +344,7 @@ class SimVehicle:
         landed_after: bool = False,
     ) -> float:
         """Add one leg starting at start_s; return its end time."""
-        horizontal = ground_distance_m(start, end)
-        vertical = abs(end.alt - start.alt)
-        duration = max(horizontal / self.spec.max_speed_mps, vertical / self.spec.climb_rate_mps)
-        end_s = start_s + duration
+        end_s = start_s + self._duration(start, end)
         if self._steps:
             prev = self._steps[-1]
             hover_s = 0.0 if prev.landed_after else start_s - prev.leg.end_s

@@ -237,3 +237,33 @@ def test_a_command_earlier_than_the_previous_one_is_refused() -> None:
 def test_bad_vehicle_spec_is_refused_naming_the_field(kwargs: dict[str, float], name: str) -> None:
     with pytest.raises(ValueError, match=name):
         VehicleSpec(**kwargs)
+
+
+def test_the_estimates_are_what_the_commands_then_take() -> None:
+    vehicle = _vehicle()
+    estimate = vehicle.time_to_s(TARGET, 0.0)
+    arrival = vehicle.fly_to(TARGET, 0.0)
+    assert estimate == pytest.approx(arrival)
+    home = vehicle.time_home_s(TARGET)
+    assert vehicle.return_to_depot(arrival) == pytest.approx(arrival + home)
+
+
+def test_a_recharged_battery_is_full_once_the_charge_is_done() -> None:
+    spec = VehicleSpec(max_speed_mps=10.0, climb_rate_mps=2.0, takeoff_alt_m=5.0, battery_s=600.0)
+    vehicle = _vehicle(spec)
+    landed = vehicle.return_to_depot(vehicle.fly_to(TARGET, 0.0))
+    used = vehicle.flight_s(landed)
+    assert vehicle.battery_remaining_s(landed) == pytest.approx(600.0 - used)
+    full = vehicle.recharge(landed, 120.0)
+    assert full == landed + 120.0
+    assert vehicle.battery_remaining_s(full - 1) == pytest.approx(600.0 - used), "still charging"
+    assert vehicle.battery_remaining_s(full) == 600.0
+    back = vehicle.fly_to(TARGET, full + 10)
+    assert vehicle.battery_remaining_s(back) == pytest.approx(600.0 - (back - full - 10))
+
+
+def test_only_a_landed_vehicle_charges() -> None:
+    vehicle = _vehicle(VehicleSpec(max_speed_mps=10.0, climb_rate_mps=2.0, battery_s=60.0))
+    arrival = vehicle.fly_to(TARGET, 0.0)
+    with pytest.raises(ValueError, match="not landed"):
+        vehicle.recharge(arrival, 10.0)
