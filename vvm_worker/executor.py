@@ -27,6 +27,10 @@ logger = logging.getLogger("cpcc.executor")
 # A vehicle at its target serves every open task within the task's tolerance plus this much
 # (floating-point slack of the kinematics).
 _REACH_SLACK_M = 1e-3
+# A vehicle not there at its estimated arrival is looked at this often, and sent there anew
+# when this late.
+_ARRIVAL_POLL_S = 0.2
+_ARRIVAL_OVERDUE_S = 60.0
 _SDC_TTL_S = 10.0
 
 
@@ -50,6 +54,7 @@ class Driver(Protocol):
     def time_to_s(self, target: Position, now_s: float) -> float: ...
     def time_home_s(self, start: Position) -> float: ...
     def recharge(self, now_s: float, duration_s: float) -> float: ...
+    def has_arrived(self, target: Position, tolerance_m: float, now_s: float) -> bool: ...
 
 
 class VehicleLoop:
@@ -102,10 +107,23 @@ class VehicleLoop:
             return
         self._plan(now)
 
-    def _arrive(self, token: int) -> None:
+    def _arrive(self, token: int, target: Position, tolerance_m: float, due_s: float) -> None:
         if token != self._token:
             return
         now = self.vvm.clock.now_s()
+        if not self.driver.has_arrived(target, tolerance_m, now):
+            # A real vehicle is there when its telemetry says so, not when the estimate said:
+            # look again shortly, and fly there anew if it is far overdue (a gust, a fence).
+            if now - due_s > _ARRIVAL_OVERDUE_S:
+                logger.warning(
+                    "arrival overdue: flying there again", extra={"vehicle": self.vehicle_id}
+                )
+                self._plan(now)
+            else:
+                self.scheduler.call_at(
+                    now + _ARRIVAL_POLL_S, lambda: self._arrive(token, target, tolerance_m, due_s)
+                )
+            return
         self.target = None
         # The end of the leg is on the track of the VVs aboard, before any of them leaves.
         self._save_state(now)
@@ -206,8 +224,11 @@ class VehicleLoop:
         if choice is not None:
             self.target = choice.id
             self.returning = False
+            tolerance_m = next(t.tolerance_m for t in tasks if t.pk == choice.id)
             arrival = self.driver.fly_to(choice.position, now)
-            self.scheduler.call_at(arrival, lambda: self._arrive(token))
+            self.scheduler.call_at(
+                arrival, lambda: self._arrive(token, choice.position, tolerance_m, arrival)
+            )
         else:
             self.target = None
             if not self.driver.is_landed_at(now):

@@ -25,6 +25,10 @@ PHASE_LANDING = "landing"
 PHASE_HOVERING = "hovering"
 
 
+# Floating-point slack of an arrival exactly at the planned time.
+_ARRIVAL_SLACK_M = 1e-3
+
+
 def _check_positive(name: str, value: float) -> None:
     if not (math.isfinite(value) and value > 0.0):
         raise ValueError(f"{name} must be a positive finite number, got {value!r}")
@@ -180,6 +184,10 @@ class SimVehicle:
         done_s = now_s + duration_s
         self._charges.append((done_s, self.flight_s(now_s)))
         return done_s
+
+    def has_arrived(self, target: Position, tolerance_m: float, now_s: float) -> bool:
+        """Whether the vehicle is within ``tolerance_m`` (3-D) of ``target`` at ``now_s``."""
+        return distance_m(self.position_at(now_s), target) <= tolerance_m + _ARRIVAL_SLACK_M
 
     # Estimates (the plan is not changed)
 
