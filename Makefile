@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 SCENARIO ?= examples/scenarios/paper-fig3.json
 
-.PHONY: demo test lint check bench simulate-fig2 simulate-fig3 vendor clean
+.PHONY: demo test lint check bench screenshots simulate-fig2 simulate-fig3 vendor clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
@@ -31,6 +31,7 @@ check: $(STAMP)
 	$(PY) manage.py makemigrations --check --dry-run
 
 test: lint check
+	@test -x /usr/bin/chromium || echo "browser tests: skipped (no /usr/bin/chromium; apt-get install chromium)"
 	$(PY) -m pytest
 
 simulate-fig2: $(STAMP)
@@ -43,7 +44,13 @@ bench: $(STAMP)
 	$(PY) -m bench
 	$(PY) -m bench.platform
 
-# Re-creates static/vendor/ (Leaflet, Leaflet-Geoman) from npm; see static/vendor/README.md.
+# The README's pictures of the web front end, from the real pages of a demo run (Playwright
+# driving /usr/bin/chromium): bench/screenshots.py, into docs/screenshots/.
+screenshots: $(STAMP)
+	$(PY) -m bench.screenshots
+
+# Re-creates static/vendor/ (Leaflet, Leaflet-Geoman, CodeMirror, Chart.js) from npm; see
+# static/vendor/README.md.
 vendor:
 	sh static/vendor/update.sh
 

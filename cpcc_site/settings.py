@@ -181,6 +181,10 @@ CELERY_BROKER_CONNECTION_TIMEOUT = 2.0
 # flies home and recharges for CPCC_RECHARGE_S (simulated vehicles; time acceleration applies).
 CPCC_BATTERY_RESERVE = env_float("CPCC_BATTERY_RESERVE", 0.2, minimum=0.0)
 CPCC_RECHARGE_S = env_float("CPCC_RECHARGE_S", 600.0, minimum=0.0)
+# MAVLink vehicles: how long an RV worker waits for its vehicle's first heartbeat, and after
+# how long without one it takes the link as lost (the vehicle leaves service until it is back).
+CPCC_MAVLINK_CONNECT_S = env_float("CPCC_MAVLINK_CONNECT_S", 30.0, minimum=1.0)
+CPCC_MAVLINK_LINK_TIMEOUT_S = env_float("CPCC_MAVLINK_LINK_TIMEOUT_S", 3.0, minimum=0.5)
 # An RV worker that has not reported for this long is taken as gone: its VVs move on.
 CPCC_RV_LEASE_S = env_float("CPCC_RV_LEASE_S", 20.0, minimum=1.0)
 

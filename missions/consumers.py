@@ -64,7 +64,10 @@ class MapConsumer(AsyncJsonWebsocketConsumer):  # type: ignore[misc]
         self.customer_id = user.customer_id
         query = parse_qs(self.scope.get("query_string", b"").decode())
         self.vv_id = (query.get("vv") or [None])[0]
-        self.redis = aioredis.Redis.from_url(settings.CPCC_FEED_REDIS_URL)
+        # A blocking read waits up to BLOCK_MS: the socket's own timeout must be longer.
+        self.redis = aioredis.Redis.from_url(
+            settings.CPCC_FEED_REDIS_URL, socket_timeout=BLOCK_MS / 1000 + 5
+        )
         self.seq = 0
         self.shown: dict[str, float] = {}
         try:

@@ -17,6 +17,21 @@ SCENARIOS = EXAMPLES / "scenarios"
 PROGRAMS = EXAMPLES / "vv"
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """A transactional test must restore what the migrations put in the database (the default
+    SDC, content types): one that flushes without it breaks every serialized_rollback test that
+    runs after it, far from the cause. Say so at collection instead."""
+    for item in items:
+        marker = item.get_closest_marker("django_db")
+        if marker is None:
+            continue
+        if marker.kwargs.get("transaction") and not marker.kwargs.get("serialized_rollback"):
+            raise pytest.UsageError(
+                f"{item.nodeid}: django_db(transaction=True) needs serialized_rollback=True "
+                "(tests/conftest.py says why)"
+            )
+
+
 def pytest_sessionstart(session: pytest.Session) -> None:
     """Remove what interrupted runs left of their SQLite test databases (a WAL file left
     behind would make a new database fail with a disk I/O error)."""

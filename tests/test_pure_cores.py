@@ -21,6 +21,7 @@ PURE = [
     "vvm_worker.dispatch",
     "vvm_worker.clock",
     "fleet.catalog",
+    "fleet.mavlink",
     "missions.readings",
     "cpcc_client.cli",  # the customers' command line runs without Django
 ]

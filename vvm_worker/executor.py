@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from fleet.geo import Position, distance_m
+from fleet.mavlink.errors import MavlinkError
 from fleet.models import SensorType, Vehicle, VehicleStatus
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.planning import Planner, PlanTask
@@ -153,11 +154,20 @@ class VehicleLoop:
             )
         self._plan(now)
 
-    def _landed(self, token: int) -> None:
+    def _landed(self, token: int, due_s: float) -> None:
         if token != self._token:
             return
-        self.returning = False
         now = self.vvm.clock.now_s()
+        if not self.driver.is_landed_at(now):
+            if now - due_s > _ARRIVAL_OVERDUE_S:
+                logger.warning(
+                    "landing overdue: returning again", extra={"vehicle": self.vehicle_id}
+                )
+                self._plan(now)
+            else:
+                self.scheduler.call_at(now + _ARRIVAL_POLL_S, lambda: self._landed(token, due_s))
+            return
+        self.returning = False
         if self.status == VehicleStatus.CHARGING:
             self._charge(now)
         self._save_state(now)
@@ -225,7 +235,11 @@ class VehicleLoop:
             self.target = choice.id
             self.returning = False
             tolerance_m = next(t.tolerance_m for t in tasks if t.pk == choice.id)
-            arrival = self.driver.fly_to(choice.position, now)
+            try:
+                arrival = self.driver.fly_to(choice.position, now)
+            except MavlinkError as exc:
+                self._failed(exc)
+                return
             self.scheduler.call_at(
                 arrival, lambda: self._arrive(token, choice.position, tolerance_m, arrival)
             )
@@ -233,9 +247,24 @@ class VehicleLoop:
             self.target = None
             if not self.driver.is_landed_at(now):
                 self.returning = True
-                landing = self.driver.return_to_depot(now)
-                self.scheduler.call_at(landing, lambda: self._landed(token))
+                try:
+                    landing = self.driver.return_to_depot(now)
+                except MavlinkError as exc:
+                    self._failed(exc)
+                    return
+                self.scheduler.call_at(landing, lambda: self._landed(token, landing))
         self._save_state(now)
+
+    def _failed(self, exc: Exception) -> None:
+        """The vehicle cannot be flown (its link, its autopilot refused, a pilot took over):
+        it leaves service so that its VVs move on; the operator returns it (or its worker,
+        once the link is back)."""
+        logger.error("vehicle out of service: %s", exc, extra={"vehicle": self.vehicle_id})
+        self.target = None
+        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+        if vehicle.status == VehicleStatus.ACTIVE:
+            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.MAINTENANCE, vvm=self.vvm)
+        self.status = VehicleStatus.MAINTENANCE
 
     def _catalog(self) -> dict[str, dict[str, Any]]:
         # The SDC changes rarely; read it again now and then, not at every stop.

@@ -28,7 +28,9 @@ from django.db import close_old_connections, connection
 from django.db.models import Q
 from django.utils import timezone
 
-from fleet.models import GroundStation, Vehicle
+from fleet.mavlink.driver import MavlinkDriver
+from fleet.mavlink.errors import MavlinkError
+from fleet.models import Driver, GroundStation, Vehicle, VehicleStatus
 from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
 from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus
@@ -41,6 +43,7 @@ from vvm_worker.services import (
     VVM,
     vehicle_heartbeat,
     vehicle_register,
+    vehicle_set_status,
     vehicles_check_leases,
     vv_admit_queued,
     vv_advance,
@@ -131,18 +134,36 @@ class RVHost:
         self.clock = self.vvm.clock
         self.scheduler = RealTimeScheduler(self.clock)
         # Simulated flights: time acceleration shortens them (distances stay right), and the
-        # battery and its charging with them.
+        # battery and its charging with them. A MAVLink vehicle flies as fast as it flies:
+        # the same acceleration only tells the estimates what a `mavsim --speed` does.
         scale = INSTANT if speed <= 0 else speed
         battery_s = None if vehicle.battery_s is None else vehicle.battery_s / scale
-        driver = SimVehicle(
-            KinematicSpec(
-                max_speed_mps=vehicle.max_speed_mps * scale,
-                climb_rate_mps=vehicle.climb_rate_mps * scale,
-                battery_s=battery_s,
-            ),
-            vehicle.depot,
-            now_s=self.clock.now_s(),
+        spec = KinematicSpec(
+            max_speed_mps=vehicle.max_speed_mps * scale,
+            climb_rate_mps=vehicle.climb_rate_mps * scale,
+            battery_s=battery_s,
         )
+        self._link_down = False
+        driver: SimVehicle | MavlinkDriver
+        if vehicle.driver == Driver.MAVLINK:
+            if speed <= 0:
+                raise ValueError("a MAVLink vehicle cannot fly instantly: set CPCC_SIM_SPEED > 0")
+            driver = MavlinkDriver(
+                vehicle.driver_url,
+                spec=spec,
+                depot=vehicle.depot,
+                area=vehicle.area,
+                min_altitude_m=vehicle.min_altitude_m,
+                max_altitude_m=vehicle.max_altitude_m,
+                clock=self.clock.now_s,
+                link_timeout_s=settings.CPCC_MAVLINK_LINK_TIMEOUT_S,
+                on_link_lost=lambda: self.scheduler.submit(self._link_lost),
+                name=vehicle.name,
+            )
+            driver.connect(timeout_s=settings.CPCC_MAVLINK_CONNECT_S)
+        else:
+            driver = SimVehicle(spec, vehicle.depot, now_s=self.clock.now_s())
+        self.driver = driver
         self.loop = VehicleLoop(
             vehicle_id=vehicle.pk,
             driver=driver,
@@ -164,7 +185,7 @@ class RVHost:
         self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
 
     def wake_later(self) -> None:
-        self.scheduler.submit(self.loop.wake)
+        self.scheduler.submit(self._changed)
 
     # --- what Celery tasks ask -----------------------------------------------------------------
 
@@ -172,7 +193,44 @@ class RVHost:
         self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm)).result(WAIT_S)
 
     def wake(self) -> None:
-        self.scheduler.submit(self.loop.wake).result(WAIT_S)
+        self.scheduler.submit(self._changed).result(WAIT_S)
+
+    def _changed(self) -> None:
+        """The vehicle's work, status or configuration changed: re-plan, and give a MAVLink
+        vehicle its new geofence if its area or altitudes changed."""
+        if isinstance(self.driver, MavlinkDriver) and self.driver.link_ok:
+            vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+            wanted = (
+                [(lat, lng) for lat, lng in vehicle.area[:-1]],
+                vehicle.min_altitude_m,
+                vehicle.max_altitude_m,
+            )
+            if self.driver.fence is None or _fence_differs(self.driver.fence, wanted):
+                try:
+                    self.driver.upload_fence(
+                        vehicle.area, vehicle.min_altitude_m, vehicle.max_altitude_m
+                    )
+                except MavlinkError:
+                    logger.exception("geofence not uploaded", extra={"vehicle": self.name})
+        self.loop.wake()
+
+    def _link_lost(self) -> None:
+        """The vehicle stopped answering: like an RV taken out of service, its VVs move on
+        (a reading it may still report is refused); it comes back when the link does."""
+        logger.warning("vehicle link lost", extra={"vehicle": self.name})
+        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+        if vehicle.status == VehicleStatus.ACTIVE:
+            self._link_down = True
+            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.MAINTENANCE, vvm=self.vvm)
+
+    def _link_check(self) -> None:
+        if not self._link_down or not getattr(self.driver, "link_ok", True):
+            return
+        self._link_down = False
+        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+        if vehicle.status == VehicleStatus.MAINTENANCE:
+            logger.warning("vehicle link back: in service again", extra={"vehicle": self.name})
+            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.ACTIVE, vvm=self.vvm)
 
     # --- life ---------------------------------------------------------------------------------
 
@@ -190,6 +248,8 @@ class RVHost:
             self.scheduler.run()
         finally:
             self.vvm.runtime.close()
+            if isinstance(self.driver, MavlinkDriver):
+                self.driver.close()
             connection.close()
 
     def _recover(self) -> None:
@@ -215,6 +275,7 @@ class RVHost:
 
     def _heartbeat(self) -> None:
         vehicle_heartbeat(vehicle_id=self.vehicle_id, vvm=self.vvm)
+        self._link_check()
         self.scheduler.call_at(self.clock.now_s() + settings.CPCC_RV_LEASE_S / 4, self._heartbeat)
 
     def _sweep(self) -> None:
@@ -292,6 +353,18 @@ def stalled(**host: int) -> list[uuid.UUID]:
 
 
 _host: RVHost | GSHost | None = None
+
+
+def _fence_differs(
+    fence: tuple[list[tuple[float, float]], float, float],
+    wanted: tuple[list[tuple[float, float]], float, float],
+) -> bool:
+    (have, low, high), (want, want_low, want_high) = fence, wanted
+    if (low, high) != (want_low, want_high) or len(have) != len(want):
+        return True
+    return any(
+        abs(a - c) > 1e-7 or abs(b - d) > 1e-7 for (a, b), (c, d) in zip(have, want, strict=True)
+    )
 
 
 def set_host(host: RVHost | GSHost | None) -> None:

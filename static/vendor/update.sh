@@ -1,14 +1,16 @@
 #!/bin/sh
-# Re-creates static/vendor/leaflet/ and static/vendor/leaflet-geoman/ from the npm packages
-# (see README.md here). Needs npm and the npm registry; `make test` and `make demo` never run
+# Re-creates static/vendor/leaflet/, leaflet-geoman/, codemirror/ and chartjs/ from the npm
+# packages (see README.md here). Needs npm and the npm registry; `make test` and `make demo` never run
 # it: the copies are part of the repository, so nothing is fetched at run time.
 #
 #   sh static/vendor/update.sh                     # the versions below
-#   LEAFLET=1.9.4 GEOMAN=2.20.2 sh static/vendor/update.sh
+#   LEAFLET=1.9.4 GEOMAN=2.20.2 CODEMIRROR=5.65.21 CHARTJS=4.5.1 sh static/vendor/update.sh
 set -eu
 
 LEAFLET=${LEAFLET:-1.9.4}
 GEOMAN=${GEOMAN:-2.20.2}
+CODEMIRROR=${CODEMIRROR:-5.65.21}
+CHARTJS=${CHARTJS:-4.5.1}
 
 here=$(cd "$(dirname "$0")" && pwd)
 work=$(mktemp -d)
@@ -62,5 +64,40 @@ cp "$package/LICENSE" "$geoman/LICENSE"
     done
 } >"$geoman/THIRD-PARTY-LICENSES"
 
+# The program editor and the VV page's chart, installed apart so that Geoman's list of bundled
+# packages above stays its own.
+mkdir "$work/pages"
+cd "$work/pages"
+npm init -y >/dev/null
+npm install --no-audit --no-fund --ignore-scripts --omit=dev \
+    "codemirror@$CODEMIRROR" "chart.js@$CHARTJS" >/dev/null
+modules="$work/pages/node_modules"
+
+codemirror="$here/codemirror"
+rm -rf "$codemirror"
+mkdir -p "$codemirror/lib" "$codemirror/mode/javascript" "$codemirror/addon/edit"
+copy "$modules/codemirror/lib/codemirror.js" "$codemirror/lib/codemirror.js"
+copy "$modules/codemirror/lib/codemirror.css" "$codemirror/lib/codemirror.css"
+copy "$modules/codemirror/mode/javascript/javascript.js" "$codemirror/mode/javascript/javascript.js"
+copy "$modules/codemirror/addon/edit/matchbrackets.js" "$codemirror/addon/edit/matchbrackets.js"
+cp "$modules/codemirror/LICENSE" "$codemirror/LICENSE"
+
+chart="$here/chartjs"
+rm -rf "$chart"
+mkdir -p "$chart"
+copy "$modules/chart.js/dist/chart.umd.min.js" "$chart/chart.umd.min.js"
+cp "$modules/chart.js/LICENSE.md" "$chart/LICENSE"
+# chart.umd.min.js bundles @kurkle/color: its licence goes with it.
+{
+    kurkle="$modules/@kurkle/color"
+    echo "Licences of the packages bundled in chart.umd.min.js (chart.js $CHARTJS)."
+    echo
+    echo "==== @kurkle/color $(node -p "require('$kurkle/package.json').version") ($(node -p "require('$kurkle/package.json').license"))"
+    echo
+    cat "$kurkle/LICENSE.md"
+} >"$chart/THIRD-PARTY-LICENSES"
+
 echo "leaflet $LEAFLET -> $leaflet"
 echo "@geoman-io/leaflet-geoman-free $GEOMAN -> $geoman"
+echo "codemirror $CODEMIRROR -> $codemirror"
+echo "chart.js $CHARTJS -> $chart"

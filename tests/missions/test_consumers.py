@@ -25,6 +25,17 @@ VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(48.1111, 12.861
 
 
 @pytest.fixture(autouse=True)
+async def _close_socket_connections():
+    """The sockets read the database in a worker thread: close its connection after each test,
+    or PostgreSQL refuses to drop the test database at the end of the run."""
+    yield
+    from channels.db import database_sync_to_async
+    from django.db import connections
+
+    await database_sync_to_async(connections.close_all)()
+
+
+@pytest.fixture(autouse=True)
 def feed(broker):
     """The test run's Redis carries the feed; empty before each test."""
     broker.delete(EVENTS_STREAM, POSITIONS_STREAM, VEHICLES_HASH)

@@ -38,7 +38,9 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_path: Path) -> None:
+def run_demo(tmp_path: Path, *args: str) -> tuple[str, int]:
+    """Run ``manage.py demo ARGS`` until its scenario has ended, then Ctrl-C it; returns its
+    output and port, after checking that it stopped cleanly and left nothing running."""
     port = free_port()
     env = {
         **os.environ,
@@ -48,7 +50,7 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
     }
     env.pop("REDIS_URL", None)  # the demo's own embedded Redis
     demo = subprocess.Popen(
-        [sys.executable, "manage.py", "demo", "--speed", "0", "--port", str(port)],
+        [sys.executable, "manage.py", "demo", *args, "--port", str(port)],
         cwd=ROOT,
         env=env,
         stdout=subprocess.PIPE,
@@ -62,7 +64,7 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
         threading.Thread(
             target=lambda: [output_lines.put(x) for x in demo.stdout], daemon=True
         ).start()
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + 150
         while not lines or "The scenario has ended" not in lines[-1]:
             try:
                 lines.append(output_lines.get(timeout=max(0.0, deadline - time.monotonic())))
@@ -72,11 +74,6 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
                 ) from None
             assert demo.poll() is None, "the demo exited early:\n" + "".join(lines)
         output = "".join(lines)
-        assert f"CPCC is running at http://127.0.0.1:{port}/" in output
-        assert "customer: customer-a / demo-pass-123" in output
-        assert "VVs ended 3/3" in output
-        assert "with 1 ground-station and 2 vehicle worker(s)" in output
-        assert "VV 1 (Customer A): finished" in output
         assert answers(tmp_path / "redis" / "redis.sock")
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/accounts/login/", timeout=10) as page:
             assert page.status == 200
@@ -88,3 +85,32 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
     assert processes_of(tmp_path) == [], "the demo left processes behind"
     with socket.socket() as s:
         assert s.connect_ex(("127.0.0.1", port)) != 0  # the web server is gone too
+    return output, port
+
+
+def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_path: Path) -> None:
+    output, port = run_demo(tmp_path, "--speed", "0")
+    assert f"CPCC is running at http://127.0.0.1:{port}/" in output
+    assert "customer: customer-a / demo-pass-123" in output
+    assert "VVs ended 3/3" in output
+    assert "with 1 ground-station and 2 vehicle worker(s)" in output
+    assert "VV 1 (Customer A): finished" in output
+
+
+def test_demo_flies_the_papers_figure_3_over_mavlink(tmp_path: Path) -> None:
+    output, _ = run_demo(tmp_path, "--speed", "40", "--mavlink")
+    assert "VVs ended 3/3" in output
+    for n, customer in [(1, "A"), (2, "B"), (3, "C")]:
+        assert f"VV {n} (Customer {customer}): finished" in output
+    # Both RVs flew through their MAVLink drivers, each to its own simulated copter.
+    import sqlite3
+
+    with sqlite3.connect(tmp_path / "db.sqlite3") as db:
+        drivers = db.execute("SELECT name, driver, driver_url FROM fleet_vehicle").fetchall()
+        flown = db.execute(
+            "SELECT DISTINCT v.name FROM missions_task t JOIN fleet_vehicle v ON t.vehicle_id = v.id"
+            " WHERE t.status = 'done'"
+        ).fetchall()
+    assert sorted(d[:2] for d in drivers) == [("Heli One", "mavlink"), ("Heli Two", "mavlink")]
+    assert all(url.startswith("udpout:127.0.0.1:") for _, _, url in drivers)
+    assert sorted(flown) == [("Heli One",), ("Heli Two",)]

@@ -129,13 +129,16 @@ def test_an_rv_added_mid_mission_takes_over_work_in_its_area(
     data = json.loads((SCENARIOS / "paper-fig3.json").read_text())
     heli_two = data["vehicles"].pop(1)
     data["vehicles"][0]["area"] = FIELD  # Heli One alone covers the whole field at first
+    # ... slowly, so that a task in Heli Two's area is still waiting for it however long Heli
+    # Two's worker takes to start.
+    data["vehicles"][0]["max_speed_mps"] = 1.0
     load(data, tmp_path, monkeypatch)
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
     wait_for(
-        lambda: Task.objects.filter(status=TaskStatus.DONE).count() >= 2,
+        lambda: Task.objects.filter(status=TaskStatus.OPEN, lng__gte=12.864).exists(),
         timeout=120,
-        what="two tasks done",
+        what="a VV asking for a reading in Heli Two's area",
         details=workers.logs,
     )
     # The provider adds Heli Two and starts its worker.

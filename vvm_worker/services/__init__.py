@@ -16,6 +16,11 @@ this:
   TaskRejectedError. A VV that ends goes back to a ground station.
 - ``task_complete`` records the readings an RV took as the answer in the VV's journal and
   resumes the VV on that RV.
+
+What a user does with their own VVs (the REST API and the web pages): ``vv_create_for_user``
+and ``vv_create_copies_for_user`` (N copies at once), ``vv_update_program_for_user`` (while it
+is queued), ``vv_restart_for_user`` (a new VV with the program of an ended one) and
+``vv_cancel_for_user``.
 """
 
 from vvm_worker.services.base import VVM, ProgramRejected
@@ -49,19 +54,27 @@ from vvm_worker.services.fleet import (
 from vvm_worker.services.journal import JournalView
 from vvm_worker.services.routing import fleet_caps, vehicle_caps
 from vvm_worker.services.vvs import (
+    MAX_COPIES,
     MAX_STEPS_PER_ADVANCE,
     NotACustomer,
     VVAlreadyEnded,
+    VVNotEnded,
+    VVNotQueued,
+    copy_names,
     task_complete,
     vv_admit_queued,
     vv_advance,
     vv_cancel,
     vv_cancel_for_user,
+    vv_create_copies_for_user,
     vv_create_for_user,
+    vv_restart_for_user,
     vv_submit,
+    vv_update_program_for_user,
 )
 
 __all__ = [
+    "MAX_COPIES",
     "MAX_STEPS_PER_ADVANCE",
     "REACH_FIELDS",
     "VVM",
@@ -73,7 +86,10 @@ __all__ = [
     "NotACustomer",
     "ProgramRejected",
     "VVAlreadyEnded",
+    "VVNotEnded",
+    "VVNotQueued",
     "VehicleConfig",
+    "copy_names",
     "customer_create",
     "customer_delete",
     "customer_limits",
@@ -97,7 +113,10 @@ __all__ = [
     "vv_advance",
     "vv_cancel",
     "vv_cancel_for_user",
+    "vv_create_copies_for_user",
     "vv_create_for_user",
+    "vv_restart_for_user",
     "vv_submit",
+    "vv_update_program_for_user",
     "vvs_reroute_waiting",
 ]

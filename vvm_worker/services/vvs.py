@@ -1,4 +1,5 @@
-"""A VV's life: submission and admission (the loader), steps, the end, task answers, cancelling."""
+"""A VV's life: submission and admission (the loader), steps, the end, task answers, cancelling;
+and what a user does with their VVs (submit copies, edit while queued, restart, cancel)."""
 
 from __future__ import annotations
 
@@ -63,8 +64,26 @@ class VVAlreadyEnded(RuntimeError):
         self.vv = vv
 
 
+class VVNotEnded(RuntimeError):
+    """The VV has not ended yet, so it cannot be restarted."""
+
+    def __init__(self, vv: VirtualVehicle) -> None:
+        super().__init__(f"{vv.name} has not ended ({vv.status})")
+        self.vv = vv
+
+
+class VVNotQueued(RuntimeError):
+    """The VV has left the queue (it started or ended), so its program can no longer change."""
+
+    def __init__(self, vv: VirtualVehicle) -> None:
+        super().__init__(f"{vv.name} is no longer queued ({vv.status})")
+        self.vv = vv
+
+
 # Steps one host runs for one VV before it lets other work go first (rejected tasks in a row).
 MAX_STEPS_PER_ADVANCE = 50
+# Copies of one program a user may submit at once (the web editor's "copies").
+MAX_COPIES = 50
 
 
 def vv_submit(
@@ -391,6 +410,61 @@ def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
     return True
 
 
+def copy_names(*, name: str, copies: int) -> list[str]:
+    """The names of ``copies`` copies of a VV: ``name``, ``name (2)``, ``name (3)``, ..."""
+    return [name if n == 1 else f"{name} ({n})" for n in range(1, copies + 1)]
+
+
+def _submit_copies(
+    *, customer: Customer, name: str, program: str, copies: int, vvm: VVM
+) -> list[VirtualVehicle]:
+    """Queue ``copies`` VVs of one program in one transaction and, once it commits, ask the
+    ground-station workers to admit the customer's queued VVs. Raises ProgramRejected for a
+    syntax error (checked once; nothing is created)."""
+    if not 1 <= copies <= MAX_COPIES:
+        raise ValueError(f"copies must be between 1 and {MAX_COPIES}, not {copies}")
+    problem = check_syntax(program)
+    if problem is not None:
+        raise ProgramRejected(problem)
+    with transaction.atomic():
+        vvs = [
+            vv_submit(
+                customer=customer,
+                name=copy_name,
+                program=program,
+                vvm=vvm,
+                refuse_syntax_errors=False,  # checked above, once for all copies
+                admit=False,
+            )
+            for copy_name in copy_names(name=name, copies=copies)
+        ]
+        vvm.dispatcher.customer_slot_freed(customer.pk)
+    return vvs
+
+
+def vv_create_copies_for_user(
+    *, user: User, name: str, program: str, copies: int, vvm: VVM
+) -> tuple[list[VirtualVehicle], SyntaxProblem | None]:
+    """Queue ``copies`` (1 to MAX_COPIES) new VVs of the user's customer running one program,
+    named ``name``, ``name (2)``, ``name (3)``, ... (``copy_names``); a program with a syntax
+    error is refused with where the error is, and nothing is created.
+
+    Returns the VVs in that order, queued: once the transaction that created them all commits,
+    the ground-station workers are asked to admit the customer's queued VVs within its quota
+    of parallel VVs (the others wait in the queue). Raises NotACustomer for a user of no
+    customer and ValueError for a number of copies out of range.
+    """
+    if user.customer is None:
+        raise NotACustomer(f"{user.username} belongs to no customer")
+    try:
+        vvs = _submit_copies(
+            customer=user.customer, name=name, program=program, copies=copies, vvm=vvm
+        )
+    except ProgramRejected as exc:
+        return [], exc.problem
+    return vvs, None
+
+
 def vv_create_for_user(
     *, user: User, name: str, program: str, vvm: VVM
 ) -> tuple[VirtualVehicle | None, SyntaxProblem | None]:
@@ -401,15 +475,62 @@ def vv_create_for_user(
     asked to admit the customer's queued VVs within its quota of parallel VVs. Raises
     NotACustomer for a user of no customer.
     """
-    if user.customer is None:
-        raise NotACustomer(f"{user.username} belongs to no customer")
-    try:
-        with transaction.atomic():
-            vv = vv_submit(customer=user.customer, name=name, program=program, vvm=vvm, admit=False)
-            vvm.dispatcher.customer_slot_freed(user.customer.pk)
-    except ProgramRejected as exc:
-        return None, exc.problem
-    return vv, None
+    vvs, problem = vv_create_copies_for_user(
+        user=user, name=name, program=program, copies=1, vvm=vvm
+    )
+    return (vvs[0] if vvs else None), problem
+
+
+def vv_restart_for_user(*, user: User, vv_id: uuid.UUID | str, vvm: VVM) -> VirtualVehicle:
+    """Start an ended VV (finished, failed, killed or cancelled) again: a new VV of the same
+    customer with the same name and program, queued and admitted like a new submission (a new
+    seed, an empty storage and log). The ended VV stays as it is.
+
+    Staff may restart any VV (the new one belongs to the VV's customer). Raises VVNotFound for
+    a missing VV or another customer's, VVNotEnded while it is queued or running, and
+    ProgramRejected when its program does not parse (a scenario's VV that failed so).
+    """
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    if not vv.is_ended:
+        raise VVNotEnded(vv)
+    (new,) = _submit_copies(
+        customer=vv.customer, name=vv.name, program=vv.program, copies=1, vvm=vvm
+    )
+    logger.info(
+        "vv restarted", extra={"vv": str(new.pk), "from_vv": str(vv.pk), "user": user.username}
+    )
+    return new
+
+
+def vv_update_program_for_user(
+    *, user: User, vv_id: uuid.UUID | str, name: str, program: str, vvm: VVM
+) -> VirtualVehicle:
+    """Change the name and program of one of the user's VVs while it waits in the queue; it
+    keeps its place there.
+
+    Raises VVNotFound for a missing VV or another customer's, ProgramRejected (with the line
+    and column) for a program with a syntax error, and VVNotQueued once the VV has started or
+    ended. Returns the VV as it is afterwards.
+    """
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    problem = check_syntax(program)
+    if problem is not None:
+        raise ProgramRejected(problem)
+    with transaction.atomic():
+        # Admission holds the customer's row while it starts queued VVs: taking it first (then
+        # the VV's, in admission's order) means a VV starts either before the change, which is
+        # then refused, or after it, with the new program.
+        Customer.objects.select_for_update().filter(pk=vv.customer_id).first()
+        locked = VirtualVehicle.objects.select_for_update(of=("self",)).get(pk=vv.pk)
+        if locked.status != VVStatus.QUEUED:
+            raise VVNotQueued(locked)
+        locked.name = name
+        locked.program = program
+        locked.save(update_fields=["name", "program", "updated"])
+        if announcing(vvm):
+            vvm.announcer.announce(vv_event(locked))
+    logger.info("vv program changed", extra={"vv": str(vv.pk), "user": user.username})
+    return vv_get_for_user(user=user, vv_id=vv.pk)
 
 
 def vv_cancel_for_user(*, user: User, vv_id: uuid.UUID | str, vvm: VVM) -> VirtualVehicle:

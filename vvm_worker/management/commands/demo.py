@@ -24,11 +24,11 @@ from django.core.management import call_command
 from django.core.management.base import BaseCommand, CommandError, CommandParser
 
 from cpcc_site.embedded_redis import EmbeddedRedis
-from fleet.models import Vehicle
+from fleet.models import Driver, Vehicle
 from missions.models import ENDED_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.platform import platform_vvm
 from vvm_worker.scenario import FleetEvent, Scenario, ScenarioError, load_scenario
-from vvm_worker.services import user_set_login
+from vvm_worker.services import user_set_login, vehicle_update
 from vvm_worker.services.scenarios import (
     PASSWORD_ENV,
     demo_reset,
@@ -116,9 +116,18 @@ class Command(BaseCommand):
         )
         parser.add_argument("--port", type=int, default=8000)
         parser.add_argument("--host", default="127.0.0.1")
+        parser.add_argument(
+            "--mavlink",
+            action="store_true",
+            help="fly every RV over MAVLink: a `mavsim` process per RV (a simulated ArduPilot "
+            "copter on a loopback UDP port) and its worker's MAVLink driver",
+        )
 
     def handle(self, *args: Any, **options: Any) -> None:
         speed = settings.CPCC_SIM_SPEED if options["speed"] is None else options["speed"]
+        if options["mavlink"] and speed <= 0:
+            raise CommandError("--mavlink needs --speed > 0: a MAVLink copter cannot fly instantly")
+        self.mavlink = options["mavlink"]
         try:
             scenario = load_scenario(options["scenario"])
         except ScenarioError as exc:
@@ -155,8 +164,8 @@ class Command(BaseCommand):
             _wait_for_port(options["host"], options["port"], processes)
             for name in loaded.ground_stations:
                 processes.start(f"gsworker {name}", manage, "gsworker", name)
-            for name in loaded.vehicles:
-                processes.start(f"rvworker {name}", manage, "rvworker", name)
+            for vehicle in loaded.vehicles.values():
+                self._start_vehicle(vehicle, processes, manage)
             vvs = scenario_submit_all(scenario=scenario, loaded=loaded, vvm=platform_vvm())
             url = f"http://{options['host']}:{options['port']}/"
             self.stdout.write(self.style.SUCCESS(f"CPCC is running at {url}"))
@@ -207,9 +216,25 @@ class Command(BaseCommand):
                 return
             time.sleep(0.25)
 
+    def _start_vehicle(self, vehicle: Vehicle, processes: Processes, manage: str) -> None:
+        """Start an RV's worker; with --mavlink, first its simulated copter, which the worker
+        reaches over a loopback UDP port."""
+        if self.mavlink:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                probe.bind(("127.0.0.1", 0))
+                port = probe.getsockname()[1]
+            vehicle = vehicle_update(
+                vehicle=vehicle,
+                config={"driver": Driver.MAVLINK, "driver_url": f"udpout:127.0.0.1:{port}"},
+                sensors=None,
+                vvm=platform_vvm(),
+            )
+            processes.start(f"mavsim {vehicle.name}", manage, "mavsim", vehicle.name)
+        processes.start(f"rvworker {vehicle.name}", manage, "rvworker", vehicle.name)
+
     def _apply(self, event: FleetEvent, processes: Processes, manage: str) -> None:
         def start_worker(vehicle: Vehicle) -> None:
-            processes.start(f"rvworker {vehicle.name}", manage, "rvworker", vehicle.name)
+            self._start_vehicle(vehicle, processes, manage)
 
         vehicle = scenario_event_apply(event=event, vvm=platform_vvm(), on_added=start_worker)
         self.stdout.write(f"  event: {vehicle.name} {event.action}")

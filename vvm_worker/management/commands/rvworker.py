@@ -5,8 +5,9 @@ from __future__ import annotations
 from typing import Any
 
 from django.conf import settings
-from django.core.management.base import BaseCommand, CommandParser
+from django.core.management.base import BaseCommand, CommandError, CommandParser
 
+from fleet.mavlink.errors import MavlinkError
 from fleet.models import Vehicle
 from vvm_worker.dispatch import rv_queue
 from vvm_worker.hosts import RVHost
@@ -24,7 +25,11 @@ class Command(BaseCommand):
 
     def handle(self, *args: Any, **options: Any) -> None:
         vehicle = host_named(Vehicle, options["name"], "vehicle")
-        host = RVHost(vehicle, speed=settings.CPCC_SIM_SPEED, planner=options["planner"])
+        try:
+            host = RVHost(vehicle, speed=settings.CPCC_SIM_SPEED, planner=options["planner"])
+        except (MavlinkError, ValueError) as exc:
+            where = f" at {vehicle.driver_url}" if vehicle.driver_url else ""
+            raise CommandError(f"{vehicle.name}: cannot fly its vehicle{where}: {exc}") from None
         serve(
             self,
             host,

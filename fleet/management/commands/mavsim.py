@@ -1,0 +1,93 @@
+"""``manage.py mavsim NAME``: a MAVLink-speaking simulated copter for one vehicle of the fleet.
+
+It flies like the vehicle's record says (depot, maximum speed, climb rate, battery endurance)
+and speaks MAVLink like ArduCopter, so the RV worker's MAVLink driver, MAVProxy or
+QGroundControl can fly it. Runs in the foreground until Ctrl-C or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from typing import Any
+
+from django.conf import settings
+from django.core.management.base import BaseCommand, CommandError, CommandParser
+
+from fleet.mavlink.endpoint import mirror_endpoint
+from fleet.mavlink.errors import LinkError
+from fleet.mavlink.sim import FLAVOURS, MavSim
+from fleet.selectors import vehicle_list
+from fleet.simulation.vehicle import VehicleSpec
+
+
+class Command(BaseCommand):
+    help = (
+        "Run a MAVLink-speaking simulated copter (ArduCopter by default) for one vehicle: "
+        "its depot, speed, climb rate and battery come from the database."
+    )
+
+    def add_arguments(self, parser: CommandParser) -> None:
+        parser.add_argument("name", help="the vehicle's name")
+        parser.add_argument(
+            "--connection",
+            help=(
+                "where to listen or send, e.g. udpin:127.0.0.1:14560 (default: the other end "
+                "of the vehicle's driver_url, e.g. udpin:H:P for udpout:H:P)"
+            ),
+        )
+        parser.add_argument(
+            "--speed",
+            type=float,
+            default=None,
+            help="time acceleration (default CPCC_SIM_SPEED; 0: every flight ends at once)",
+        )
+        parser.add_argument("--system-id", type=int, default=1, help="MAVLink system id")
+        parser.add_argument("--autopilot", choices=sorted(FLAVOURS), default="ardupilot")
+        parser.add_argument(
+            "--battery", type=float, default=1.0, help="the charge it starts with, 0..1"
+        )
+
+    def handle(self, *args: Any, **options: Any) -> None:
+        name = options["name"]
+        vehicle = vehicle_list().filter(name=name).first()
+        if vehicle is None:
+            known = ", ".join(v.name for v in vehicle_list()) or "none"
+            raise CommandError(f"no vehicle named {name!r} (vehicles: {known})")
+        connection = options["connection"]
+        try:
+            if not connection:
+                if not vehicle.driver_url:
+                    raise CommandError(f"{name} has no driver_url: give --connection")
+                connection = mirror_endpoint(vehicle.driver_url)
+            speed = settings.CPCC_SIM_SPEED if options["speed"] is None else options["speed"]
+            sim = MavSim(
+                connection,
+                spec=VehicleSpec(
+                    max_speed_mps=vehicle.max_speed_mps,
+                    climb_rate_mps=vehicle.climb_rate_mps,
+                    battery_s=vehicle.battery_s,
+                ),
+                depot=vehicle.depot,
+                speed=speed,
+                system_id=options["system_id"],
+                autopilot=options["autopilot"],
+                battery=options["battery"],
+                name=name,
+            )
+        except (LinkError, ValueError) as exc:
+            raise CommandError(str(exc)) from None
+
+        stop = threading.Event()
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda *_: stop.set())
+        self.stdout.write(
+            f"mavsim {name}: {options['autopilot']} copter on {sim.endpoint} "
+            f"(system {options['system_id']}, speed {speed:g})"
+        )
+        self.stdout.flush()
+        try:
+            sim.serve(stop)
+        except LinkError as exc:
+            raise CommandError(str(exc)) from None
+        self.stdout.write(f"mavsim {name}: stopped")

@@ -1,0 +1,743 @@
+"""MavlinkDriver: one real vehicle flown over MAVLink, behind the RV control loop's driver API.
+
+It answers the same questions as the in-process simulator's ``SimVehicle`` (``fly_to``,
+``return_to_depot``, ``position_at``, ``phase_at``, ``is_landed_at``, ``distance_m``,
+``flight_s``, ``battery_remaining_s``, ``time_to_s``, ``time_home_s``, ``recharge``), but a
+real vehicle is not a plan: ``fly_to`` and ``return_to_depot`` *command* the autopilot and
+return an *estimated* arrival or landing time (the vehicle's configured speed and climb rate
+over ``fleet.geo`` distances, the simulator's kinematics), and the queries answer from the
+latest telemetry whatever ``t`` they are given. Arrival is ``has_arrived``: the last
+GLOBAL_POSITION_INT within a 3-D tolerance of the target.
+
+How it flies:
+
+- ArduPilot (ArduCopter): mode GUIDED, arm, MAV_CMD_NAV_TAKEOFF to a safe altitude (the target's
+  altitude, at least the spec's take-off altitude, relative to home), and once up
+  SET_POSITION_TARGET_GLOBAL_INT (frame GLOBAL_RELATIVE_ALT_INT, position only), re-sent every
+  second because the message has no acknowledgement; home with MAV_CMD_NAV_RETURN_TO_LAUNCH
+  (RTL mode if the command is unsupported), which lands and disarms.
+- PX4: arm, MAV_CMD_NAV_TAKEOFF (its altitude is AMSL on PX4), then offboard position control:
+  SET_POSITION_TARGET_GLOBAL_INT streamed at 4 Hz (PX4 leaves offboard below 2 Hz, and only
+  enters it once the stream has run for a second), frame GLOBAL_INT with AMSL altitude
+  (what every PX4 release accepts in offboard), and the switch to OFFBOARD; home with
+  MAV_CMD_NAV_RETURN_TO_LAUNCH.
+
+If the vehicle leaves the mode the driver put it in while flying (a pilot, or a failsafe:
+battery, fence, radio), the driver stops commanding it: ``fly_to`` raises VehicleTookOver and
+``return_to_depot`` only accepts a vehicle already returning or landing.
+
+Times ``now_s``/``t`` are platform-clock seconds; ``clock`` (injectable) is that clock, used
+to time-stamp telemetry (flight time). Link timeouts run on the monotonic clock.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from fleet.geo import Position, distance_m, ground_distance_m
+from fleet.mavlink.errors import (
+    CommandDenied,
+    LinkLost,
+    MavlinkError,
+    UnsupportedVehicle,
+    VehicleTookOver,
+)
+from fleet.mavlink.link import MavlinkLink
+from fleet.mavlink.mission import fence_polygon_items
+from fleet.mavlink.modes import COPTER_TYPES, Autopilot
+from fleet.mavlink.wire import mavlink
+from fleet.simulation.vehicle import (
+    PHASE_CRUISE,
+    PHASE_HOVERING,
+    PHASE_LANDED,
+    PHASE_LANDING,
+    PHASE_TAKEOFF,
+    VehicleSpec,
+)
+
+logger = logging.getLogger("cpcc.mavlink.driver")
+
+_POSITION_ONLY = (
+    mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_VZ_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_AX_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_AY_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE
+    | mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+)
+_ODOMETER_STEP_M = 0.5  # GPS jitter below this does not count as distance flown
+_LANDING_RADIUS_M = 2.0  # a returning vehicle this close to home is landing
+_ARDUPILOT_RESEND_S = 1.0
+_PX4_STREAM_HZ = 4.0
+_PX4_OFFBOARD_AFTER_S = 1.2  # PX4 enters offboard after a second of setpoints
+_STUCK_ARMED_S = 5.0  # landed but still armed this long after returning: disarm
+
+# Flying states and the modes the autopilot may show in them without the driver being
+# overruled (PX4 switches from AUTO.TAKEOFF to AUTO.LOITER by itself, RTL ends in LAND).
+_MODES = {
+    Autopilot.ARDUPILOT: {
+        "takeoff": frozenset({"GUIDED"}),
+        "goto": frozenset({"GUIDED"}),
+        "return": frozenset({"RTL", "LAND"}),
+    },
+    Autopilot.PX4: {
+        "takeoff": frozenset({"AUTO.TAKEOFF", "AUTO.LOITER"}),
+        "goto": frozenset({"OFFBOARD", "AUTO.LOITER", "AUTO.TAKEOFF"}),
+        "return": frozenset({"AUTO.RTL", "AUTO.LAND"}),
+    },
+}
+_RETURN_MODES = frozenset({"RTL", "LAND", "AUTO.RTL", "AUTO.LAND", "SMART_RTL", "AUTO_RTL"})
+
+
+class MavlinkDriver:
+    """Flies one ArduPilot or PX4 copter over a MAVLink link (see the module docstring).
+
+    ``connection``: a connection string (``fleet.mavlink.endpoint``) or an unopened
+    ``MavlinkLink``. ``spec``: the vehicle's speed, climb rate, take-off altitude and battery
+    endurance (for estimates and ``battery_remaining_s``). ``depot``: its home, where it arms
+    (the autopilot's home is where it armed, so altitudes relative to home are relative to the
+    depot). ``area``/``min_altitude_m``/``max_altitude_m``: the geofence to upload on connect
+    (None: none). ``clock``: the platform clock. ``telemetry_hz``: the GLOBAL_POSITION_INT rate
+    to ask for. ``arrival_tolerance_m``: how close counts as "there" for ``phase_at``.
+    ``on_link_lost``: called (on the link's thread) when the heartbeat stops.
+    """
+
+    def __init__(
+        self,
+        connection: str | MavlinkLink,
+        *,
+        spec: VehicleSpec,
+        depot: Position,
+        area: Sequence[Sequence[float]] | None = None,
+        min_altitude_m: float = 0.0,
+        max_altitude_m: float | None = None,
+        clock: Callable[[], float] = time.time,
+        telemetry_hz: float = 4.0,
+        link_timeout_s: float = 3.0,
+        command_timeout_s: float = 1.0,
+        command_attempts: int = 3,
+        arrival_tolerance_m: float = 1.0,
+        on_link_lost: Callable[[], None] | None = None,
+        name: str = "",
+    ) -> None:
+        if isinstance(connection, MavlinkLink):
+            self.link = connection
+        else:
+            self.link = MavlinkLink(
+                connection,
+                link_timeout_s=link_timeout_s,
+                command_timeout_s=command_timeout_s,
+                command_attempts=command_attempts,
+            )
+        self.link.on_link_lost = self._on_link_lost
+        self.link.on_link_regained = self._on_link_regained
+        self.spec = spec
+        self.depot = depot
+        self.clock = clock
+        self.telemetry_hz = telemetry_hz
+        self.arrival_tolerance_m = arrival_tolerance_m
+        self.on_link_lost = on_link_lost
+        self.name = name or str(self.link.endpoint)
+        self._fence_request = (
+            (area, min_altitude_m, max_altitude_m)
+            if area is not None and max_altitude_m is not None
+            else None
+        )
+        self.fence: tuple[list[tuple[float, float]], float, float] | None = None
+
+        self._lock = threading.RLock()
+        self._command_lock = threading.Lock()  # one flight command sequence at a time
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._guidance: threading.Thread | None = None
+        self._removers: list[Callable[[], None]] = []
+
+        # Telemetry.
+        self._position = depot
+        self._position_seen_s: float | None = None
+        self._home_amsl_m: float | None = None
+        self._battery: float | None = None
+        self._landed_state: int | None = None
+        self._armed = False
+        self._mode = ""
+        # Odometry and flight time (platform clock).
+        self._distance_m = 0.0
+        self._odometer_anchor: Position | None = None
+        self._flight_before_s = 0.0
+        self._armed_since_s: float | None = None
+        # What the driver is doing.
+        self._state = "idle"  # "idle", "takeoff", "goto", "return"
+        self._target: Position | None = None  # where the vehicle is going now
+        self._pending: Position | None = None  # where to go once the take-off is done
+        self._goal_modes: frozenset[str] = frozenset()
+        self._allowed_modes: frozenset[str] = frozenset()
+        self._took_over: str | None = None
+        self._last_setpoint = -math.inf  # monotonic
+        self._stream_since: float | None = None  # PX4: when the setpoint stream started
+        self._on_ground_since: float | None = None  # monotonic, while returning
+
+    # --- life cycle -----------------------------------------------------------------------
+
+    def connect(self, timeout_s: float = 10.0) -> None:
+        """Open the link, wait for the vehicle, set up telemetry and upload the fence.
+
+        Asks for GLOBAL_POSITION_INT at ``telemetry_hz`` and SYS_STATUS, BATTERY_STATUS,
+        EXTENDED_SYS_STATE, HEARTBEAT and STATUSTEXT (MAV_CMD_SET_MESSAGE_INTERVAL; only the
+        position is required, the others are best effort), reads HOME_POSITION, uploads the
+        geofence given to the constructor, and starts the guidance thread. Raises LinkError
+        (cannot open), LinkLost (no heartbeat in ``timeout_s``), UnsupportedVehicle (not an
+        ArduPilot or PX4 copter), and what the requests raise; the link is closed on failure.
+        """
+        try:
+            self.link.open()
+            beat = self.link.wait_heartbeat(timeout_s)
+            if beat.autopilot is Autopilot.OTHER:
+                raise UnsupportedVehicle(
+                    f"{self.name}: autopilot {beat.autopilot.value} is neither ArduPilot nor PX4"
+                )
+            if beat.mav_type not in COPTER_TYPES:
+                raise UnsupportedVehicle(f"{self.name}: MAV_TYPE {beat.mav_type} is not a copter")
+            self._removers = [
+                self.link.add_listener("HEARTBEAT", self._on_heartbeat),
+                self.link.add_listener("GLOBAL_POSITION_INT", self._on_position),
+                self.link.add_listener("SYS_STATUS", self._on_sys_status),
+                self.link.add_listener("BATTERY_STATUS", self._on_battery_status),
+                self.link.add_listener("EXTENDED_SYS_STATE", self._on_extended_state),
+                self.link.add_listener("HOME_POSITION", self._on_home),
+            ]
+            self._on_heartbeat_state(beat.armed, beat.mode)
+            self.link.set_message_interval(
+                mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, self.telemetry_hz
+            )
+            for message_id, rate_hz in (
+                (mavlink.MAVLINK_MSG_ID_SYS_STATUS, 1.0),
+                (mavlink.MAVLINK_MSG_ID_BATTERY_STATUS, 1.0),
+                (mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 1.0),
+                (mavlink.MAVLINK_MSG_ID_HEARTBEAT, 1.0),
+                (mavlink.MAVLINK_MSG_ID_STATUSTEXT, 1.0),
+            ):
+                try:
+                    self.link.set_message_interval(message_id, rate_hz)
+                except MavlinkError as exc:
+                    logger.info("%s: message %d rate not set: %s", self.name, message_id, exc)
+            try:
+                self.link.request_message(mavlink.MAVLINK_MSG_ID_HOME_POSITION)
+            except MavlinkError as exc:
+                logger.warning("%s: no HOME_POSITION: %s", self.name, exc)
+            if self._fence_request is not None:
+                area, low, high = self._fence_request
+                self.upload_fence(area, low, high)
+        except BaseException:
+            self.close()
+            raise
+        self._stop.clear()
+        self._guidance = threading.Thread(
+            target=self._guidance_loop, name=f"mavlink-guidance {self.name}", daemon=True
+        )
+        self._guidance.start()
+
+    def close(self) -> None:
+        """Stop the guidance thread and close the link (idempotent). The vehicle keeps doing
+        what it was last told; an autopilot's GCS failsafe decides what happens next."""
+        self._stop.set()
+        self._wake.set()
+        if self._guidance is not None and self._guidance is not threading.current_thread():
+            self._guidance.join(timeout=5.0)
+        self._guidance = None
+        for remove in self._removers:
+            remove()
+        self._removers = []
+        self.link.close()
+
+    @property
+    def link_ok(self) -> bool:
+        """Whether the vehicle's heartbeat is fresh."""
+        return self.link.link_ok
+
+    @property
+    def autopilot(self) -> Autopilot:
+        return self.link.autopilot
+
+    @property
+    def took_over(self) -> str | None:
+        """The mode a pilot or failsafe switched the flying vehicle to, or None while the
+        driver is in control (cleared when the vehicle disarms)."""
+        return self._took_over
+
+    # --- geofence -------------------------------------------------------------------------
+
+    def upload_fence(
+        self, area: Sequence[Sequence[float]], min_altitude_m: float, max_altitude_m: float
+    ) -> None:
+        """Upload the operation area as the vehicle's geofence, with its altitude ceiling.
+
+        The area (a ring of (lat, lng), closed or not) becomes one inclusion polygon
+        (MAV_MISSION_TYPE_FENCE); the ceiling is set relative to home (``FENCE_ALT_MAX`` and
+        FENCE_TYPE's altitude and polygon bits, then ``FENCE_ENABLE`` on ArduPilot;
+        ``GF_MAX_VER_DIST`` on PX4, whose fence acts when GF_ACTION is not "none": it is set
+        to Return if it was). The minimum altitude is not put on the autopilot (a floor would
+        trip on every take-off and landing): the platform keeps tasks above it. Call again
+        whenever the area or altitudes change. Raises ValueError for a bad area or altitude
+        range, MissionRejected/MissionTimeout, and the parameter errors.
+        """
+        if not max_altitude_m > min_altitude_m:
+            raise ValueError(
+                f"max altitude {max_altitude_m!r} must be above min altitude {min_altitude_m!r}"
+            )
+        items = fence_polygon_items(area)
+        ceiling = max_altitude_m - self.depot.alt
+        self.link.upload_mission(items, mavlink.MAV_MISSION_TYPE_FENCE)
+        if self.autopilot is Autopilot.PX4:
+            self.link.param_set("GF_MAX_VER_DIST", ceiling)
+            if self.link.param_get("GF_ACTION") == 0:
+                self.link.param_set("GF_ACTION", 3)  # Return
+        else:
+            self.link.param_set("FENCE_ALT_MAX", ceiling)
+            fence_type = int(self.link.param_get("FENCE_TYPE"))
+            self.link.param_set("FENCE_TYPE", fence_type | 1 | 4)  # + max altitude, polygon
+            self.link.param_set("FENCE_ENABLE", 1)
+        self.fence = ([(i.lat, i.lng) for i in items], min_altitude_m, max_altitude_m)
+        logger.info(
+            "%s: geofence of %d vertices, ceiling %.1f m uploaded", self.name, len(items), ceiling
+        )
+
+    # --- commands (the driver API) ----------------------------------------------------------
+
+    def fly_to(self, target: Position, now_s: float) -> float:
+        """Send the vehicle to ``target`` (altitude above ground); returns the estimated arrival.
+
+        From the ground: mode, arm, take off to ``max(target.alt, spec.takeoff_alt_m)``, and the
+        target once that altitude is reached (the guidance thread does it). In the air: the
+        new target at once. The estimate is ``now_s`` plus the simulator's flight time from
+        the last known position. Raises LinkLost, VehicleTookOver (permanent), PreArmFailed
+        with the vehicle's reasons, CommandDenied/CommandTimeout (after a failed take-off
+        command the vehicle is disarmed again, best effort), ModeChangeFailed.
+        """
+        with self._command_lock:
+            self._check_usable(returning_ok=False)
+            eta = now_s + self.time_to_s(target, now_s)
+            if self.is_landed_at(now_s):
+                self._take_off_towards(target)
+            else:
+                self._go(target)
+            return eta
+
+    def return_to_depot(self, now_s: float) -> float:
+        """Send the vehicle home to land (RTL); returns the estimated landing time.
+
+        ``now_s`` when it is already landed. The autopilot lands and disarms by itself; the
+        guidance thread disarms a vehicle that stays armed on the ground. Raises LinkLost,
+        VehicleTookOver (unless the vehicle is already returning or landing by itself),
+        CommandDenied/CommandTimeout, ModeChangeFailed.
+        """
+        with self._command_lock:
+            if self.is_landed_at(now_s):
+                return now_s
+            self._check_usable(returning_ok=True)
+            eta = now_s + self.time_home_s(self._position)
+            if self._took_over is not None:
+                return eta  # already returning or landing by itself
+            modes = _MODES[self._flavour()]["return"]
+            with self._lock:
+                before = (self._state, self._target, self._pending, self._stream_since)
+                self._state = "return"
+                self._target = self.depot
+                self._pending = None
+                self._stream_since = None
+                self._set_goal(modes)
+            try:
+                try:
+                    self.link.command_long(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+                except CommandDenied as exc:
+                    if exc.result != mavlink.MAV_RESULT_UNSUPPORTED:
+                        raise
+                    self.link.set_mode("AUTO.RTL" if self.autopilot is Autopilot.PX4 else "RTL")
+            except MavlinkError:
+                with self._lock:  # still doing what it did: say so
+                    self._state, self._target, self._pending, self._stream_since = before
+                raise
+            logger.info("%s: returning to launch", self.name)
+            return eta
+
+    def recharge(self, now_s: float, duration_s: float) -> float:
+        """When a charge (or a battery swap) of ``duration_s`` started now will be done.
+
+        A real battery is charged or swapped by people, not over the link: this only keeps
+        the control loop's timing; ``battery_remaining_s`` keeps reporting what the vehicle
+        measures. Raises ValueError when the vehicle is not landed or the duration is bad.
+        """
+        if not self.is_landed_at(now_s):
+            raise ValueError(f"{self.name} is not landed: it cannot charge")
+        if not (math.isfinite(duration_s) and duration_s >= 0):
+            raise ValueError(f"duration_s must be a finite number >= 0, got {duration_s!r}")
+        return now_s + duration_s
+
+    # --- queries (the driver API) -----------------------------------------------------------
+
+    def position_at(self, t: float) -> Position:
+        """The last reported position (altitude above ground: relative altitude + depot's),
+        whatever ``t``: a real vehicle is where it is. The depot before any telemetry."""
+        return self._position
+
+    def phase_at(self, t: float) -> str:
+        """One of "landed", "takeoff", "cruise", "hovering", "landing", from the driver's
+        state and the last telemetry (``t`` is not used)."""
+        with self._lock:
+            if not self._armed:
+                return PHASE_LANDED
+            here = self._position
+            if self._took_over is not None:
+                if self._took_over in _RETURN_MODES:
+                    return self._return_phase(here)
+                return PHASE_HOVERING
+            if self._state == "takeoff":
+                return PHASE_TAKEOFF
+            if self._state == "goto" and self._target is not None:
+                near = distance_m(here, self._target) <= self.arrival_tolerance_m
+                return PHASE_HOVERING if near else PHASE_CRUISE
+            if self._state == "return":
+                return self._return_phase(here)
+            if self._landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND or (
+                here.alt - self.depot.alt < 0.5
+            ):
+                return PHASE_LANDED
+            return PHASE_HOVERING
+
+    def _return_phase(self, here: Position) -> str:
+        if self._landed_state == mavlink.MAV_LANDED_STATE_LANDING or (
+            ground_distance_m(here, self.depot) <= _LANDING_RADIUS_M
+        ):
+            return PHASE_LANDING
+        return PHASE_CRUISE
+
+    def is_landed_at(self, t: float) -> bool:
+        """Whether the vehicle is on the ground (disarmed, or armed but not yet off it)."""
+        return self.phase_at(t) == PHASE_LANDED
+
+    def has_arrived(self, target: Position, tolerance_m: float, now_s: float | None = None) -> bool:
+        """Whether the last GLOBAL_POSITION_INT is within ``tolerance_m`` of ``target`` in 3-D
+        (altitude: relative to home, plus the depot's). ``now_s`` is not used: the telemetry
+        is the present."""
+        return distance_m(self._position, target) <= tolerance_m
+
+    def distance_m(self, t: float) -> float:
+        """Metres flown since the driver started, from telemetry (steps under half a metre,
+        GPS jitter, do not count)."""
+        return self._distance_m
+
+    def flight_s(self, t: float) -> float:
+        """Seconds flown (armed) up to platform time ``t``."""
+        with self._lock:
+            since = self._armed_since_s
+            if since is None:
+                return self._flight_before_s
+            return self._flight_before_s + max(0.0, t - since)
+
+    def battery_fraction(self) -> float | None:
+        """The battery's charge 0..1 from SYS_STATUS.battery_remaining (or BATTERY_STATUS),
+        None while the vehicle has not reported one."""
+        return self._battery
+
+    def battery_remaining_s(self, t: float) -> float | None:
+        """Endurance left in seconds: the reported charge times ``spec.battery_s`` (before any
+        report: ``battery_s`` minus the flight time). None when ``battery_s`` is unknown."""
+        if self.spec.battery_s is None:
+            return None
+        fraction = self._battery
+        if fraction is None:
+            return max(0.0, self.spec.battery_s - self.flight_s(t))
+        return fraction * self.spec.battery_s
+
+    def time_to_s(self, target: Position, now_s: float) -> float:
+        """Estimated seconds for ``fly_to(target)`` from the last known position: a vertical
+        take-off first when landed, then one straight leg (the simulator's kinematics)."""
+        here = self._position
+        seconds = 0.0
+        if self.is_landed_at(now_s):
+            top = here.with_alt(max(target.alt, self.spec.takeoff_alt_m, here.alt))
+            seconds += self._leg_s(here, top)
+            here = top
+        return seconds + self._leg_s(here, target)
+
+    def time_home_s(self, start: Position) -> float:
+        """Estimated seconds to return from ``start`` in the air: cruise to above the depot at
+        the current altitude (at least the take-off altitude), then land."""
+        above = self.depot.with_alt(max(start.alt, self.spec.takeoff_alt_m, self.depot.alt))
+        return self._leg_s(start, above) + self._leg_s(above, self.depot)
+
+    def _leg_s(self, a: Position, b: Position) -> float:
+        horizontal = ground_distance_m(a, b) / self.spec.max_speed_mps
+        vertical = abs(b.alt - a.alt) / self.spec.climb_rate_mps
+        return max(horizontal, vertical)
+
+    # --- flying ---------------------------------------------------------------------------
+
+    def _flavour(self) -> Autopilot:
+        autopilot = self.autopilot
+        return autopilot if autopilot in _MODES else Autopilot.ARDUPILOT
+
+    def _check_usable(self, *, returning_ok: bool) -> None:
+        if not self.link.link_ok:
+            raise LinkLost(f"{self.name}: the link to the vehicle is down")
+        taken = self._took_over
+        if taken is not None and not (returning_ok and taken in _RETURN_MODES):
+            raise VehicleTookOver(taken)
+
+    def _set_goal(self, modes: frozenset[str]) -> None:
+        # While the switch is under way the old mode still shows in heartbeats: allow both
+        # until a heartbeat shows one of the new ones (_on_heartbeat narrows it).
+        self._allowed_modes = self._goal_modes | modes | {self._mode}
+        self._goal_modes = modes
+
+    def _take_off_towards(self, target: Position) -> None:
+        here = self._position
+        top = here.with_alt(max(target.alt, self.spec.takeoff_alt_m, self.depot.alt + 1.0))
+        relative = top.alt - self.depot.alt
+        px4 = self.autopilot is Autopilot.PX4
+        with self._lock:
+            self._state = "takeoff"
+            self._target = top
+            self._pending = target
+            self._set_goal(_MODES[self._flavour()]["takeoff"])
+        try:
+            if not px4:
+                self.link.set_mode("GUIDED")
+            self.link.arm()
+        except MavlinkError:
+            with self._lock:
+                self._state = "idle"
+                self._pending = None
+            raise
+        nan = math.nan
+        if px4:
+            # PX4 reads the take-off altitude as AMSL, and NaN as "here" for lat/lon/yaw.
+            params = (0.0, 0.0, 0.0, nan, nan, nan, self._home_amsl() + relative)
+        else:
+            params = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, relative)
+        try:
+            self.link.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, params)
+        except MavlinkError:
+            with self._lock:
+                self._state = "idle"
+                self._pending = None
+            # Armed motors on the ground are a hazard: disarm (best effort) before reporting.
+            try:
+                self.link.disarm()
+            except MavlinkError as exc:
+                logger.warning("%s: could not disarm after a failed take-off: %s", self.name, exc)
+            raise
+        logger.info("%s: taking off to %.1f m", self.name, relative)
+        self._wake.set()
+
+    def _go(self, target: Position) -> None:
+        px4 = self.autopilot is Autopilot.PX4
+        with self._lock:
+            if self._state == "takeoff":
+                self._pending = target  # still climbing: go there once up
+                return
+            self._state = "goto"
+            self._target = target
+            self._pending = None
+            self._set_goal(_MODES[self._flavour()]["goto"])
+        if px4:
+            with self._lock:
+                if self._stream_since is None:
+                    self._stream_since = time.monotonic()
+            self._send_setpoint(target)
+        else:
+            self.link.set_mode("GUIDED")
+            self._send_setpoint(target)
+        self._wake.set()
+
+    def _send_setpoint(self, target: Position) -> None:
+        px4 = self.autopilot is Autopilot.PX4
+        if px4:
+            # GLOBAL_INT with an AMSL altitude: what PX4's offboard mode accepts everywhere.
+            frame = mavlink.MAV_FRAME_GLOBAL_INT
+            alt = self._home_amsl() + (target.alt - self.depot.alt)
+        else:
+            frame = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+            alt = target.alt - self.depot.alt
+        target_system = self.link.target_system or 0
+        self.link.send(
+            lambda mav: mav.set_position_target_global_int_send(
+                0,
+                target_system,
+                self.link.target_component,
+                frame,
+                _POSITION_ONLY,
+                round(target.lat * 1e7),
+                round(target.lng * 1e7),
+                alt,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            )
+        )
+        self._last_setpoint = time.monotonic()
+
+    def _home_amsl(self) -> float:
+        """Home's altitude above mean sea level: HOME_POSITION, or GLOBAL_POSITION_INT's
+        AMSL minus relative altitude."""
+        if self._home_amsl_m is not None:
+            return self._home_amsl_m
+        msg = self.link.last_message("GLOBAL_POSITION_INT")
+        if msg is not None:
+            return float(msg.alt - msg.relative_alt) / 1000.0
+        raise MavlinkError(f"{self.name}: home altitude unknown (no position yet)")
+
+    def _guidance_loop(self) -> None:
+        while not self._stop.is_set():
+            px4 = self.autopilot is Autopilot.PX4
+            self._wake.wait(1.0 / _PX4_STREAM_HZ if px4 else 0.25)
+            self._wake.clear()
+            if self._stop.is_set():
+                return
+            try:
+                self._guide(px4)
+            except MavlinkError as exc:
+                logger.warning("%s: guidance: %s", self.name, exc)
+            except Exception:
+                logger.exception("%s: guidance", self.name)
+
+    def _guide(self, px4: bool) -> None:
+        """One step of what runs in the background: finish the take-off, keep the setpoint
+        alive, enter offboard (PX4), disarm a vehicle left armed on the ground."""
+        now = time.monotonic()
+        with self._lock:
+            state, target, pending = self._state, self._target, self._pending
+            taken = self._took_over
+        if taken is not None or not self.link.link_ok:
+            return
+        if state == "takeoff" and target is not None and self._reached_altitude(target):
+            with self._lock:
+                self._state = "idle" if pending is None else "goto"
+                self._target = pending if pending is not None else target
+                self._pending = None
+                if pending is not None:
+                    self._set_goal(_MODES[self._flavour()]["goto"])
+                    if px4:
+                        self._stream_since = now
+            if pending is not None:
+                self._send_setpoint(pending)
+            return
+        if state == "goto" and target is not None:
+            if px4:
+                # The guidance also wakes on every position report: keep the stream at 4 Hz.
+                if now - self._last_setpoint >= 0.9 / _PX4_STREAM_HZ:
+                    self._send_setpoint(target)
+                since = self._stream_since
+                streaming = since is not None and now - since >= _PX4_OFFBOARD_AFTER_S
+                if self._mode != "OFFBOARD" and streaming:
+                    self.link.set_mode("OFFBOARD")
+            elif now - self._last_setpoint >= _ARDUPILOT_RESEND_S:
+                # SET_POSITION_TARGET has no acknowledgement: re-send against packet loss.
+                self._send_setpoint(target)
+        if state == "return" and self._armed:
+            on_ground = self._landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND
+            if not on_ground:
+                self._on_ground_since = None
+            elif self._on_ground_since is None:
+                self._on_ground_since = now
+            elif now - self._on_ground_since > _STUCK_ARMED_S:
+                logger.info("%s: landed but still armed: disarming", self.name)
+                self.link.disarm()
+
+    def _reached_altitude(self, top: Position) -> bool:
+        # ArduPilot ends its take-off within a few decimetres; a little early is harmless
+        # since the cruise leg keeps climbing.
+        return self._position.alt >= top.alt - max(0.5, 0.05 * (top.alt - self.depot.alt))
+
+    # --- telemetry (on the link's reader thread) --------------------------------------------
+
+    def _on_heartbeat(self, msg: Any) -> None:
+        beat = self.link.heartbeat
+        if beat is not None:
+            self._on_heartbeat_state(beat.armed, beat.mode)
+
+    def _on_heartbeat_state(self, armed: bool, mode: str) -> None:
+        now = self.clock()
+        with self._lock:
+            self._mode = mode
+            if armed and not self._armed:
+                self._armed_since_s = now
+                self._odometer_anchor = self._position
+            elif not armed and self._armed:
+                if self._armed_since_s is not None:
+                    self._flight_before_s += max(0.0, now - self._armed_since_s)
+                self._armed_since_s = None
+                self._state = "idle"
+                self._target = self._pending = None
+                self._took_over = None
+                self._stream_since = None
+                self._goal_modes = self._allowed_modes = frozenset()
+            self._armed = armed
+            if not armed or self._state == "idle":
+                return
+            if mode in self._goal_modes:
+                self._allowed_modes = self._goal_modes
+            elif mode not in self._allowed_modes and self._took_over is None:
+                self._took_over = mode
+                self._stream_since = None
+                logger.warning("%s: the vehicle switched to %s by itself", self.name, mode)
+
+    def _on_position(self, msg: Any) -> None:
+        if msg.lat == 0 and msg.lon == 0:
+            return  # ArduPilot reports 0, 0 until it has a position
+        try:
+            here = Position(msg.lat / 1e7, msg.lon / 1e7, self.depot.alt + msg.relative_alt / 1000)
+        except ValueError:
+            return  # out-of-range garbage
+        with self._lock:
+            self._position = here
+            self._position_seen_s = self.clock()
+            anchor = self._odometer_anchor
+            if self._armed and anchor is not None:
+                step = distance_m(anchor, here)
+                if step >= _ODOMETER_STEP_M:
+                    self._distance_m += step
+                    self._odometer_anchor = here
+        self._wake.set()
+
+    def _on_sys_status(self, msg: Any) -> None:
+        if msg.battery_remaining >= 0:  # -1: unknown
+            self._battery = msg.battery_remaining / 100.0
+
+    def _on_battery_status(self, msg: Any) -> None:
+        if msg.battery_remaining >= 0:
+            self._battery = msg.battery_remaining / 100.0
+
+    def _on_extended_state(self, msg: Any) -> None:
+        self._landed_state = int(msg.landed_state)
+
+    def _on_home(self, msg: Any) -> None:
+        self._home_amsl_m = msg.altitude / 1000.0
+        home = Position(msg.latitude / 1e7, msg.longitude / 1e7, self.depot.alt)
+        off = ground_distance_m(home, self.depot)
+        if off > 20.0:
+            logger.warning(
+                "%s: the autopilot's home is %.0f m from the depot: altitudes and returns are "
+                "relative to it",
+                self.name,
+                off,
+            )
+
+    def _on_link_lost(self) -> None:
+        logger.warning("%s: link lost", self.name)
+        if self.on_link_lost is not None:
+            self.on_link_lost()
+
+    def _on_link_regained(self) -> None:
+        logger.warning("%s: link regained", self.name)

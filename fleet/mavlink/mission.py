@@ -1,0 +1,145 @@
+"""Mission items and the geofence as the mission protocol carries it.
+
+A geofence travels over the same protocol as a mission, with ``mission_type`` =
+MAV_MISSION_TYPE_FENCE on every message. An inclusion polygon is N consecutive items with
+command MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, each carrying the polygon's vertex count N
+in param1 and one vertex in x (latitude * 1e7) and y (longitude * 1e7). The polygon is closed
+implicitly: the first vertex is not repeated at the end (an operation area's ring is, so
+``fence_polygon_items`` drops its closing point).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from fleet.mavlink.wire import mavlink
+
+FENCE_COMMANDS = frozenset(
+    {
+        mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT,
+        mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+        mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
+        mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+        mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
+    }
+)
+_POLYGON_COMMANDS = frozenset(
+    {
+        mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+        mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
+    }
+)
+
+
+def to_e7(degrees: float) -> int:
+    """Degrees as the protocol's integer degrees * 1e7."""
+    return round(degrees * 1e7)
+
+
+@dataclass(frozen=True)
+class MissionItem:
+    """One item of a mission, fence or rally list, as MISSION_ITEM_INT carries it.
+
+    ``x``/``y`` are latitude/longitude in degrees * 1e7 for global frames; ``z`` an altitude
+    in metres. ``seq`` is the item's index in its list.
+    """
+
+    command: int
+    frame: int = mavlink.MAV_FRAME_GLOBAL
+    param1: float = 0.0
+    param2: float = 0.0
+    param3: float = 0.0
+    param4: float = 0.0
+    x: int = 0
+    y: int = 0
+    z: float = 0.0
+    seq: int = 0
+    current: int = 0
+    autocontinue: int = 1
+
+    @property
+    def lat(self) -> float:
+        return self.x / 1e7
+
+    @property
+    def lng(self) -> float:
+        return self.y / 1e7
+
+    def with_seq(self, seq: int) -> MissionItem:
+        return replace(self, seq=seq)
+
+
+def fence_polygon_items(ring: Sequence[Sequence[float]]) -> list[MissionItem]:
+    """The fence items of one inclusion polygon from a ring of (lat, lng) points.
+
+    A closing point equal to the first is dropped, as are repeated consecutive points.
+    Returns the items numbered from 0. Raises ValueError for fewer than 3 distinct vertices or
+    a coordinate out of range.
+    """
+    vertices: list[tuple[float, float]] = []
+    for point in ring:
+        lat, lng = float(point[0]), float(point[1])
+        if not (math.isfinite(lat) and -90.0 <= lat <= 90.0):
+            raise ValueError(f"latitude {lat!r} is outside -90..90")
+        if not (math.isfinite(lng) and -180.0 <= lng <= 180.0):
+            raise ValueError(f"longitude {lng!r} is outside -180..180")
+        if not vertices or vertices[-1] != (lat, lng):
+            vertices.append((lat, lng))
+    if len(vertices) > 1 and vertices[0] == vertices[-1]:
+        vertices.pop()
+    if len(set(vertices)) < 3:
+        raise ValueError("a fence polygon needs at least 3 distinct vertices")
+    count = float(len(vertices))
+    return [
+        MissionItem(
+            command=mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+            param1=count,
+            x=to_e7(lat),
+            y=to_e7(lng),
+            seq=seq,
+        )
+        for seq, (lat, lng) in enumerate(vertices)
+    ]
+
+
+def inclusion_polygons(items: Sequence[MissionItem]) -> list[list[tuple[float, float]]]:
+    """The inclusion polygons of a fence list, each as its (lat, lng) vertices in order.
+
+    Items are grouped as the protocol says: a polygon is the next param1 vertex items.
+    Raises ValueError when a polygon is cut short or its items disagree on the count.
+    """
+    polygons: list[list[tuple[float, float]]] = []
+    i = 0
+    while i < len(items):
+        item = items[i]
+        if item.command not in _POLYGON_COMMANDS:
+            i += 1
+            continue
+        count = int(item.param1)
+        group = list(items[i : i + count])
+        if count < 3 or len(group) < count:
+            raise ValueError(f"fence item {i}: a polygon of {count} vertices is cut short")
+        if any(g.command != item.command or int(g.param1) != count for g in group):
+            raise ValueError(f"fence items {i}..{i + count - 1} disagree on their polygon")
+        if item.command == mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION:
+            polygons.append([(g.lat, g.lng) for g in group])
+        i += count
+    return polygons
+
+
+def validate_fence(items: Sequence[MissionItem]) -> int:
+    """Check a fence list as a vehicle would on upload.
+
+    Returns MAV_MISSION_ACCEPTED, or the MAV_MISSION_RESULT that says what is wrong:
+    MAV_MISSION_UNSUPPORTED for a command that is not a fence item,
+    MAV_MISSION_INVALID_PARAM1 for an inconsistent polygon vertex count.
+    """
+    if any(item.command not in FENCE_COMMANDS for item in items):
+        return int(mavlink.MAV_MISSION_UNSUPPORTED)
+    try:
+        inclusion_polygons(items)
+    except ValueError:
+        return int(mavlink.MAV_MISSION_INVALID_PARAM1)
+    return int(mavlink.MAV_MISSION_ACCEPTED)

@@ -1,0 +1,134 @@
+"""What differs between the simulated ArduCopter and the simulated PX4: modes, take-off,
+parameter names and encodings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from fleet.mavlink import params as param_codec
+from fleet.mavlink.modes import Autopilot
+from fleet.mavlink.wire import mavlink
+from fleet.simulation.vehicle import VehicleSpec
+
+
+@dataclass(frozen=True)
+class Flavour:
+    """How one autopilot behaves where ArduCopter and PX4 differ."""
+
+    autopilot: Autopilot
+    heartbeat_autopilot: int
+    initial_mode: str
+    armable: frozenset[str]  # modes arming is allowed in
+    hold: frozenset[str]  # modes that hold position in the air
+    follows_targets: str  # the mode that flies SET_POSITION_TARGET_GLOBAL_INT
+    rtl: str
+    land: str
+    takeoff_in: frozenset[str] | None  # modes NAV_TAKEOFF is accepted in (None: any)
+    takeoff_mode: str | None  # the mode NAV_TAKEOFF switches to
+    after_takeoff: str | None  # the mode the vehicle is in once up
+    takeoff_alt_amsl: bool  # NAV_TAKEOFF param7: AMSL (PX4) or relative to home (ArduPilot)
+    refusal_prefix: str
+    bytewise_params: bool
+    setpoint_stream: bool  # the follow mode needs a live setpoint stream (PX4 offboard)
+    speed_params: tuple[tuple[str, str, float], ...]  # (param, spec field, unit in m/s)
+    rtl_alt_param: tuple[str, float]  # (param, unit in metres)
+    disarm_delay_param: str
+
+
+ARDUCOPTER = Flavour(
+    autopilot=Autopilot.ARDUPILOT,
+    heartbeat_autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+    initial_mode="STABILIZE",
+    armable=frozenset({"STABILIZE", "ALT_HOLD", "GUIDED", "LOITER", "POSHOLD"}),
+    hold=frozenset({"STABILIZE", "ALT_HOLD", "GUIDED", "LOITER", "POSHOLD", "BRAKE"}),
+    follows_targets="GUIDED",
+    rtl="RTL",
+    land="LAND",
+    takeoff_in=frozenset({"GUIDED"}),
+    takeoff_mode=None,
+    after_takeoff=None,
+    takeoff_alt_amsl=False,
+    refusal_prefix="PreArm: ",
+    bytewise_params=False,
+    setpoint_stream=False,
+    speed_params=(
+        ("WPNAV_SPEED", "max_speed_mps", 0.01),
+        ("WPNAV_SPEED_UP", "climb_rate_mps", 0.01),
+    ),
+    rtl_alt_param=("RTL_ALT", 0.01),
+    disarm_delay_param="DISARM_DELAY",
+)
+PX4 = Flavour(
+    autopilot=Autopilot.PX4,
+    heartbeat_autopilot=mavlink.MAV_AUTOPILOT_PX4,
+    initial_mode="AUTO.LOITER",
+    armable=frozenset({"MANUAL", "ALTCTL", "POSCTL", "AUTO.LOITER", "OFFBOARD"}),
+    hold=frozenset({"MANUAL", "ALTCTL", "POSCTL", "AUTO.LOITER", "STABILIZED"}),
+    follows_targets="OFFBOARD",
+    rtl="AUTO.RTL",
+    land="AUTO.LAND",
+    takeoff_in=None,
+    takeoff_mode="AUTO.TAKEOFF",
+    after_takeoff="AUTO.LOITER",
+    takeoff_alt_amsl=True,
+    refusal_prefix="Preflight Fail: ",
+    bytewise_params=True,
+    setpoint_stream=True,
+    speed_params=(
+        ("MPC_XY_CRUISE", "max_speed_mps", 1.0),
+        ("MPC_Z_V_AUTO_UP", "climb_rate_mps", 1.0),
+    ),
+    rtl_alt_param=("RTL_RETURN_ALT", 1.0),
+    disarm_delay_param="COM_DISARM_PRFLT",
+)
+FLAVOURS = {"ardupilot": ARDUCOPTER, "px4": PX4}
+
+
+@dataclass
+class Param:
+    """A parameter's value and MAV_PARAM_TYPE."""
+
+    value: float
+    type: int
+
+
+def initial_params(
+    flavour: Flavour, spec: VehicleSpec, *, system_id: int, battery_capacity_mah: int
+) -> dict[str, Param]:
+    """The parameters a simulated vehicle of this flavour starts with, by name (in the order
+    PARAM_REQUEST_LIST streams them)."""
+    real = param_codec.REAL32
+    int8 = int(mavlink.MAV_PARAM_TYPE_INT8)
+    int16 = int(mavlink.MAV_PARAM_TYPE_INT16)
+    int32 = int(mavlink.MAV_PARAM_TYPE_INT32)
+    if flavour.autopilot is Autopilot.PX4:
+        return {
+            "GF_ACTION": Param(2, int32),
+            "GF_MAX_HOR_DIST": Param(0.0, real),
+            "GF_MAX_VER_DIST": Param(0.0, real),
+            "BAT1_CAPACITY": Param(float(battery_capacity_mah), real),
+            "MPC_XY_CRUISE": Param(spec.max_speed_mps, real),
+            "MPC_Z_V_AUTO_UP": Param(spec.climb_rate_mps, real),
+            "MPC_Z_V_AUTO_DN": Param(spec.climb_rate_mps, real),
+            "MIS_TAKEOFF_ALT": Param(spec.takeoff_alt_m, real),
+            "RTL_RETURN_ALT": Param(spec.takeoff_alt_m, real),
+            "COM_DISARM_PRFLT": Param(10.0, real),
+            "MAV_SYS_ID": Param(float(system_id), int32),
+        }
+    return {
+        "FENCE_ENABLE": Param(0, int8),
+        "FENCE_TYPE": Param(7, int8),  # max altitude, circle and polygon
+        "FENCE_ACTION": Param(1, int8),  # RTL or land
+        "FENCE_ALT_MAX": Param(100.0, real),
+        "FENCE_ALT_MIN": Param(-10.0, real),
+        "FENCE_MARGIN": Param(2.0, real),
+        "FENCE_RADIUS": Param(300.0, real),
+        "BATT_CAPACITY": Param(float(battery_capacity_mah), int32),
+        "WPNAV_SPEED": Param(spec.max_speed_mps * 100, real),
+        "WPNAV_SPEED_UP": Param(spec.climb_rate_mps * 100, real),
+        "WPNAV_SPEED_DN": Param(spec.climb_rate_mps * 100, real),
+        "RTL_ALT": Param(round(spec.takeoff_alt_m * 100), int32),
+        "DISARM_DELAY": Param(10, int8),
+        "SYSID_THISMAV": Param(float(system_id), int16),
+        "FS_GCS_ENABLE": Param(0, int8),
+    }

@@ -1,0 +1,221 @@
+"""A customer's VV flies on the real platform (daphne, a GS worker, an RV worker) and the
+customer watches it in the browser; another customer sees none of it; staff see it all."""
+
+from __future__ import annotations
+
+import json
+import re
+import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from playwright.sync_api import Error as PlaywrightError
+from playwright.sync_api import Page, expect
+
+from missions.models import VirtualVehicle, VVStatus
+from tests.browser.pages import log_in, map_state
+from tests.conftest import PROGRAMS
+from tests.live import Workers, wait_for
+from vvm_worker.runtime import check_syntax
+
+pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
+
+VV1 = (PROGRAMS / "vv1-paper.js").read_text()
+# VV 1 with a parenthesis missing on line 4 (`VV.sensor.get('Thermometer';`).
+VV1_BROKEN = VV1.replace("get('Thermometer');", "get('Thermometer';", 1)
+# What the platform's check says of it (computed here: V8 refuses to run once Playwright's loop
+# runs in this thread).
+PROBLEM = check_syntax(VV1_BROKEN)
+KEYS = sorted(f"p{n}.{k}" for n in range(4) for k in range(3))  # what VV 1 stores
+SOME = re.compile(r"^[1-9][0-9]*$")
+FLIGHT_MS = 90_000  # VV 1's four points take about 15 s at the tests' speed
+
+
+@contextmanager
+def explained(workers: Workers) -> Iterator[None]:
+    """A failure also says what the workers and the VVs were doing."""
+    try:
+        yield
+    except (AssertionError, PlaywrightError) as exc:
+        errors = list(VirtualVehicle.objects.values_list("name", "status", "error"))
+        raise AssertionError(f"{exc}\n{workers.logs()}\nVVs: {errors}") from exc
+
+
+def write_and_submit(page: Page, name: str) -> str:
+    """In the program editor: VV 1 written with a syntax error, which the check shows with
+    its line and column; the error fixed in the editor; the program submitted. The new VV's
+    id, from its row on the dashboard."""
+    page.get_by_role("navigation", name="Main").get_by_role("link", name="New VV").click()
+    form = page.locator("#editor-form")
+    page.get_by_label("Name").fill(name)
+    page.locator(".CodeMirror").click()
+    page.keyboard.insert_text(VV1_BROKEN)
+    assert page.evaluate("window.cpccEditor.getValue()") == VV1_BROKEN
+
+    page.get_by_role("button", name="Check").click()
+    expect(form).to_have_attribute("data-check", "error")
+    assert PROBLEM is not None and PROBLEM.line == 4
+    expect(page.get_by_role("status")).to_have_text(
+        f"Line 4, column {PROBLEM.column}: {PROBLEM.message}"
+    )
+
+    # Where the editor marks the error, on line 4: the parenthesis goes before the semicolon.
+    page.locator(".CodeMirror .cm-error-mark").click()
+    page.keyboard.press("End")
+    page.keyboard.press("ArrowLeft")
+    page.keyboard.type(")")
+    assert page.evaluate("window.cpccEditor.getValue()") == VV1
+    page.get_by_role("button", name="Check").click()
+    expect(form).to_have_attribute("data-check", "ok")
+
+    page.get_by_role("button", name="Submit").click()
+    expect(page.locator(".messages")).to_contain_text(f"“{name}” is submitted.")
+    row = page.locator("tr[data-vv]", has=page.get_by_role("link", name=name, exact=True))
+    vv_id = row.get_attribute("data-vv")
+    assert vv_id is not None
+    # A form sends a textarea's lines ending in CR LF (the HTML standard): the same program.
+    assert VirtualVehicle.objects.get(pk=vv_id).program.replace("\r\n", "\n") == VV1
+    return vv_id
+
+
+def carrier(page) -> dict:
+    """The one vehicle on the map, once there is one."""
+    page.wait_for_function("() => Object.keys(window.cpccMap.vehicles).length === 1")
+    (vehicle,) = map_state(page)["vehicles"]
+    return vehicle
+
+
+def test_a_customer_writes_vv1_watches_it_fly_and_gets_its_results_others_see_nothing(
+    page, traffic, new_page, world, workers
+) -> None:
+    with explained(workers):
+        workers.start("gsworker", "GS Base")
+        workers.start("rvworker", "Heli One")
+        log_in(page, "customer-a")
+        vv_id = write_and_submit(page, "VV 1")
+        dashboard = page
+        # The live map in a second tab: the dashboard stays open and must follow by itself.
+        with page.context.expect_page() as opened:
+            page.get_by_role("link", name="Map", exact=True).click(modifiers=["Control"])
+        page = opened.value
+        live = page.locator("#live-map")
+        expect(live).to_have_attribute("data-connected", "true")
+        expect(live).to_have_attribute("data-vvs", "1")
+        # Its first task appears (a blue dot) and a vehicle picks it up...
+        expect(live).to_have_attribute("data-tasks-open", SOME, timeout=FLIGHT_MS)
+        first = carrier(page)
+        assert first["vvs"] == [{"id": vv_id, "name": "VV 1", "customer": world.customer_a.pk}]
+        # ...anonymous to the customer: no name, no route (it would show others' tasks).
+        assert "name" not in first and "route" not in first
+        # The marker moves: another frame puts the vehicle, and its marker, somewhere else.
+        page.wait_for_function(
+            """([lat, lng]) => Object.values(window.cpccMap.vehicles)
+                 .some((v) => v.lat !== lat || v.lng !== lng)""",
+            arg=[first["lat"], first["lng"]],
+            timeout=FLIGHT_MS,
+        )
+        moved = carrier(page)
+        assert moved["marker"] == [moved["lat"], moved["lng"]] != first["marker"]
+        assert int(live.get_attribute("data-seq") or 0) > 1
+
+        # Customer B, meanwhile: its map stays empty while A's tasks turn red.
+        page_b, traffic_b = new_page()
+        log_in(page_b, "customer-b", then="/map/")
+        live_b = page_b.locator("#live-map")
+        expect(live_b).to_have_attribute("data-connected", "true")
+        done_before = live.get_attribute("data-tasks-done")
+        expect(live).not_to_have_attribute("data-tasks-done", done_before or "", timeout=FLIGHT_MS)
+        state_b = map_state(page_b)
+        assert (state_b["vvs"], state_b["vehicles"], state_b["vvNames"]) == ("0", [], [])
+        assert (state_b["tasksOpen"], state_b["tasksDone"]) == ("0", "0")
+
+        # Staff see the vehicle by its name, with VV 1 aboard.
+        page_staff, _ = new_page()
+        log_in(page_staff, "operator", then="/map/")
+        page_staff.wait_for_function(
+            """() => Object.values(window.cpccMap.vehicles).some((v) =>
+                 v.name === 'Heli One' && v.vvs.some((vv) => vv.name === 'VV 1'))""",
+            timeout=FLIGHT_MS,
+        )
+
+        # All four tasks done (red), nothing open; the carrier leaves the customer's map.
+        expect(live).to_have_attribute("data-tasks-done", "4", timeout=FLIGHT_MS)
+        expect(live).to_have_attribute("data-tasks-open", "0")
+        expect(live).to_have_attribute("data-vehicles", "0")
+        assert "Heli One" not in page.content()
+        wait_for(
+            lambda: VirtualVehicle.objects.get(pk=vv_id).status == VVStatus.FINISHED,
+            timeout=30,
+            what="VV 1 to finish",
+        )
+
+        see_the_results(dashboard, vv_id)
+
+        # B's pages show nothing of it, and A's VV is not found for B.
+        page_b.get_by_role("link", name="Dashboard").click()
+        expect(page_b.locator("tr[data-vv]")).to_have_count(0)
+        page_b.get_by_role("link", name="Map", exact=True).click()
+        expect(page_b.locator("#live-map")).to_have_attribute("data-connected", "true")
+        expect(page_b.locator("#live-map")).to_have_attribute("data-vvs", "0")
+        for shown in (page_b.locator("#live-map"), page_b.locator("main")):
+            expect(shown).not_to_contain_text("VV 1")
+            expect(shown).not_to_contain_text("Heli One")
+        traffic_b.expect(404, f"/vvs/{vv_id}/")
+        response = page_b.goto(f"/vvs/{vv_id}/")
+        assert response is not None and response.status == 404
+        expect(page_b.locator("body")).not_to_contain_text("VV 1")
+
+
+def see_the_results(page: Page, vv_id: str) -> None:
+    """On the dashboard, open since the VV was submitted: VV 1 finished with its four tasks,
+    without a reload. On its page: its mission replayed on its map, a camera picture opened
+    full size, the results downloaded."""
+    row = page.locator(f'tr[data-vv="{vv_id}"]')
+    expect(row).to_have_attribute("data-status", "finished")
+    expect(row.locator(".tasks-done")).to_have_text("4")
+    expect(page.locator("#dashboard")).to_have_attribute("data-live", "true")
+    expect(page.locator("#dashboard")).not_to_have_attribute("data-refreshes", "0")
+    row.get_by_role("link", name="VV 1").click()
+    expect(page.locator("#vv-status")).to_have_text("Finished")
+
+    # The replay: every task done at the end of the mission, none at its start.
+    vv_map = page.locator("#vv-map")
+    expect(page.locator("#replay")).to_be_visible()
+    expect(vv_map).to_have_attribute("data-tasks-done", "4")
+    page.get_by_label("Time in the mission").fill("0")
+    expect(vv_map).to_have_attribute("data-tasks-done", "0")
+    page.get_by_label("Time in the mission").fill("1000")
+    expect(vv_map).to_have_attribute("data-tasks-done", "4")
+
+    # A camera reading's thumbnail (p3.2: the picture of the fourth point) opens full size.
+    thumbnail = page.get_by_role("link", name="picture of Camera 640x480 (p3.2)", exact=True)
+    thumbnail.scroll_into_view_if_needed()
+    expect(thumbnail.locator("img")).to_have_js_property("complete", True)
+    assert thumbnail.locator("img").evaluate("img => img.naturalWidth") == 640
+    with page.expect_navigation() as opened:
+        thumbnail.click()
+    response = opened.value
+    assert response is not None and response.status == 200
+    assert response.headers["content-type"] == "image/png"
+    assert page.evaluate("[document.images[0].naturalWidth, document.images[0].naturalHeight]") == [
+        640,
+        480,
+    ]
+    page.go_back()
+
+    # The downloads: the results as a zip, the storage as JSON.
+    with page.expect_download() as got:
+        page.get_by_role("link", name="results.zip").click()
+    with zipfile.ZipFile(got.value.path()) as results:
+        names = results.namelist()
+        vv = json.loads(results.read("vv.json"))
+        storage = json.loads(results.read("storage.json"))
+    assert "vv.json" in names and "tasks.json" in names and "log.txt" in names
+    assert sum(name.startswith("images/") for name in names) == 4
+    assert (vv["name"], vv["status"]) == ("VV 1", "finished")
+    assert sorted(storage) == KEYS
+    with page.expect_download() as got:
+        page.get_by_role("link", name="storage.json").click()
+    assert sorted(json.loads(Path(got.value.path()).read_text())) == KEYS

@@ -1,0 +1,126 @@
+"""RV workers flying real MAVLink links: the worker's MAVLink driver against a MAVLink-speaking
+simulated copter (MavSim) on loopback, the rest of the platform as in production."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from fleet.geo import Position, distance_m
+from fleet.mavlink import MavSim
+from fleet.models import Driver, Vehicle, VehicleStatus
+from fleet.simulation.vehicle import VehicleSpec
+from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
+from tests.conftest import SCENARIOS
+from tests.fleet.mavlink.conftest import free_udp_port
+from tests.live import wait_for
+from tests.vvm_worker.test_distributed import KEYS, all_ended, load
+
+pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
+
+SPEED = 25.0  # the workers' time acceleration (tests/live.py), the simulators' too
+
+
+def _vv1_only(vehicles: list[dict]) -> dict:
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    data["vehicles"] = vehicles
+    data["vvs"] = [vv for vv in data["vvs"] if vv["name"] == "VV 1"]
+    return data
+
+
+def _mavlink(vehicle: Vehicle) -> MavSim:
+    """Make ``vehicle`` a MAVLink vehicle and start its copter, which its worker will reach."""
+    port = free_udp_port()
+    vehicle.driver, vehicle.driver_url = Driver.MAVLINK, f"udpout:127.0.0.1:{port}"
+    vehicle.save(update_fields=["driver", "driver_url"])
+    spec = VehicleSpec(
+        max_speed_mps=vehicle.max_speed_mps,
+        climb_rate_mps=vehicle.climb_rate_mps,
+        battery_s=vehicle.battery_s,
+    )
+    return MavSim(
+        f"udpin:127.0.0.1:{port}", spec=spec, depot=vehicle.depot, speed=SPEED, name=vehicle.name
+    ).start()
+
+
+@pytest.fixture
+def copters():
+    started: list[MavSim] = []
+    yield started
+    for sim in started:
+        sim.stop()
+
+
+def test_an_rv_worker_flies_the_papers_vv_1_over_mavlink(
+    workers, copters, tmp_path: Path, monkeypatch
+) -> None:
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    load(_vv1_only(data["vehicles"]), tmp_path, monkeypatch)
+    heli = Vehicle.objects.get(name="Heli One")
+    copters.append(sim := _mavlink(heli))
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    vv = VirtualVehicle.objects.get()
+    assert vv.status == VVStatus.FINISHED, vv.error
+    assert set(vv.storage.values_list("key", flat=True)) == KEYS
+    done = list(vv.tasks.filter(status=TaskStatus.DONE))
+    assert len(done) == 4 and all(t.vehicle == heli for t in done)
+    for task in done:  # read where the copter was: within the task's tolerance
+        where = task.readings[0]["position"]
+        here = Position(where["lat"], where["lng"], where["alt"])
+        assert distance_m(here, task.position) <= task.tolerance_m
+    # The geofence the copter received: the operation area, and the ceiling above its home.
+    (polygon,) = sim.fence_polygons()
+    ring = [tuple(p) for p in heli.area[:-1]]
+    assert [(round(a, 6), round(b, 6)) for a, b in polygon] == ring
+    assert sim.param("FENCE_ALT_MAX") == pytest.approx(heli.max_altitude_m - heli.depot_alt)
+    assert sim.param("FENCE_ENABLE") == 1
+    wait_for(lambda: sim.on_ground, timeout=60, what="the copter to land at its depot")
+
+
+def test_a_link_cut_in_flight_hands_the_vv_to_another_rv_and_nothing_is_read_twice(
+    workers, copters, tmp_path: Path, monkeypatch
+) -> None:
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    slow = dict(data["vehicles"][0], name="Heli Two", depot=[48.1100, 12.8650, 0], max_speed_mps=4)
+    load(_vv1_only([data["vehicles"][0], slow]), tmp_path, monkeypatch)
+    heli = Vehicle.objects.get(name="Heli One")
+    copters.append(sim := _mavlink(heli))
+    workers.env["CPCC_MAVLINK_LINK_TIMEOUT_S"] = "1"
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    workers.start("rvworker", "Heli Two")
+    wait_for(
+        lambda: Task.objects.filter(status=TaskStatus.DONE, vehicle=heli).exists(),
+        timeout=120,
+        what="a task done by the MAVLink RV",
+        details=workers.logs,
+    )
+    sim.cut_link()  # the radio dies in flight
+    wait_for(
+        lambda: Vehicle.objects.get(pk=heli.pk).status == VehicleStatus.MAINTENANCE,
+        timeout=30,
+        what="the RV taken out of service",
+        details=workers.logs,
+    )
+    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    vv = VirtualVehicle.objects.get()
+    assert vv.status == VVStatus.FINISHED, vv.error
+    assert set(vv.storage.values_list("key", flat=True)) == KEYS
+    assert vv.tasks.count() == 4 and vv.tasks.filter(status=TaskStatus.DONE).count() == 4
+    assert JournalEntry.objects.filter(vv=vv).count() == 4, "every reading exactly once"
+    assert vv.tasks.filter(vehicle__name="Heli Two", status=TaskStatus.DONE).exists()
+    assert Migration.objects.filter(vv=vv, from_name="Heli One", to_name="Heli Two").exists() or (
+        Migration.objects.filter(vv=vv, from_name="Heli One", to_kind="gs").exists()
+    )
+    # The link comes back: the RV returns to service by itself.
+    sim.restore_link()
+    wait_for(
+        lambda: Vehicle.objects.get(pk=heli.pk).status == VehicleStatus.ACTIVE,
+        timeout=30,
+        what="the RV back in service",
+        details=workers.logs,
+    )
