@@ -43,6 +43,9 @@ simulate-fig3: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m bench
 	$(PY) -m bench.platform
+	$(PY) -m bench.live_map
+	$(PY) -m bench.live_map --redis redis://127.0.0.1:6379/15
+	$(PY) -m bench.map_browser
 
 # The README's pictures of the web front end, from the real pages of a demo run (Playwright
 # driving /usr/bin/chromium): bench/screenshots.py, into docs/screenshots/.

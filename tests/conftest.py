@@ -22,6 +22,14 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     SDC, content types): one that flushes without it breaks every serialized_rollback test that
     runs after it, far from the cause. Say so at collection instead."""
     for item in items:
+        callspec = getattr(item, "callspec", None)
+        if callspec is not None and "browser_name" in callspec.params and "browser" not in str(
+            item.path.parent.name
+        ):
+            # A test outside tests/browser that names an argument like one of Playwright's
+            # fixtures (page, browser, context) becomes a browser test, and pytest-playwright
+            # moves it and every browser test among the database tests.
+            raise pytest.UsageError(f"{item.nodeid}: rename the argument Playwright takes")
         marker = item.get_closest_marker("django_db")
         if marker is None:
             continue

@@ -36,9 +36,9 @@ def test_the_schema_validates_without_warnings(tmp_path: Path) -> None:
         assert path in paths, path
 
 
-@pytest.mark.parametrize("page", ["/api/docs/", "/api/redoc/"])
-def test_the_docs_pages_load_only_local_static_files(client, db, page: str) -> None:
-    response = client.get(page)
+@pytest.mark.parametrize("docs_page", ["/api/docs/", "/api/redoc/"])
+def test_the_docs_pages_load_only_local_static_files(client, db, docs_page: str) -> None:
+    response = client.get(docs_page)
     assert response.status_code == 200
     html = response.text
     assets = ASSET.findall(html)
