@@ -23,8 +23,10 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     runs after it, far from the cause. Say so at collection instead."""
     for item in items:
         callspec = getattr(item, "callspec", None)
-        if callspec is not None and "browser_name" in callspec.params and "browser" not in str(
-            item.path.parent.name
+        if (
+            callspec is not None
+            and "browser_name" in callspec.params
+            and "browser" not in str(item.path.parent.name)
         ):
             # A test outside tests/browser that names an argument like one of Playwright's
             # fixtures (page, browser, context) becomes a browser test, and pytest-playwright
