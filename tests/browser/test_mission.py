@@ -109,15 +109,20 @@ def test_a_customer_writes_vv1_watches_it_fly_and_gets_its_results_others_see_no
         assert first["vvs"] == [{"id": vv_id, "name": "VV 1", "customer": world.customer_a.pk}]
         # ...anonymous to the customer: no name, no route (it would show others' tasks).
         assert "name" not in first and "route" not in first
-        # The marker moves: another frame puts the vehicle, and its marker, somewhere else.
+        # The marker moves: another frame puts the vehicle somewhere else, and the marker is
+        # drawn there (on the next animation frame).
         page.wait_for_function(
-            """([lat, lng]) => Object.values(window.cpccMap.vehicles)
-                 .some((v) => v.lat !== lat || v.lng !== lng)""",
+            """([lat, lng]) => Object.entries(window.cpccMap.vehicles).some(([id, v]) => {
+                 const marker = window.cpccMap.vehicleMarkers[id];
+                 if (!marker || (v.lat === lat && v.lng === lng)) return false;
+                 const drawn = marker.getLatLng();
+                 return drawn.lat === v.lat && drawn.lng === v.lng;
+               })""",
             arg=[first["lat"], first["lng"]],
             timeout=FLIGHT_MS,
         )
         moved = carrier(page)
-        assert moved["marker"] == [moved["lat"], moved["lng"]] != first["marker"]
+        assert moved["marker"] != first["marker"]
         assert int(live.get_attribute("data-seq") or 0) > 1
 
         # Customer B, meanwhile: its map stays empty while A's tasks turn red.

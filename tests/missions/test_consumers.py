@@ -212,3 +212,24 @@ async def test_a_socket_from_another_site_is_refused(client, user_a) -> None:
     )
     connected, _ = await socket.connect()
     assert not connected
+
+
+async def test_a_browser_that_asks_to_resync_gets_the_whole_state_again(
+    client, user_a, customer_a, ground_station, announcing
+) -> None:
+    from asgiref.sync import sync_to_async
+
+    await sync_to_async(client.force_login)(user_a)
+    socket = _socket(client)
+    assert (await socket.connect())[0]
+    first = await socket.receive_json_from(timeout=5)
+    assert first["type"] == "snapshot" and first["vvs"] == []
+    vv = await sync_to_async(vv_submit)(
+        customer=customer_a, name="later", program=PROGRAM, vvm=announcing
+    )
+    await socket.send_json_to({"type": "resync"})
+    frames = await _frames_until(socket, lambda f: f["type"] == "snapshot")
+    again = frames[-1]
+    assert [v["vv"] for v in again["vvs"]] == [str(vv.pk)]
+    assert again["seq"] == first["seq"] + len(frames), "numbered on from the first snapshot"
+    await socket.disconnect()
