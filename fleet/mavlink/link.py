@@ -632,23 +632,7 @@ class MavlinkLink:
 
         def send_item(item: MissionItem) -> None:
             self.send(
-                lambda mav: mav.mission_item_int_send(
-                    self._target(),
-                    self.target_component,
-                    item.seq,
-                    item.frame,
-                    item.command,
-                    item.current,
-                    item.autocontinue,
-                    item.param1,
-                    item.param2,
-                    item.param3,
-                    item.param4,
-                    item.x,
-                    item.y,
-                    item.z,
-                    mission_type,
-                )
+                lambda mav: item.send(mav, self._target(), self.target_component, mission_type)
             )
 
         def is_answer(msg: Any) -> bool:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 from fleet.mavlink.wire import mavlink
 
@@ -69,6 +70,27 @@ class MissionItem:
 
     def with_seq(self, seq: int) -> MissionItem:
         return replace(self, seq=seq)
+
+    def send(self, mav: Any, system: int, component: int, mission_type: int) -> None:
+        """Send the item as MISSION_ITEM_INT to ``system``/``component`` with pymavlink's
+        ``mav`` (a connection's MAVLink object)."""
+        mav.mission_item_int_send(
+            system,
+            component,
+            self.seq,
+            self.frame,
+            self.command,
+            self.current,
+            self.autocontinue,
+            self.param1,
+            self.param2,
+            self.param3,
+            self.param4,
+            self.x,
+            self.y,
+            self.z,
+            mission_type,
+        )
 
 
 def fence_polygon_items(ring: Sequence[Sequence[float]]) -> list[MissionItem]:

@@ -188,25 +188,7 @@ class MissionServer:
                 )
             )
             return
-        self._send(
-            lambda mav: mav.mission_item_int_send(
-                system,
-                component,
-                item.seq,
-                item.frame,
-                item.command,
-                item.current,
-                item.autocontinue,
-                item.param1,
-                item.param2,
-                item.param3,
-                item.param4,
-                item.x,
-                item.y,
-                item.z,
-                mission_type,
-            )
-        )
+        self._send(lambda mav: item.send(mav, system, component, mission_type))
 
     def _on_mission_clear_all(self, msg: Any) -> None:
         mission_type = int(getattr(msg, "mission_type", 0))
