@@ -717,22 +717,7 @@ class MavlinkLink:
             for seq in range(int(count_msg.count)):
                 with self._waiting(is_item(seq)) as waiter:
                     msg = self._ask(waiter, request_item(seq), timeout)
-                items.append(
-                    MissionItem(
-                        command=int(msg.command),
-                        frame=int(msg.frame),
-                        param1=float(msg.param1),
-                        param2=float(msg.param2),
-                        param3=float(msg.param3),
-                        param4=float(msg.param4),
-                        x=int(msg.x),
-                        y=int(msg.y),
-                        z=float(msg.z),
-                        seq=seq,
-                        current=int(msg.current),
-                        autocontinue=int(msg.autocontinue),
-                    )
-                )
+                items.append(MissionItem.from_message(msg).with_seq(seq))
             self.send(
                 lambda mav: mav.mission_ack_send(
                     target(), self.target_component, mavlink.MAV_MISSION_ACCEPTED, mission_type

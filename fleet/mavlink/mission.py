@@ -71,6 +71,29 @@ class MissionItem:
     def with_seq(self, seq: int) -> MissionItem:
         return replace(self, seq=seq)
 
+    @classmethod
+    def from_message(cls, msg: Any) -> MissionItem:
+        """The item a MISSION_ITEM_INT (or the older MISSION_ITEM, whose x/y are degrees as
+        floats) carries."""
+        if msg.get_type() == "MISSION_ITEM":
+            x, y = round(msg.x * 1e7), round(msg.y * 1e7)
+        else:
+            x, y = int(msg.x), int(msg.y)
+        return cls(
+            command=int(msg.command),
+            frame=int(msg.frame),
+            param1=float(msg.param1),
+            param2=float(msg.param2),
+            param3=float(msg.param3),
+            param4=float(msg.param4),
+            x=x,
+            y=y,
+            z=float(msg.z),
+            seq=int(msg.seq),
+            current=int(msg.current),
+            autocontinue=int(msg.autocontinue),
+        )
+
     def send(self, mav: Any, system: int, component: int, mission_type: int) -> None:
         """Send the item as MISSION_ITEM_INT to ``system``/``component`` with pymavlink's
         ``mav`` (a connection's MAVLink object)."""

@@ -98,26 +98,7 @@ class MissionServer:
         if msg.seq != len(upload.items):
             self._request_item(upload)  # out of order or repeated: ask for the one we need
             return
-        if msg.get_type() == "MISSION_ITEM":
-            x, y = round(msg.x * 1e7), round(msg.y * 1e7)  # the float variant: degrees
-        else:
-            x, y = int(msg.x), int(msg.y)
-        upload.items.append(
-            MissionItem(
-                command=int(msg.command),
-                frame=int(msg.frame),
-                param1=float(msg.param1),
-                param2=float(msg.param2),
-                param3=float(msg.param3),
-                param4=float(msg.param4),
-                x=x,
-                y=y,
-                z=float(msg.z),
-                seq=int(msg.seq),
-                current=int(msg.current),
-                autocontinue=int(msg.autocontinue),
-            )
-        )
+        upload.items.append(MissionItem.from_message(msg))
         upload.retries = 0
         if len(upload.items) < upload.count:
             self._request_item(upload)
