@@ -126,7 +126,8 @@ class VehicleLoop:
                 )
             return
         self.target = None
-        # The end of the leg is on the track of the VVs aboard, before any of them leaves.
+        # The end of the leg is on the track of the VVs aboard, before any of them leaves, and
+        # the vehicle's row says it is here: a VV migrating off it now records this position.
         self._save_state(now)
         here = self.driver.position_at(now)
         served = [
