@@ -181,6 +181,12 @@ CELERY_BROKER_CONNECTION_TIMEOUT = 2.0
 # flies home and recharges for CPCC_RECHARGE_S (simulated vehicles; time acceleration applies).
 CPCC_BATTERY_RESERVE = env_float("CPCC_BATTERY_RESERVE", 0.2, minimum=0.0)
 CPCC_RECHARGE_S = env_float("CPCC_RECHARGE_S", 600.0, minimum=0.0)
+# An idle RV whose planner stands by (the default, latency) waits this long in the air at the
+# centre of its area for the next task before it flies home (battery permitting; 0: at once).
+CPCC_STANDBY_S = env_float("CPCC_STANDBY_S", 120.0, minimum=0.0)
+# Longest a live RV worker's planner may think about one route (simulate is not limited, so
+# that its runs are reproducible).
+CPCC_PLAN_TIME_LIMIT_S = env_float("CPCC_PLAN_TIME_LIMIT_S", 0.5, minimum=0.01)
 # MAVLink vehicles: how long an RV worker waits for its vehicle's first heartbeat, and after
 # how long without one it takes the link as lost (the vehicle leaves service until it is back).
 CPCC_MAVLINK_CONNECT_S = env_float("CPCC_MAVLINK_CONNECT_S", 30.0, minimum=1.0)

@@ -2,8 +2,10 @@
 
 The loop keeps the route over the open tasks of every VV aboard with its planner, flies to
 the next task through its driver, reads the sensors there for every task within tolerance
-and resumes those VVs (``task_complete``). With nothing left to do it flies home and lands.
-Time comes from a scheduler: the discrete-event queue of ``simulate``, or real time in a
+and resumes those VVs (``task_complete``). It asks the planner again when it arrives and,
+when the planner ``retargets``, whenever work is added in flight. With nothing left to do it
+waits in the air at its standby position for a while (planners that ``stand_by``) and then
+flies home and lands. Time comes from a scheduler: the discrete-event queue of ``simulate``, or real time in a
 worker.
 """
 
@@ -18,7 +20,7 @@ from fleet.geo import Position, distance_m
 from fleet.mavlink.errors import MavlinkError
 from fleet.models import SensorType, Vehicle, VehicleStatus
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle
-from vvm_worker.planning import Planner, PlanTask
+from vvm_worker.planning import Planner, PlanTask, standby_position
 from vvm_worker.sensing import read_sensors
 from vvm_worker.services import VVM, task_complete, vehicle_record_state, vehicle_set_status
 from vvm_worker.services.base import announcing
@@ -33,6 +35,8 @@ _REACH_SLACK_M = 1e-3
 _ARRIVAL_POLL_S = 0.2
 _ARRIVAL_OVERDUE_S = 60.0
 _SDC_TTL_S = 10.0
+# Altitudes of this many tasks served last place the standby position.
+_RECENT_TASKS = 20
 
 
 class Scheduler(Protocol):
@@ -72,6 +76,7 @@ class VehicleLoop:
         battery_s: float | None = None,
         reserve: float = 0.0,
         recharge_s: float = 0.0,
+        standby_s: float = 0.0,
     ) -> None:
         self.vehicle_id = vehicle_id
         self.driver = driver
@@ -82,6 +87,9 @@ class VehicleLoop:
         # Endurance kept for the unexpected: never planned away (seconds of flight).
         self.reserve_s = reserve * battery_s if battery_s else 0.0
         self.recharge_s = recharge_s
+        self.standby_s = standby_s
+        self.standby_until: float | None = None  # waiting in the air for work until then
+        self._recent_alts: list[float] = []
         self._charged_at: float | None = None  # when a charge under way is done
         self.target: int | None = None  # the task the vehicle is flying to
         self.returning = False
@@ -97,13 +105,18 @@ class VehicleLoop:
     # --- events ------------------------------------------------------------------------------
 
     def wake(self) -> None:
-        """The vehicle's tasks or status changed: re-plan unless its target still stands."""
+        """The vehicle's tasks or status changed: re-plan, unless its target still stands and
+        its planner keeps targets until it gets there."""
         now = self.vvm.clock.now_s()
-        if self.target is not None and self._assigned().filter(pk=self.target).exists():
+        if (
+            not self.planner.retargets
+            and self.target is not None
+            and self._assigned().filter(pk=self.target).exists()
+        ):
             if announcing(self.vvm):  # the map shows new work and VVs at once
                 here = self.driver.position_at(now)
-                plan = [PlanTask(t.pk, t.position, t.requested_s) for t in self._assigned()]
-                self.route = [t.position for t in self.planner.route(here, plan)]
+                plan = [_plan_task(t) for t in self._assigned()]
+                self.route = [t.position for t in self.planner.route(here, plan, now)]
                 self.aboard = self._aboard()
             return
         self._plan(now)
@@ -137,6 +150,7 @@ class VehicleLoop:
         ]
         catalog = self._catalog()
         for task in served:
+            self._recent_alts = [*self._recent_alts[1 - _RECENT_TASKS :], task.alt]
             readings = read_sensors(
                 field=self.vvm.field,
                 sensors=[catalog[name] for name in task.sensors],
@@ -222,19 +236,23 @@ class VehicleLoop:
         choice = None
         self.route = []
         if tasks:
-            plan = [PlanTask(t.pk, t.position, t.requested_s) for t in tasks]
-            choice = self.planner.next_task(here, plan)
-            self.route = [t.position for t in self.planner.route(here, plan)]
+            plan = [_plan_task(t) for t in tasks]
+            choice = self.planner.next_task(here, plan, now)
+            self.route = [t.position for t in self.planner.route(here, plan, now)]
             if choice is not None and not self._within_battery(now, choice.position):
                 self._run_low()
                 choice, self.route = None, []
         if self.status == VehicleStatus.CHARGING and self.driver.is_landed_at(now):
             self._charge(now)
+        if choice is not None and choice.id == self.target and not self.returning:
+            self._save_state(now)  # still the best target: fly on
+            return
         self._token += 1
         token = self._token
         if choice is not None:
             self.target = choice.id
             self.returning = False
+            self.standby_until = None
             tolerance_m = next(t.tolerance_m for t in tasks if t.pk == choice.id)
             try:
                 arrival = self.driver.fly_to(choice.position, now)
@@ -246,14 +264,64 @@ class VehicleLoop:
             )
         else:
             self.target = None
-            if not self.driver.is_landed_at(now):
-                self.returning = True
-                try:
-                    landing = self.driver.return_to_depot(now)
-                except MavlinkError as exc:
-                    self._failed(exc)
-                    return
-                self.scheduler.call_at(landing, lambda: self._landed(token, landing))
+            if not self.driver.is_landed_at(now) and not self._stand_by(now, token):
+                self._go_home(now, token)
+        self._save_state(now)
+
+    def _go_home(self, now: float, token: int) -> None:
+        self.returning = True
+        self.standby_until = None
+        try:
+            landing = self.driver.return_to_depot(now)
+        except MavlinkError as exc:
+            self._failed(exc)
+            return
+        self.scheduler.call_at(landing, lambda: self._landed(token, landing))
+
+    def _stand_by(self, now: float, token: int) -> bool:
+        """Wait in the air at the standby position, if the planner wants it and the battery
+        allows it (there, a while, and home with the reserve left). False: fly home."""
+        if (
+            not self.planner.stands_by
+            or self.standby_s <= 0
+            or self.status != VehicleStatus.ACTIVE
+            or self.returning
+        ):
+            return False
+        if self.standby_until is not None:
+            if now >= self.standby_until:
+                return False
+            self.scheduler.call_at(self.standby_until, lambda: self._standby_over(token))
+            return True  # already waiting (or on the way there): keep its deadline
+        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+        spot = standby_position(
+            vehicle.area_polygon,
+            self._recent_alts,
+            min_altitude_m=vehicle.min_altitude_m,
+            max_altitude_m=vehicle.max_altitude_m,
+        )
+        wait_s = self.standby_s
+        remaining = self.driver.battery_remaining_s(now)
+        if remaining is not None:
+            spare = remaining - self.reserve_s - self.driver.time_to_s(spot, now)
+            wait_s = min(wait_s, spare - self.driver.time_home_s(spot))
+            if wait_s <= 0:
+                return False
+        try:
+            there = self.driver.fly_to(spot, now)
+        except MavlinkError as exc:
+            self._failed(exc)
+            return True
+        self.standby_until = there + wait_s
+        self.scheduler.call_at(self.standby_until, lambda: self._standby_over(token))
+        return True
+
+    def _standby_over(self, token: int) -> None:
+        if token != self._token:
+            return
+        now = self.vvm.clock.now_s()
+        self._token += 1
+        self._go_home(now, self._token)
         self._save_state(now)
 
     def _failed(self, exc: Exception) -> None:
@@ -323,3 +391,9 @@ class VehicleLoop:
             flight_s=self.driver.flight_s(now),
             planner_state=self.planner.state(),
         )
+
+
+def _plan_task(task: Task) -> PlanTask:
+    """A task as the planner sees it; the tasks of one request (an executeAll batch) share a
+    group."""
+    return PlanTask(task.pk, task.position, task.requested_s, group=f"{task.vv_id}:{task.q}")

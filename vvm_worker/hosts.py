@@ -37,7 +37,7 @@ from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus
 from vvm_worker.clock import Clock
 from vvm_worker.executor import VehicleLoop
 from vvm_worker.live import publish_vehicle
-from vvm_worker.planning import DEFAULT_PLANNER, make_planner
+from vvm_worker.planning import DEFAULT_PLANNER, TravelTime, make_planner
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     VVM,
@@ -167,12 +167,17 @@ class RVHost:
         self.loop = VehicleLoop(
             vehicle_id=vehicle.pk,
             driver=driver,
-            planner=make_planner(planner),
+            planner=make_planner(
+                planner,
+                travel_time=TravelTime(spec.max_speed_mps, spec.climb_rate_mps),
+                time_limit_s=settings.CPCC_PLAN_TIME_LIMIT_S,
+            ),
             vvm=self.vvm,
             scheduler=self.scheduler,
             battery_s=battery_s,
             reserve=settings.CPCC_BATTERY_RESERVE,
             recharge_s=settings.CPCC_RECHARGE_S / scale,
+            standby_s=settings.CPCC_STANDBY_S / scale,
         )
         self._thread = threading.Thread(target=self._run, name=f"rv-{vehicle.pk}", daemon=True)
 

@@ -10,10 +10,11 @@ from dataclasses import dataclass
 
 from shapely.geometry import Point, Polygon
 
-from fleet.geo import Position, distance_m
+from fleet.geo import Position
+from vvm_worker.planning import TravelTime, insertion_cost
 from vvm_worker.runtime.types import TaskRequest
 
-# Cost of one task already queued on a vehicle, in seconds of flight, when ranking vehicles.
+# Cost of one task queued on a vehicle whose route the mapper does not know, in seconds.
 QUEUE_PENALTY_S = 30.0
 
 
@@ -31,6 +32,9 @@ class VehicleCaps:
     position: Position
     max_speed_mps: float
     open_tasks: int = 0
+    climb_rate_mps: float = 3.0
+    # The open tasks aboard in the order the RV's planner means to serve them (all or some).
+    route: tuple[Position, ...] = ()
 
     def covers(self, task: TaskRequest) -> bool:
         return bool(self.area.covers(Point(task.lng, task.lat)))
@@ -43,10 +47,14 @@ class VehicleCaps:
         )
 
     def cost_s(self, task: TaskRequest) -> float:
+        """What giving the task to this RV costs the customers, in seconds: the task's own wait
+        plus the delay it causes the tasks already on the RV's route, where the planner would
+        fit it in (`planning.insertion_cost` with the RV's travel times)."""
         target = Position(task.lat, task.lng, task.alt)
-        return (
-            distance_m(self.position, target) / self.max_speed_mps
-            + QUEUE_PENALTY_S * self.open_tasks
+        unknown = max(0, self.open_tasks - len(self.route))
+        travel = TravelTime(self.max_speed_mps, self.climb_rate_mps)
+        return insertion_cost(travel, self.position, self.route, target) + (
+            QUEUE_PENALTY_S * unknown
         )
 
 
@@ -72,7 +80,9 @@ def _fmt(task: TaskRequest) -> str:
 
 
 def map_task(task: TaskRequest, fleet: Sequence[VehicleCaps]) -> MapDecision:
-    """Which RVs can serve the task, ranked by estimated time to get there (then name)."""
+    """Which RVs can serve the task, ranked by what it costs the customers to give it to them
+    (`VehicleCaps.cost_s`, then name): where areas overlap, the RV that serves it soonest
+    without holding up its other tasks more than another would."""
     able = [v for v in fleet if v.can_serve(task)]
     active = sorted((v for v in able if v.active), key=lambda v: (v.cost_s(task), v.name))
     if active:

@@ -6,6 +6,7 @@ through ``parse_scenario`` and ``simulate`` like a file would.
 
 from __future__ import annotations
 
+import random
 from typing import Any
 
 from fleet.geo import Position, offset
@@ -116,3 +117,89 @@ def original_style_program(
         "high": high_m,
         "tasks": tasks,
     }
+
+
+ONE_TASK = """\
+// One point task, as in the original implementation's demo5: a GPS reading at a fixed point.
+var gps = VV.sensor.get('GPS');
+var position = new VV.types.LatLngAlt(%(lat).7f, %(lng).7f, %(alt).1f);
+VV.task.execute({type: 'point', position: position, tolerance: 4, sensors: [gps]}, function (data) {
+  VV.storage.store('reading', data[0]);
+});
+"""
+
+
+def poisson_tasks(
+    *,
+    mean_gap_s: float,
+    seed: int,
+    count: int,
+    box: dict[str, float],
+    low_m: float = 5.0,
+    high_m: float = 55.0,
+) -> list[tuple[float, Position]]:
+    """``count`` point tasks requested with exponentially distributed gaps of mean ``mean_gap_s``
+    (Poisson arrivals), at points spread uniformly over ``box`` (see `grid_box`) between
+    ``low_m`` and ``high_m`` up: (request time, position) pairs. Equal arguments, equal tasks."""
+    if mean_gap_s <= 0 or count < 1:
+        raise ValueError("Poisson arrivals need a positive mean gap and at least one task")
+    rng = random.Random(seed)
+    tasks = []
+    at_s = 0.0
+    for _ in range(count):
+        at_s += rng.expovariate(1.0 / mean_gap_s)
+        position = Position(
+            rng.uniform(box["south"], box["north"]),
+            rng.uniform(box["west"], box["east"]),
+            rng.uniform(low_m, high_m),
+        )
+        tasks.append((round(at_s, 3), position))
+    return tasks
+
+
+def poisson_scenario(
+    *,
+    mean_gap_s: float,
+    seed: int,
+    vvs: int = 199,
+    rows: int = 2,
+    cols: int = 2,
+    cell_m: float = 200.0,
+    max_speed_mps: float = 10.0,
+    overlap_m: float = 0.0,
+) -> dict[str, Any]:
+    """The original implementation's demo5 protocol: ``vvs`` VVs with one point task each (see
+    `poisson_tasks`) over a ``rows`` x ``cols`` grid of ``cell_m`` cells, by default 4 RVs at
+    10 m/s, each its own 200 m cell of a 400 m square. ``overlap_m`` > 0 widens every RV's area
+    by that much on each side (within the grid), so that neighbouring areas overlap."""
+    box = grid_box(rows=rows, cols=cols, cell_m=cell_m)
+    programs = [
+        {
+            "customer": "Customer 1",
+            "name": f"Task {k + 1:03d}",
+            "source": ONE_TASK % {"lat": p.lat, "lng": p.lng, "alt": p.alt},
+            "submit_at_s": at_s,
+        }
+        for k, (at_s, p) in enumerate(
+            poisson_tasks(mean_gap_s=mean_gap_s, seed=seed, count=vvs, box=box)
+        )
+    ]
+    scenario = grid_scenario(
+        rows=rows,
+        cols=cols,
+        cell_m=cell_m,
+        max_speed_mps=max_speed_mps,
+        max_parallel_vvs=vvs,
+        vvs=programs,
+        name=f"demo5: {vvs} VVs, mean gap {mean_gap_s:g} s, seed {seed}",
+    )
+    if overlap_m > 0:
+        for vehicle in scenario["vehicles"]:
+            lats = [p[0] for p in vehicle["area"]]
+            lngs = [p[1] for p in vehicle["area"]]
+            low = offset(Position(min(lats), min(lngs), 0), north_m=-overlap_m, east_m=-overlap_m)
+            high = offset(Position(max(lats), max(lngs), 0), north_m=overlap_m, east_m=overlap_m)
+            s, w = max(box["south"], low.lat), max(box["west"], low.lng)
+            n, e = min(box["north"], high.lat), min(box["east"], high.lng)
+            vehicle["area"] = [[s, w], [s, e], [n, e], [n, w], [s, w]]
+    return scenario

@@ -27,7 +27,7 @@ from missions.models import ENDED_STATUSES, Migration, Task, TaskStatus, Virtual
 from missions.readings import map_camera_readings
 from vvm_worker.clock import SimulatedClock
 from vvm_worker.executor import VehicleLoop
-from vvm_worker.planning import DEFAULT_PLANNER, make_planner
+from vvm_worker.planning import DEFAULT_PLANNER, TravelTime, make_planner
 from vvm_worker.scenario import FleetEvent, Scenario, vv_instances
 from vvm_worker.services import (
     VVM,
@@ -146,12 +146,16 @@ class Simulation:
         loop = VehicleLoop(
             vehicle_id=vehicle.pk,
             driver=driver,
-            planner=make_planner(self.planner_name),
+            planner=make_planner(
+                self.planner_name,
+                travel_time=TravelTime(vehicle.max_speed_mps, vehicle.climb_rate_mps),
+            ),
             vvm=self.vvm,
             scheduler=self.queue,
             battery_s=vehicle.battery_s,
             reserve=settings.CPCC_BATTERY_RESERVE,
             recharge_s=settings.CPCC_RECHARGE_S,
+            standby_s=settings.CPCC_STANDBY_S,
         )
         self.loops[vehicle.pk] = loop
         return loop

@@ -100,7 +100,7 @@ def test_simulate_prints_the_same_json_summary_twice(tmp_path: Path, scenario: s
     summary = json.loads(last)
     assert_summary_shape(summary)
     assert [v["status"] for v in summary["vvs"]] == ["finished"] * 3
-    assert summary["planner"] == "tour"
+    assert summary["planner"] == "latency"
     # A fresh database each time: the configured one was never created.
     assert not (tmp_path / "configured.sqlite3").exists()
 

@@ -74,9 +74,17 @@ def busy_rv_of_two(workers, tmp_path: Path, monkeypatch) -> Vehicle:
 
 def test_figure_3_through_separate_gs_and_rv_workers(workers, tmp_path, monkeypatch) -> None:
     load("paper-fig3.json", tmp_path, monkeypatch)
-    workers.start("gsworker", "GS Base")
+    # Both RVs in service before the VVs start: the paper's path presumes it (an RV whose
+    # worker has not reported yet counts as away, and its VVs would wait on the GS).
     workers.start("rvworker", "Heli One")
     workers.start("rvworker", "Heli Two")
+    wait_for(
+        lambda: not Vehicle.objects.filter(worker_seen__isnull=True).exists(),
+        timeout=60,
+        what="both RV workers to report",
+        details=workers.logs,
+    )
+    workers.start("gsworker", "GS Base")
     wait_for(all_ended, timeout=120, what="the three VVs to end", details=workers.logs)
     assert_paper_results()
     for vv in VirtualVehicle.objects.all():

@@ -6,6 +6,7 @@ from shapely.geometry import Polygon
 
 from fleet.geo import Position
 from vvm_worker.mapping import VehicleCaps, map_task
+from vvm_worker.planning import TravelTime
 from vvm_worker.runtime import TaskRequest
 
 ONE = Polygon([(12.859, 48.109), (12.864, 48.109), (12.864, 48.114), (12.859, 48.114)])
@@ -80,3 +81,26 @@ def test_candidates_are_ranked_by_time_to_get_there_and_queue() -> None:
         "Far",
         "Busy",
     ]
+
+
+def test_where_areas_overlap_the_rv_that_serves_the_task_soonest_gets_it() -> None:
+    point = task(48.1111, 12.8619, 50.0)
+    here = Position(48.1111, 12.8619, 50.0)
+    # "Passing" is 37 m away with two stops to make, the first 7 m from the task: it serves
+    # the task on the way, a second late for the stop after. "Idle" is 155 m away.
+    passing = caps(
+        "Passing",
+        ONE,
+        position=Position(48.1111, 12.8624, 50.0),
+        open_tasks=2,
+        route=(Position(48.1111, 12.8620, 50.0), Position(48.1130, 12.8600, 50.0)),
+    )
+    idle = caps("Idle", ONE, position=Position(48.1125, 12.8619, 50.0))
+    assert passing.cost_s(point) < idle.cost_s(point)
+    assert [v.name for v in map_task(point, [idle, passing]).candidates] == ["Passing", "Idle"]
+    # Its route known, the cost is the task's own wait plus the delay of the stop after it.
+    to_task = TravelTime(10.0, 3.0)(passing.position, here)
+    assert to_task <= passing.cost_s(point) < to_task + 3.0
+    # Ranked by distance plus 30 s per queued task, as the mapper once did, Idle would win.
+    blind = caps("Passing", ONE, position=passing.position, open_tasks=2)
+    assert blind.cost_s(point) > idle.cost_s(point)

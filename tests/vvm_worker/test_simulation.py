@@ -8,7 +8,9 @@ from itertools import pairwise
 from pathlib import Path
 
 import pytest
+from django.conf import settings
 from PIL import Image
+from shapely.geometry import Polygon
 
 from fleet.geo import Position, distance_m, ground_distance_m
 from tests.conftest import SCENARIOS
@@ -31,18 +33,33 @@ def stops(summary: dict) -> list[Position]:
 
 
 def flown(
-    depot: Position, points: list[Position], *, speed_mps: float, climb_mps: float
+    depot: Position,
+    points: list[Position],
+    *,
+    speed_mps: float,
+    climb_mps: float,
+    standby: Position | None = None,
+    standby_s: float = 0.0,
 ) -> tuple[float, float]:
     """Distance (m) and time (s) of a vertical take-off at ``depot``, straight legs through
-    ``points`` and a vertical landing back at ``depot``; each leg lasts as long as its slower
-    part, the horizontal at ``speed_mps`` or the vertical at ``climb_mps``."""
+    ``points`` (then to ``standby`` and ``standby_s`` there, if given) and a vertical landing
+    back at ``depot``; each leg lasts as long as its slower part, the horizontal at
+    ``speed_mps`` or the vertical at ``climb_mps``."""
+    points = [*points, standby] if standby is not None else points
     path = [depot, depot.with_alt(points[0].alt), *points, depot.with_alt(points[-1].alt), depot]
     legs = list(pairwise(path))
     distance = sum(distance_m(a, b) for a, b in legs)
     seconds = sum(
         max(ground_distance_m(a, b) / speed_mps, abs(b.alt - a.alt) / climb_mps) for a, b in legs
     )
-    return distance, seconds
+    return distance, seconds + standby_s
+
+
+def area_centre(scenario: Path, vehicle: str, alt: float) -> Position:
+    """The middle of a vehicle's operation area in a scenario file, at ``alt``."""
+    spec = next(v for v in json.loads(scenario.read_text())["vehicles"] if v["name"] == vehicle)
+    centre = Polygon([(lng, lat) for lat, lng in spec["area"]]).centroid
+    return Position(centre.y, centre.x, alt)
 
 
 def rv_to_rv(summary: dict) -> list[dict]:
@@ -69,9 +86,16 @@ def test_figure_2_one_rv_serves_three_vvs() -> None:
                 assert image.size == (640, 480)
                 assert image.format == "PNG"
     # Heli One (10 m/s, climbing at 3 m/s) takes off at its depot, flies straight to each point
-    # in the order it read them, and lands at its depot: what its odometer and flight time say.
+    # in the order it read them, waits for more work in the middle of its area (at the
+    # altitude of its tasks) for CPCC_STANDBY_S and lands at its depot: what its odometer and
+    # flight time say.
     distance, seconds = flown(
-        Position(48.1135, 12.86, 0.0), stops(summary), speed_mps=10.0, climb_mps=3.0
+        Position(48.1135, 12.86, 0.0),
+        stops(summary),
+        speed_mps=10.0,
+        climb_mps=3.0,
+        standby=area_centre(SCENARIOS / "paper-fig2.json", "Heli One", 50.0),
+        standby_s=settings.CPCC_STANDBY_S,
     )
     assert summary["vehicles"] == [
         {

@@ -6,6 +6,7 @@ draws `route(...)` on the live map and persists `state()` / `restore()` with the
 """
 
 from .base import CostFn, Planner, PlanTask
+from .costs import TravelTime
 from .exact import ExactResult, solve_open_path
 from .planners import (
     DEFAULT_PLANNER,
@@ -13,23 +14,31 @@ from .planners import (
     PLANNER_NAMES,
     FcfsPlanner,
     GatedTspPlanner,
+    LatencyPlanner,
     NearestPlanner,
     TourPlanner,
     make_planner,
 )
+from .repairman import insertion_cost
+from .standby import STANDBY_S, standby_position
 
 __all__ = [
     "DEFAULT_PLANNER",
     "GATED_TOUR_LIMIT",
     "PLANNER_NAMES",
+    "STANDBY_S",
     "CostFn",
     "ExactResult",
     "FcfsPlanner",
     "GatedTspPlanner",
+    "LatencyPlanner",
     "NearestPlanner",
     "PlanTask",
     "Planner",
     "TourPlanner",
+    "TravelTime",
+    "insertion_cost",
     "make_planner",
     "solve_open_path",
+    "standby_position",
 ]

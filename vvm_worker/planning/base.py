@@ -25,12 +25,15 @@ class PlanTask:
 
     `id` is unique among the open tasks of one vehicle; `requested_s` is when the task was
     requested on the platform clock (seconds) and breaks ties between equally good choices.
+    `group` names the request the task belongs to: the tasks of one `executeAll` batch share
+    it and the batch is done when its last task is read; None means a request of its own.
     Raises ValueError when `requested_s` is not a finite number.
     """
 
     id: int
     position: Position
     requested_s: float
+    group: str | None = None
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.requested_s):
@@ -42,12 +45,23 @@ class Planner(Protocol):
 
     The vehicle calls `next_task` whenever it arrives somewhere or gets new work, flies to the
     task returned, serves it and asks again. All planners are deterministic: equal inputs (and
-    equal state) give equal answers, and ties are broken by (requested_s, id).
+    equal state) give equal answers, and ties are broken by (requested_s, id). `now_s` is the
+    platform clock's time of the call (planners that weigh a task's age need it; None: the
+    latest request time).
+
+    `retargets`: the vehicle asks again when new work arrives in flight and may turn to another
+    task (otherwise it keeps its target until it gets there). `stands_by`: an idle vehicle
+    waits in the air where the next task is expected soonest (see `standby_position`) for a
+    while before it flies home (otherwise it flies home at once).
     """
 
     name: str
+    retargets: bool
+    stands_by: bool
 
-    def next_task(self, current: Position, open_tasks: Sequence[PlanTask]) -> PlanTask | None:
+    def next_task(
+        self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
+    ) -> PlanTask | None:
         """The task to fly to now, or None when `open_tasks` is empty.
 
         May update the planner's state (for example start a new tour). Raises ValueError on
@@ -55,7 +69,9 @@ class Planner(Protocol):
         """
         ...
 
-    def route(self, current: Position, open_tasks: Sequence[PlanTask]) -> list[PlanTask]:
+    def route(
+        self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
+    ) -> list[PlanTask]:
         """Every open task in the order the planner intends to serve them now ([] when none).
 
         The first element is what `next_task` would return for the same arguments; calling

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fleet.geo import Position, distance_m
+from fleet.geo import Position, distance_m, ground_distance_m
 
 from .base import CostFn
 
@@ -49,6 +49,31 @@ class CostMatrix:
         return int(self.values.shape[0])
 
 
+@dataclass(frozen=True, slots=True)
+class TravelTime:
+    """Seconds a vehicle needs to fly straight from one position to another: it cruises at
+    `max_speed_mps` while climbing or descending at `climb_rate_mps`, so a leg lasts
+    max(ground distance / speed, height difference / climb rate), as `fleet.simulation` flies
+    it. A cost function (symmetric) with a vectorised fast path in `build_cost_matrix`.
+    Raises ValueError when a rate is not a positive finite number.
+    """
+
+    max_speed_mps: float
+    climb_rate_mps: float = 3.0
+
+    def __post_init__(self) -> None:
+        for name in ("max_speed_mps", "climb_rate_mps"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+
+    def __call__(self, a: Position, b: Position) -> float:
+        return max(
+            ground_distance_m(a, b) / self.max_speed_mps,
+            abs(b.alt - a.alt) / self.climb_rate_mps,
+        )
+
+
 def costs_from(cost: CostFn, origin: Position, positions: Sequence[Position]) -> FloatArray:
     """The cost from `origin` to each position, one call of `cost` per position.
 
@@ -66,23 +91,30 @@ def build_cost_matrix(cost: CostFn, origin: Position, positions: Sequence[Positi
 
     Row 0 always comes from `cost` itself, so the first step of every planner is judged with
     the true cost. The task block calls `cost` once per ordered pair (n * (n - 1) calls) for a
-    custom cost, once per unordered pair for `distance_m` up to `EXACT_DEFAULT_LIMIT` tasks, and
-    a vectorised approximation of `distance_m` above that (error below 1e-6 relative for legs
-    under 50 km). Raises ValueError when a cost is negative or not finite.
+    custom cost; `distance_m` and `TravelTime` are evaluated once per unordered pair up to
+    `EXACT_DEFAULT_LIMIT` tasks, and from a vectorised approximation of the ground distance
+    above that (error below 1e-6 relative for legs under 50 km). Raises ValueError when a cost
+    is negative or not finite.
     """
     n = len(positions)
     values = np.zeros((n + 1, n + 1), dtype=np.float64)
     values[0, 1:] = costs_from(cost, origin, positions)
-    if cost is distance_m:
+    if cost is distance_m or isinstance(cost, TravelTime):
         if n > EXACT_DEFAULT_LIMIT:
-            values[1:, 1:] = approximate_distance_matrix(positions)
+            ground = approximate_ground_matrix(positions)
+            alt = np.fromiter((p.alt for p in positions), dtype=np.float64, count=n)
+            dalt = np.abs(alt[:, None] - alt[None, :])
+            if isinstance(cost, TravelTime):
+                ground *= 1.0 / cost.max_speed_mps
+                dalt *= 1.0 / cost.climb_rate_mps
+                values[1:, 1:] = np.maximum(ground, dalt, out=ground)
+            else:
+                values[1:, 1:] = np.hypot(ground, dalt, out=ground)
         else:
             for i in range(n):
                 for j in range(i + 1, n):
-                    # distance_m is symmetric in theory; mirroring keeps it exactly so.
-                    values[i + 1, j + 1] = values[j + 1, i + 1] = distance_m(
-                        positions[i], positions[j]
-                    )
+                    # Symmetric in theory; mirroring keeps the matrix exactly so.
+                    values[i + 1, j + 1] = values[j + 1, i + 1] = cost(positions[i], positions[j])
         return CostMatrix(values, symmetric=True)
     block = np.zeros((n, n), dtype=np.float64)
     for i, a in enumerate(positions):
@@ -101,15 +133,24 @@ def build_cost_matrix(cost: CostFn, origin: Position, positions: Sequence[Positi
 
 
 def approximate_distance_matrix(positions: Sequence[Position]) -> FloatArray:
-    """`distance_m` between all pairs of positions, vectorised.
+    """`distance_m` between all pairs of positions, vectorised: the ground distance of
+    `approximate_ground_matrix` and the altitude difference are the legs of a right triangle,
+    as in `distance_m`. Accurate to about a millimetre over 10 km."""
+    ground = approximate_ground_matrix(positions)
+    alt = np.fromiter((p.alt for p in positions), dtype=np.float64, count=len(positions))
+    dalt = alt[:, None] - alt[None, :]
+    result: FloatArray = np.hypot(ground, dalt, out=ground)
+    return result
 
-    The ground leg is the straight chord between the points on the WGS84 ellipsoid, lengthened
-    by the chord-to-arc term c^3 / (24 R^2); the altitude difference is the other leg of a
-    right triangle, as in `distance_m`. Accurate to about a millimetre over 10 km.
+
+def approximate_ground_matrix(positions: Sequence[Position]) -> FloatArray:
+    """`ground_distance_m` between all pairs of positions, vectorised.
+
+    The straight chord between the points on the WGS84 ellipsoid, lengthened by the
+    chord-to-arc term c^3 / (24 R^2). Accurate to about a millimetre over 10 km.
     """
     lat = np.radians(np.fromiter((p.lat for p in positions), dtype=np.float64))
     lng = np.radians(np.fromiter((p.lng for p in positions), dtype=np.float64))
-    alt = np.fromiter((p.alt for p in positions), dtype=np.float64)
     sin_lat = np.sin(lat)
     normal = _WGS84_A / np.sqrt(1.0 - _WGS84_E2 * sin_lat * sin_lat)
     xyz = np.stack(
@@ -127,17 +168,12 @@ def approximate_distance_matrix(positions: Sequence[Position]) -> FloatArray:
     np.maximum(chord_sq, 0.0, out=chord_sq)
     radius = _gaussian_radius(float(np.mean(lat)))
     # In place throughout: at 1,000 tasks every temporary is an 8 MB array.
-    ground = np.sqrt(chord_sq)
+    ground: FloatArray = np.sqrt(chord_sq)
     chord_sq *= ground
     chord_sq *= 1.0 / (24.0 * radius * radius)
     ground += chord_sq
-    ground *= ground
-    dalt = alt[:, None] - alt[None, :]
-    dalt *= dalt
-    ground += dalt
-    result: FloatArray = np.sqrt(ground, out=ground)
-    np.fill_diagonal(result, 0.0)
-    return result
+    np.fill_diagonal(ground, 0.0)
+    return ground
 
 
 def _gaussian_radius(lat_rad: float) -> float:

@@ -6,8 +6,9 @@ import dataclasses
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from django.db.models import Count, Q, QuerySet
+from django.db.models import Count, Max, Q, QuerySet
 
+from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.events import migration_event, task_event
 from missions.models import (
@@ -36,7 +37,9 @@ from vvm_worker.services.base import (
 from vvm_worker.services.journal import journal_append
 
 
-def vehicle_caps(vehicle: Vehicle, open_tasks: int = 0) -> VehicleCaps:
+def vehicle_caps(
+    vehicle: Vehicle, open_tasks: int = 0, route: tuple[Position, ...] = ()
+) -> VehicleCaps:
     """The mapper's view of one RV."""
     return VehicleCaps(
         id=vehicle.pk,
@@ -48,7 +51,9 @@ def vehicle_caps(vehicle: Vehicle, open_tasks: int = 0) -> VehicleCaps:
         active=vehicle.status == VehicleStatus.ACTIVE,
         position=vehicle.position,
         max_speed_mps=vehicle.max_speed_mps,
+        climb_rate_mps=vehicle.climb_rate_mps,
         open_tasks=open_tasks,
+        route=route,
     )
 
 
@@ -73,16 +78,40 @@ def _sensor_names(vehicle: Vehicle) -> frozenset[str]:
 def fleet_caps(vvm: VVM) -> list[VehicleCaps]:
     """The mapper's view of the fleet: every RV that is in service or in maintenance; one whose
     worker is gone counts as in maintenance (it may come back)."""
-    vehicles = (
+    vehicles = list(
         Vehicle.objects.exclude(status=VehicleStatus.REMOVED)
         .prefetch_related("sensors")
         .annotate(open_count=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)))
     )
-    caps = [vehicle_caps(v, v.open_count) for v in vehicles]
+    routes = planned_routes(vehicles)
+    caps = [vehicle_caps(v, v.open_count, routes.get(v.pk, ())) for v in vehicles]
     if vvm.lease_s is not None:
         online = set(online_vehicles(vvm).values_list("pk", flat=True))
         caps = [dataclasses.replace(c, active=c.active and c.id in online) for c in caps]
     return caps
+
+
+def planned_routes(vehicles: Sequence[Vehicle]) -> dict[int, tuple[Position, ...]]:
+    """The open tasks of each RV with work, in the order its planner last meant to serve
+    them (its saved plan; tasks the plan does not know yet come last, oldest first)."""
+    busy = {v.pk: v for v in vehicles if getattr(v, "open_count", 1)}
+    if not busy:
+        return {}
+    rows = (
+        Task.objects.filter(status=TaskStatus.OPEN, vehicle_id__in=list(busy))
+        .order_by("requested_s", "id")
+        .values_list("pk", "vehicle_id", "lat", "lng", "alt")
+    )
+    tasks: dict[int, list[tuple[int, Position]]] = {}
+    for pk, vehicle_id, lat, lng, alt in rows:
+        tasks.setdefault(vehicle_id, []).append((pk, Position(lat, lng, alt)))
+    routes = {}
+    for vehicle_id, items in tasks.items():
+        plan = busy[vehicle_id].planner_state.get("route", [])
+        rank = {task_id: k for k, task_id in enumerate(plan if isinstance(plan, list) else [])}
+        items.sort(key=lambda item: rank.get(item[0], len(rank)))
+        routes[vehicle_id] = tuple(position for _, position in items)
+    return routes
 
 
 def online_vehicles(vvm: VVM) -> QuerySet[Vehicle]:
@@ -97,17 +126,22 @@ def route(vv: VirtualVehicle, vvm: VVM) -> bool:
     assert pending is not None
     open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
     host = vv.host_rv
+    mine: list[Task] = []
     if host is not None and host.status == VehicleStatus.ACTIVE:
-        # The common case needs no look at the rest of the fleet: the RV aboard can go on.
+        # The common case needs no look at the rest of the fleet: the RV aboard can go on, and
+        # no other RV's area overlaps its own.
         caps = vehicle_caps(host)
         mine = [t for t in open_tasks if caps.can_serve(request_of(t))]
-        if mine:
+        if mine and not overlapping_vehicles(host.pk):
             assign(mine, host, vvm)
             return False
-        if any(t.vehicle_id == host.pk for t in open_tasks):
+        if not mine and any(t.vehicle_id == host.pk for t in open_tasks):
             return False
     fleet = fleet_caps(vvm)
     decisions = {t.pk: map_task(request_of(t), fleet) for t in open_tasks}
+    if host is not None and mine and _stays(host, mine, fleet, decisions):
+        assign(mine, host, vvm)
+        return False
     rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
     # A batch is accepted or rejected as a whole, before any of its tasks is answered.
     if rejected and not _partly_answered(vv, pending):
@@ -129,6 +163,52 @@ def route(vv: VirtualVehicle, vvm: VVM) -> bool:
     if vv.host_rv is not None:
         migrate_to_ground_station(vv, reason="waiting for a vehicle", vvm=vvm)
     return False
+
+
+# Another RV must be this much sooner (seconds of the mapper's cost) before a VV that its RV
+# could serve moves over: no ping-pong between RVs of overlapping areas over a few seconds.
+HANDOVER_MARGIN_S = 5.0
+
+
+def _stays(
+    host: Vehicle, mine: Sequence[Task], fleet: Sequence[VehicleCaps], decisions: dict[int, Any]
+) -> bool:
+    """Whether the VV's RV keeps the tasks it can serve: unless another RV that can serve as
+    many of them would serve them at a cost lower by HANDOVER_MARGIN_S (where areas overlap)."""
+    best = _best_vehicle(mine, decisions)
+    if best is None or best.id == host.pk:
+        return True
+    own = next((c for c in fleet if c.id == host.pk), None)
+    if own is None or not own.active:
+        return False
+    requests = [request_of(t) for t in mine if best.can_serve(request_of(t))]
+    if len(requests) < len(mine):
+        return True
+    ours = sum(own.cost_s(r) for r in requests)
+    theirs = sum(best.cost_s(r) for r in requests)
+    return theirs + HANDOVER_MARGIN_S >= ours
+
+
+# For each version of the fleet (vehicle count, last change), which RVs' areas overlap.
+_overlaps_seen: dict[tuple[Any, ...], dict[int, frozenset[int]]] = {}
+
+
+def overlapping_vehicles(vehicle_id: int) -> frozenset[int]:
+    """The RVs in service or maintenance whose operation areas overlap this RV's (sharing more
+    than a border). Remembered per version of the fleet: one light query when nothing changed."""
+    fleet = Vehicle.objects.exclude(status=VehicleStatus.REMOVED)
+    version = fleet.aggregate(count=Count("id"), changed=Max("updated"), top=Max("id"))
+    key = (version["count"], version["changed"], version["top"])
+    table = _overlaps_seen.get(key)
+    if table is None:
+        areas = {v.pk: v.area_polygon for v in fleet.only("id", "area")}
+        table = {
+            a: frozenset(b for b in areas if b != a and areas[a].intersection(areas[b]).area > 0.0)
+            for a in areas
+        }
+        _overlaps_seen.clear()
+        _overlaps_seen[key] = table
+    return table.get(vehicle_id, frozenset())
 
 
 def _partly_answered(vv: VirtualVehicle, pending: PendingRequest) -> bool:

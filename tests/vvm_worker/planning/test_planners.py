@@ -29,8 +29,8 @@ def climb_is_expensive(a: Position, b: Position) -> float:
 
 
 def test_make_planner_builds_every_named_planner() -> None:
-    assert DEFAULT_PLANNER == "tour"
-    assert set(PLANNER_NAMES) == {"tour", "nearest", "gated-tsp", "fcfs"}
+    assert DEFAULT_PLANNER == "latency"
+    assert set(PLANNER_NAMES) == {"latency", "tour", "nearest", "gated-tsp", "fcfs"}
     for name in PLANNER_NAMES:
         assert make_planner(name).name == name
 
@@ -121,7 +121,7 @@ def test_fcfs_serves_by_request_time_then_id() -> None:
     assert planner.next_task(ORIGIN, tasks) == tasks[3]
 
 
-@pytest.mark.parametrize("name", ["nearest", "tour", "gated-tsp"])
+@pytest.mark.parametrize("name", ["latency", "nearest", "tour", "gated-tsp"])
 def test_a_custom_cost_changes_the_choice(name: str) -> None:
     # 30 m east on the level, or 12 m north but 10 m higher.
     level = task(1, 0, 30)
@@ -137,7 +137,7 @@ def test_a_cost_function_must_return_finite_non_negative_costs() -> None:
     def broken(a: Position, b: Position) -> float:
         return -1.0 if b == tasks[1].position else 1.0
 
-    for name in ("nearest", "tour", "gated-tsp"):
+    for name in ("latency", "nearest", "tour", "gated-tsp"):
         with pytest.raises(ValueError, match="finite and not negative"):
             make_planner(name, cost=broken).next_task(ORIGIN, tasks)
 
