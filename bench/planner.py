@@ -112,17 +112,22 @@ def averaged(runs: list[dict[str, Any]], *keys: str) -> dict[tuple[Any, ...], di
 def table(
     rows: dict[tuple[Any, ...], dict[str, float]], planners: list[str], gaps: tuple[float, ...]
 ) -> None:
-    print("| mean gap | planner | mean latency | p95 | max | makespan | distance | vs nearest |")
-    print("|---:|---|---:|---:|---:|---:|---:|---:|")
+    print(
+        "| mean gap | planner | mean latency | p95 | max | makespan | distance "
+        "| mean vs nearest | mean vs gated-tsp |"
+    )
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     for gap in gaps:
-        base = rows[(gap, "nearest")]["mean"] if (gap, "nearest") in rows else None
         for planner in planners:
             r = rows[(gap, planner)]
-            versus = f"{(r['mean'] / base - 1) * 100:+.1f} %" if base else ""
+            versus = [
+                f"{(r['mean'] / rows[(gap, other)]['mean'] - 1) * 100:+.1f} %"
+                for other in ("nearest", "gated-tsp")
+            ]
             print(
                 f"| {gap:g} s | {planner} | {r['mean']:.1f} s | {r['p95']:.1f} s | "
                 f"{r['max']:.1f} s | {r['makespan']:.0f} s | {r['distance'] / 1000:.2f} km | "
-                f"{versus} |"
+                f"{versus[0]} | {versus[1]} |"
             )
 
 

@@ -13,6 +13,7 @@ what a sweep over planners, arrival rates and seeds needs.
 
 from __future__ import annotations
 
+import functools
 import heapq
 import itertools
 import math
@@ -149,7 +150,7 @@ class Arena:
 
     def run(self) -> ArenaResult:
         for index, task in enumerate(self.tasks):
-            self._at(task.at_s, lambda now, index=index: self._request(index, now))
+            self._at(task.at_s, functools.partial(self._request, index))
         while self._queue:
             t, _, fn = heapq.heappop(self._queue)
             fn(t)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import heapq
 import logging
+import math
 import time
 import uuid
 from collections.abc import Callable
@@ -288,13 +289,35 @@ class Simulation:
             .order_by("at_s", "id")
         ]
         finished = [v["finished_s"] for v in vvs if v["finished_s"] is not None]
+        waits = [
+            t["done_s"] - t["requested_s"]
+            for v in vvs
+            for t in v["tasks"]
+            if t["status"] == TaskStatus.DONE and t["done_s"] is not None
+        ]
         return {
             "makespan_s": max(finished) if finished else 0.0,
             "planner": self.planner_name,
             "vvs": vvs,
             "vehicles": vehicles,
             "migrations": migrations,
+            "latency": latency_summary(waits),
         }
+
+
+def latency_summary(waits: list[float]) -> dict[str, Any]:
+    """How long the tasks read waited from request to reading: count, mean, 95th percentile
+    (nearest rank) and maximum, in seconds (0 when no task was read)."""
+    if not waits:
+        return {"tasks": 0, "mean_s": 0.0, "p95_s": 0.0, "max_s": 0.0}
+    ordered = sorted(waits)
+    rank = max(0, math.ceil(0.95 * len(ordered)) - 1)
+    return {
+        "tasks": len(ordered),
+        "mean_s": _r(sum(ordered) / len(ordered)),
+        "p95_s": _r(ordered[rank]),
+        "max_s": _r(ordered[-1]),
+    }
 
 
 def _r(value: float | None) -> float | None:

@@ -101,6 +101,14 @@ def test_simulate_prints_the_same_json_summary_twice(tmp_path: Path, scenario: s
     assert_summary_shape(summary)
     assert [v["status"] for v in summary["vvs"]] == ["finished"] * 3
     assert summary["planner"] == "latency"
+    # The tasks' waits, from request to reading, summed up: the maximum as well as the mean.
+    waits = sorted(
+        t["done_s"] - t["requested_s"] for vv in summary["vvs"] for t in vv["tasks"]
+    )
+    assert summary["latency"]["tasks"] == len(waits) == 12
+    assert summary["latency"]["mean_s"] == pytest.approx(sum(waits) / 12, abs=1e-3)
+    assert summary["latency"]["p95_s"] == pytest.approx(waits[11], abs=1e-3)
+    assert summary["latency"]["max_s"] == pytest.approx(waits[-1], abs=1e-3)
     # A fresh database each time: the configured one was never created.
     assert not (tmp_path / "configured.sqlite3").exists()
 

@@ -152,7 +152,7 @@ def test_route_before_next_task_does_not_start_the_tour() -> None:
     assert planner.state()["tour"] == [t.id for t in planned]
 
 
-def test_node_limit_keeps_the_best_tour_found_and_says_it_is_not_proven() -> None:
+def test_a_search_that_hits_its_cap_halves_the_batch_as_the_original_did() -> None:
     # Random asymmetric costs give the 1-tree bound no geometry to exploit, so one search node
     # cannot prove optimality.
     tasks = random_tasks(18, seed=9)
@@ -166,8 +166,12 @@ def test_node_limit_keeps_the_best_tour_found_and_says_it_is_not_proven() -> Non
     planner = GatedTspPlanner(cost=arbitrary, node_limit=1)
     planner.next_task(ORIGIN, tasks)
     state = planner.state()
-    assert state["exact"] is False
-    assert sorted(state["tour"]) == sorted(t.id for t in tasks)
+    earliest = sorted(tasks, key=lambda t: (t.requested_s, t.id))[:9]
+    assert sorted(state["tour"]) == sorted(t.id for t in earliest)
+    assert state["exact"] is True  # 9 tasks: Held-Karp proves it
+    assert brute_force_length(ORIGIN, earliest, arbitrary) == pytest.approx(
+        path_length(ORIGIN, planner.route(ORIGIN, tasks)[:9], arbitrary)
+    )
 
 
 def test_make_planner_passes_the_cost_to_the_tour() -> None:

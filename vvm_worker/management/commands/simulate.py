@@ -158,3 +158,10 @@ class Command(BaseCommand):
         console.print(
             f"{len(summary['migrations'])} migrations; makespan {summary['makespan_s']:.1f} s"
         )
+        latency = summary["latency"]
+        if latency["tasks"]:
+            console.print(
+                f"task latency (request to reading) over {latency['tasks']} tasks: "
+                f"mean {latency['mean_s']:.1f} s, p95 {latency['p95_s']:.1f} s, "
+                f"max {latency['max_s']:.1f} s"
+            )
