@@ -102,9 +102,7 @@ def test_simulate_prints_the_same_json_summary_twice(tmp_path: Path, scenario: s
     assert [v["status"] for v in summary["vvs"]] == ["finished"] * 3
     assert summary["planner"] == "latency"
     # The tasks' waits, from request to reading, summed up: the maximum as well as the mean.
-    waits = sorted(
-        t["done_s"] - t["requested_s"] for vv in summary["vvs"] for t in vv["tasks"]
-    )
+    waits = sorted(t["done_s"] - t["requested_s"] for vv in summary["vvs"] for t in vv["tasks"])
     assert summary["latency"]["tasks"] == len(waits) == 12
     assert summary["latency"]["mean_s"] == pytest.approx(sum(waits) / 12, abs=1e-3)
     assert summary["latency"]["p95_s"] == pytest.approx(waits[11], abs=1e-3)
