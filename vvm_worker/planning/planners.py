@@ -306,9 +306,10 @@ class LatencyPlanner:
     planning time, because the plan is redone at every event anyway). When every open task
     belongs to one batch (a survey), the objective is the length of the path: iterated
     2-opt/Or-opt with double-bridge kicks (`iterated_local_search`), about 0.5 % above the
-    best known tour at 200 points in under a second. `time_limit_s` (None: no limit, results
-    reproducible) stops a search early. Measured on a 2-core machine: 25 ms to replan 100 open
-    tasks when one arrives, 0.75 s for 1,000.
+    best known tour at 200 points in under a second, planned once: at each stop the rest of the
+    path is kept until new work comes. `time_limit_s` (None: no limit, results
+    reproducible) stops a search early. Measured on a 2-core machine: 18-25 ms to replan 100
+    open tasks when one arrives, 0.5-0.75 s for 1,000 (docs/benchmarks.md).
 
     The vehicle asks again whenever tasks arrive, in flight too (`retargets`), and an idle
     vehicle waits in the air at the centre of its area for a while (`stands_by`).
@@ -392,13 +393,15 @@ class LatencyPlanner:
         n = len(tasks)
         if n <= self.exact_limit:
             return exact_path(matrix, weights, groups)[0]
+        node_of = {task.id: node for node, task in enumerate(tasks, start=1)}
+        kept = [node_of[task_id] for task_id in self._route if task_id in node_of]
         if len(group_ids) == 1:
+            if len(kept) == n:
+                return [0, *kept]  # a survey under way, nothing new: the rest of its path
             return iterated_local_search(
                 matrix, greedy_chain(matrix), kicks=self.survey_kicks, deadline=deadline
             )
         search = RepairmanSearch(matrix, weights, groups, deadline=deadline)
-        node_of = {task.id: node for node, task in enumerate(tasks, start=1)}
-        kept = [node_of[task_id] for task_id in self._route if task_id in node_of]
         warm = [0, *kept]
         planned = set(kept)
         for node in range(1, n + 1):

@@ -225,3 +225,18 @@ def test_routes_reach_every_task_within_tolerance_and_altitude_limits() -> None:
         for leg in rig.driver.planned_legs(0.0):
             assert 0.0 <= leg.end.alt <= rig.spec.max_altitude_m
         assert rig.driver.is_landed_at(rig.driver.plan_end_s)
+
+
+def test_a_survey_is_planned_once_and_flown_as_planned() -> None:
+    tasks = [PlanTask(t.id, t.position, 0.0, group="s") for t in random_tasks(60, 21)]
+    planner = LatencyPlanner()
+    planned = planner.route(ORIGIN, tasks, 0.0)
+    assert planner.next_task(ORIGIN, tasks, 0.0) == planned[0]
+    here, left = planned[0].position, [t for t in tasks if t != planned[0]]
+    # At the first stop, the rest of the same path: no search, and no change of mind.
+    assert planner.route(here, left, 10.0) == planned[1:]
+    # New work in the same batch (none of a survey's tasks were known): planned anew, all in.
+    extra = PlanTask(999, offset(ORIGIN, north_m=5, east_m=5), 0.0, group="s")
+    assert sorted(t.id for t in planner.route(here, [*left, extra], 10.0)) == sorted(
+        [t.id for t in left] + [999]
+    )
