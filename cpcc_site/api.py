@@ -50,3 +50,12 @@ class FileOrJSONNegotiation(DefaultContentNegotiation):
             return super().select_renderer(request, renderers, format_suffix)  # type: ignore[no-any-return]
         except NotAcceptable:
             return renderers[0], renderers[0].media_type
+
+
+def object_id(raw: object) -> int:
+    """A database id from a URL: a positive integer that fits the id column (64 bits).
+    Raises ValueError otherwise, which views answer with 404."""
+    value = int(str(raw))
+    if not 0 < value < 2**63:
+        raise ValueError(f"{raw!r} is not an id")
+    return value

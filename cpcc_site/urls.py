@@ -29,3 +29,6 @@ urlpatterns = [
     path("api/redoc/redoc.standalone.js", redoc_bundle, name="api-redoc-bundle"),
     path("", include("missions.urls")),
 ]
+
+handler404 = "cpcc_site.errors.not_found"
+handler500 = "cpcc_site.errors.server_error"

@@ -57,9 +57,10 @@ def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:
 
 
 def vv_get_for_user(*, user: User, vv_id: uuid.UUID | str) -> VirtualVehicle:
-    """One VV the user may see; VVNotFound both for a missing VV and another customer's."""
+    """One VV the user may see; VVNotFound both for a missing VV and another customer's, and
+    for an id that is no UUID at all."""
     try:
-        return vv_list_for_user(user=user).get(pk=vv_id)
+        return vv_list_for_user(user=user).get(pk=uuid.UUID(str(vv_id)))
     except (VirtualVehicle.DoesNotExist, ValueError, TypeError):
         raise VVNotFound(str(vv_id)) from None
 

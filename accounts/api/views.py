@@ -18,7 +18,7 @@ from rest_framework.serializers import as_serializer_error
 from accounts.api.serializers import CustomerInSerializer, CustomerOutSerializer
 from accounts.models import Customer
 from accounts.selectors import customer_list
-from cpcc_site.api import Conflict, DetailSerializer, IsStaff
+from cpcc_site.api import Conflict, DetailSerializer, IsStaff, object_id
 from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import CustomerBusy, customer_create, customer_delete, customer_update
@@ -59,7 +59,7 @@ class CustomerViewSet(
 
     def get_object(self) -> Customer:
         try:
-            return self.get_queryset().get(pk=int(self.kwargs["pk"]))
+            return self.get_queryset().get(pk=object_id(self.kwargs["pk"]))
         except (ValueError, Customer.DoesNotExist):
             raise NotFound(f"No customer with id {self.kwargs['pk']!r}.") from None
 

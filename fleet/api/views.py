@@ -21,7 +21,7 @@ from rest_framework.response import Response
 from rest_framework.serializers import as_serializer_error
 
 from accounts.selectors import sensor_list_for_user
-from cpcc_site.api import Conflict, DetailSerializer, IsStaff
+from cpcc_site.api import Conflict, DetailSerializer, IsStaff, object_id
 from fleet.api.serializers import (
     GroundStationInSerializer,
     GroundStationOutSerializer,
@@ -71,7 +71,7 @@ class FleetErrorsMixin:
 
     def get_object(self) -> Any:
         try:
-            return self.get_queryset().get(pk=int(self.kwargs["pk"]))  # type: ignore[attr-defined]
+            return self.get_queryset().get(pk=object_id(self.kwargs["pk"]))  # type: ignore[attr-defined]
         except (ValueError, TypeError, Vehicle.DoesNotExist, GroundStation.DoesNotExist):
             raise NotFound(f"No {self.noun} with id {self.kwargs['pk']!r}.") from None  # type: ignore[attr-defined]
 

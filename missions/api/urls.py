@@ -4,6 +4,7 @@ from django.urls import re_path
 from rest_framework.routers import DefaultRouter
 
 from missions.api.views import (
+    UUID_PATTERN,
     VirtualVehicleViewSet,
     VVImageView,
     VVLogView,
@@ -16,7 +17,7 @@ from missions.api.views import (
 router = DefaultRouter()
 router.register("vvs", VirtualVehicleViewSet, basename="vv")
 
-ONE_VV = r"^vvs/(?P<id>[0-9a-fA-F-]{36})/"
+ONE_VV = rf"^vvs/(?P<id>{UUID_PATTERN})/"
 
 urlpatterns = [
     *router.urls,

@@ -57,6 +57,8 @@ NO_SUCH_VV = (
 )
 VV_ID = OpenApiParameter("id", OpenApiTypes.UUID, OpenApiParameter.PATH, description="The VV's id.")
 NOT_FOUND = {404: DetailSerializer}
+# A VV's id in a path: anything else is no route at all (404), never a database error.
+UUID_PATTERN = "[0-9a-fA-F]{8}-?[0-9a-fA-F]{4}-?[0-9a-fA-F]{4}-?[0-9a-fA-F]{4}-?[0-9a-fA-F]{12}"
 IMAGE = {(200, "image/png"): OpenApiTypes.BINARY, (200, "image/jpeg"): OpenApiTypes.BINARY}
 
 
@@ -110,7 +112,7 @@ class VirtualVehicleViewSet(
     """
 
     serializer_class = VVSerializer
-    lookup_value_regex = "[0-9a-fA-F-]{36}"
+    lookup_value_regex = UUID_PATTERN
 
     def get_queryset(self) -> QuerySet[VirtualVehicle]:
         vvs = vv_list_for_user(user=self.request.user).order_by("-created")  # type: ignore[arg-type]
