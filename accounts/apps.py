@@ -4,3 +4,11 @@ from django.apps import AppConfig
 class AccountsConfig(AppConfig):
     name = "accounts"
     verbose_name = "Customers and users"
+
+    def ready(self) -> None:
+        from auditlog.registry import auditlog
+
+        from accounts.models import Customer
+
+        # Customers and their quotas, SDC entries and VVM-API calls: who changed what.
+        auditlog.register(Customer, m2m_fields={"allowed_sensors"})

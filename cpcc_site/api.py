@@ -1,17 +1,22 @@
 """REST API plumbing shared by the apps' ``api`` packages: the staff permission, the 409 error,
-the JSON error shape for the schema, and content negotiation for endpoints that answer with a
-file."""
+the JSON error shape for the schema, content negotiation for endpoints that answer with a file,
+authentication that the audit log sees, and the per-address throttle."""
 
 from __future__ import annotations
 
 from typing import Any
 
+from auditlog.context import auditlog_value
+from drf_spectacular.authentication import SessionScheme
 from rest_framework import serializers, status
-from rest_framework.exceptions import APIException, NotAcceptable
+from rest_framework.authentication import SessionAuthentication, TokenAuthentication
+from rest_framework.exceptions import APIException, NotAcceptable, ValidationError
 from rest_framework.negotiation import DefaultContentNegotiation
+from rest_framework.pagination import PageNumberPagination
 from rest_framework.permissions import IsAdminUser
 from rest_framework.renderers import BaseRenderer
 from rest_framework.request import Request
+from rest_framework.throttling import SimpleRateThrottle
 
 
 class IsStaff(IsAdminUser):
@@ -59,3 +64,175 @@ def object_id(raw: object) -> int:
     if not 0 < value < 2**63:
         raise ValueError(f"{raw!r} is not an id")
     return value
+
+
+def _note_actor(user: Any) -> None:
+    """Tell the audit log who acts in this request (its middleware ran before DRF knew)."""
+    try:
+        context = auditlog_value.get()
+    except LookupError:
+        return
+    context["actor"] = user
+
+
+class AuditedTokenAuthentication(TokenAuthentication):
+    """Token authentication whose user the audit log records as the actor."""
+
+    def authenticate(self, request: Request) -> tuple[Any, Any] | None:
+        result = super().authenticate(request)
+        if result is not None:
+            _note_actor(result[0])
+        return result
+
+
+class AuditedSessionAuthentication(SessionAuthentication):
+    """Session authentication (the browsable API, the pages' scripts), audited likewise."""
+
+    def authenticate(self, request: Request) -> tuple[Any, Any] | None:
+        result = super().authenticate(request)
+        if result is not None:
+            _note_actor(result[0])
+        return result
+
+
+class AddressRateThrottle(SimpleRateThrottle):
+    """Requests per client address, whoever sends them (the "address" rate)."""
+
+    scope = "address"
+
+    def get_cache_key(self, request: Request, view: Any) -> str:
+        return self.cache_format % {"scope": self.scope, "ident": self.get_ident(request)}
+
+
+_ERROR = {"application/json": {"schema": {"$ref": "#/components/schemas/Detail"}}}
+_ERRORS = {
+    "400": "The request is malformed or a value is invalid: the body says which and why.",
+    "401": "No credentials, or a token that is not valid (send 'Authorization: Token ...').",
+    "403": "Your account may not do this.",
+    "404": "No such object (another customer's answers the same), or no such page.",
+    "413": "The request body is larger than the platform accepts (CPCC_MAX_REQUEST_BYTES).",
+    "415": "The body's content type is not one the endpoint reads (send JSON).",
+    "429": "Too many requests from your token or address: wait as Retry-After says.",
+}
+
+
+def add_error_responses(result: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+    """drf-spectacular postprocessing hook: every API operation documents the errors any
+    request may get (401, 403, 429; 400 and 404 where it takes parameters, 400, 413 and 415
+    where it takes a body), each a JSON ``{"detail": ...}`` body."""
+    for path, operations in result.get("paths", {}).items():
+        if not path.startswith("/api/v"):
+            continue
+        for operation in operations.values():
+            if not isinstance(operation, dict) or "responses" not in operation:
+                continue
+            codes = ["401", "403", "429"]
+            if operation.get("parameters") or "{" in path:
+                codes += ["400", "404"]
+            if "requestBody" in operation:
+                codes += ["400", "413", "415"]
+            for code in codes:
+                operation["responses"].setdefault(
+                    code, {"description": _ERRORS[code], "content": _ERROR}
+                )
+    return result
+
+
+class AuditedSessionScheme(SessionScheme):
+    """The session cookie in the schema, for the audited session authentication."""
+
+    target_class = "cpcc_site.api.AuditedSessionAuthentication"
+
+
+class StrictPageNumberPagination(PageNumberPagination):
+    """Pages of PAGE_SIZE; a ``page`` that is not a positive whole number is a 400 that says so
+    (DRF's own treats an empty one as page 1)."""
+
+    def get_page_number(self, request: Any, paginator: Any) -> Any:
+        raw = request.query_params.get(self.page_query_param)
+        valid = raw is None or raw in self.last_page_strings
+        if not valid and not (raw.isascii() and raw.isdigit() and int(raw) > 0):
+            raise ValidationError({"page": [f"{raw!r} is not a page number (1, 2, ...)."]})
+        return super().get_page_number(request, paginator)
+
+    def get_schema_operation_parameters(self, view: Any) -> list[dict[str, Any]]:
+        parameters = super().get_schema_operation_parameters(view)
+        for parameter in parameters:
+            if parameter["name"] == self.page_query_param:
+                parameter["schema"] = {"type": "integer", "minimum": 1}
+        return parameters
+
+
+def exception_handler(exc: Exception, context: dict[str, Any]) -> Any:
+    """DRF's error responses, each with a ``detail`` sentence a person can act on: field
+    errors (``{"name": ["..."]}``) keep their fields and get a ``detail`` naming the first."""
+    # Imported here: rest_framework.views reads the authentication classes of this module.
+    from rest_framework.views import exception_handler as drf_exception_handler
+
+    response = drf_exception_handler(exc, context)
+    if response is None:
+        return None
+    data = response.data
+    if isinstance(data, list):
+        response.data = {"detail": " ".join(str(item) for item in data), "errors": data}
+    elif isinstance(data, dict) and "detail" not in data:
+        response.data = {"detail": _first_problem(data), **data}
+    return response
+
+
+def _first_problem(errors: dict[str, Any]) -> str:
+    field, messages = next(iter(errors.items()))
+    while isinstance(messages, dict) and messages:
+        field, messages = next(iter(messages.items()))
+    first = messages[0] if isinstance(messages, list) and messages else messages
+    more = len(errors) - 1
+    return f"{field}: {first}" + (f" (and {more} more field(s))" if more > 0 else "")
+
+
+# Request bodies are JSON (DEFAULT_PARSER_CLASSES): a value of the wrong JSON type is refused,
+# not converted (DRF's own fields turn 0 into "0" and "1.5" into 1.5).
+
+
+def _refuse_type(field: serializers.Field, data: Any, *types: type) -> None:
+    if (isinstance(data, bool) and bool not in types) or not isinstance(data, types):
+        raise ValidationError(f"Expected {field.type_name}, got {type(data).__name__}: {data!r}.")  # type: ignore[attr-defined]
+
+
+class StrictCharField(serializers.CharField):
+    """A string, and only a string."""
+
+    type_name = "a string"
+
+    def to_internal_value(self, data: Any) -> str:
+        _refuse_type(self, data, str)
+        return super().to_internal_value(data)  # type: ignore[no-any-return]
+
+
+class StrictFloatField(serializers.FloatField):
+    """A JSON number (not a string of digits, not a boolean)."""
+
+    type_name = "a number"
+
+    def to_internal_value(self, data: Any) -> float:
+        _refuse_type(self, data, int, float)
+        return super().to_internal_value(data)  # type: ignore[no-any-return]
+
+
+class StrictIntegerField(serializers.IntegerField):
+    """A JSON whole number."""
+
+    type_name = "a whole number"
+
+    def to_internal_value(self, data: Any) -> int:
+        _refuse_type(self, data, int)
+        return super().to_internal_value(data)  # type: ignore[no-any-return]
+
+
+class StrictBooleanField(serializers.BooleanField):
+    """true or false."""
+
+    type_name = "true or false"
+
+    def to_internal_value(self, data: Any) -> bool:
+        _refuse_type(self, data, bool)
+        return super().to_internal_value(data)  # type: ignore[no-any-return]

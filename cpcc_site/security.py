@@ -15,7 +15,7 @@ from collections.abc import Callable
 from urllib.parse import urlsplit
 
 from django.conf import settings
-from django.http import HttpRequest, HttpResponse
+from django.http import HttpRequest, HttpResponse, JsonResponse
 
 HEADER = "Content-Security-Policy"
 # Pages of third-party UIs that start with an inline script; they show no customer content.
@@ -51,6 +51,28 @@ def policy(request: HttpRequest) -> str:
         "frame-ancestors 'none'",
     ]
     return "; ".join(directives)
+
+
+class RequestSizeLimitMiddleware:
+    """413 with a JSON body for a request whose body is larger than CPCC_MAX_REQUEST_BYTES (by
+    its Content-Length), before anything reads it."""
+
+    def __init__(self, get_response: Callable[[HttpRequest], HttpResponse]) -> None:
+        self.get_response = get_response
+
+    def __call__(self, request: HttpRequest) -> HttpResponse:
+        limit = settings.CPCC_MAX_REQUEST_BYTES
+        try:
+            length = int(request.META.get("CONTENT_LENGTH") or 0)
+        except ValueError:
+            return JsonResponse({"detail": "Content-Length is not a number."}, status=400)
+        if length > limit:
+            return JsonResponse(
+                {"detail": f"The request body has {length:,} bytes; at most {limit:,} are "
+                           "accepted (CPCC_MAX_REQUEST_BYTES)."},
+                status=413,
+            )  # fmt: skip
+        return self.get_response(request)
 
 
 class ContentSecurityPolicyMiddleware:

@@ -41,6 +41,8 @@ INSTALLED_APPS = [
     "drf_spectacular",
     "drf_spectacular_sidecar",
     "channels",
+    "axes",
+    "auditlog",
     "accounts",
     "fleet",
     "missions",
@@ -59,7 +61,28 @@ MIDDLEWARE = [
     "django.contrib.messages.middleware.MessageMiddleware",
     "django.middleware.clickjacking.XFrameOptionsMiddleware",
     "cpcc_site.security.ContentSecurityPolicyMiddleware",
+    "cpcc_site.security.RequestSizeLimitMiddleware",
+    # Who changed what (the admin's session user; API token users are added by
+    # cpcc_site.api.AuditedTokenAuthentication once DRF has authenticated them).
+    "auditlog.middleware.AuditlogMiddleware",
+    # Login attempts: locked after CPCC_LOGIN_FAILURES failures (must come last).
+    "axes.middleware.AxesMiddleware",
 ]
+
+AUTHENTICATION_BACKENDS = [
+    "axes.backends.AxesStandaloneBackend",
+    "django.contrib.auth.backends.ModelBackend",
+]
+# A user name from one address is locked out after this many failed logins, for this long.
+AXES_FAILURE_LIMIT = int(env_float("CPCC_LOGIN_FAILURES", 5, minimum=1))
+AXES_COOLOFF_TIME = env_float("CPCC_LOGIN_COOLOFF_H", 0.25, minimum=0.0)
+AXES_LOCKOUT_PARAMETERS = [["username", "ip_address"]]
+AXES_RESET_ON_SUCCESS = True
+AXES_LOCKOUT_TEMPLATE = "registration/locked_out.html"
+AXES_VERBOSE = False
+# The largest request body accepted (a VV program is at most 1 MB); larger ones get 413.
+CPCC_MAX_REQUEST_BYTES = int(env_float("CPCC_MAX_REQUEST_BYTES", 2_000_000, minimum=1024))
+DATA_UPLOAD_MAX_MEMORY_SIZE = CPCC_MAX_REQUEST_BYTES
 
 # HTTPS (README "Production"): on by default when DEBUG is off. Behind a proxy that ends TLS,
 # SECURE_PROXY_SSL_HEADER names the header it sets ("HTTP_X_FORWARDED_PROTO,https"); the
@@ -218,12 +241,24 @@ CPCC_RV_LEASE_S = env_float("CPCC_RV_LEASE_S", 20.0, minimum=1.0)
 
 REST_FRAMEWORK = {
     "DEFAULT_AUTHENTICATION_CLASSES": [
-        "rest_framework.authentication.TokenAuthentication",
-        "rest_framework.authentication.SessionAuthentication",
+        "cpcc_site.api.AuditedTokenAuthentication",
+        "cpcc_site.api.AuditedSessionAuthentication",
     ],
+    # Per user (token or session) and per client address; 429 with Retry-After beyond.
+    "DEFAULT_THROTTLE_CLASSES": [
+        "rest_framework.throttling.UserRateThrottle",
+        "cpcc_site.api.AddressRateThrottle",
+    ],
+    "DEFAULT_THROTTLE_RATES": {
+        "user": env_str("CPCC_API_RATE_USER", "1200/minute"),
+        "address": env_str("CPCC_API_RATE_ADDRESS", "2400/minute"),
+    },
     "DEFAULT_PERMISSION_CLASSES": ["rest_framework.permissions.IsAuthenticated"],
     "DEFAULT_SCHEMA_CLASS": "drf_spectacular.openapi.AutoSchema",
-    "DEFAULT_PAGINATION_CLASS": "rest_framework.pagination.PageNumberPagination",
+    "DEFAULT_PAGINATION_CLASS": "cpcc_site.api.StrictPageNumberPagination",
+    "EXCEPTION_HANDLER": "cpcc_site.api.exception_handler",
+    # JSON in, JSON out (and files where an endpoint serves one).
+    "DEFAULT_PARSER_CLASSES": ["rest_framework.parsers.JSONParser"],
     "PAGE_SIZE": 50,
 }
 SPECTACULAR_SETTINGS = {
@@ -235,6 +270,10 @@ SPECTACULAR_SETTINGS = {
     "SWAGGER_UI_DIST": "SIDECAR",
     "SWAGGER_UI_FAVICON_HREF": "SIDECAR",
     "REDOC_DIST": "SIDECAR",
+    "POSTPROCESSING_HOOKS": [
+        "drf_spectacular.hooks.postprocess_schema_enums",
+        "cpcc_site.api.add_error_responses",
+    ],
 }
 
 # Simulation: time acceleration of simulated vehicles (0 = discrete-event, no sleeping).

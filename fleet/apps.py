@@ -6,4 +6,18 @@ class FleetConfig(AppConfig):
     verbose_name = "Fleet"
 
     def ready(self) -> None:
+        from auditlog.registry import auditlog
+
         from fleet import signals  # noqa: F401 - connects the receivers
+        from fleet.models import GroundStation, SensorType, Vehicle
+
+        # Who changed what, in the admin and over the API (the vehicle's live state, written
+        # by its worker with .update(), is not a change anyone made).
+        auditlog.register(SensorType)
+        auditlog.register(GroundStation)
+        auditlog.register(
+            Vehicle,
+            m2m_fields={"sensors"},
+            exclude_fields=["lat", "lng", "alt", "phase", "distance_m", "flight_s", "tasks_done",
+                            "planner_state", "worker_seen", "updated"],
+        )  # fmt: skip

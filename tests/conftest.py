@@ -83,6 +83,15 @@ def _fast_password_hashing(settings) -> None:
 
 
 @pytest.fixture(autouse=True)
+def _fresh_cache() -> None:
+    """API throttles and login lockouts count in the cache: every test starts from zero
+    (ids repeat between tests, and every test client comes from 127.0.0.1)."""
+    from django.core.cache import cache
+
+    cache.clear()
+
+
+@pytest.fixture(autouse=True)
 def _media_root(settings, tmp_path: Path) -> None:
     """Images of a test go to its own folder, not to var/media."""
     settings.MEDIA_ROOT = tmp_path / "media"

@@ -7,6 +7,7 @@ from typing import Any
 from rest_framework import serializers
 
 from accounts.models import Customer
+from cpcc_site.api import StrictBooleanField, StrictCharField, StrictIntegerField
 from vvm_worker.runtime import VVM_API_CALLS
 from vvm_worker.services import CustomerConfig
 
@@ -14,18 +15,18 @@ from vvm_worker.services import CustomerConfig
 class CustomerInSerializer(serializers.Serializer):
     """A customer and its quotas; quotas left out keep their defaults (or current values)."""
 
-    name = serializers.CharField(max_length=120)
+    name = StrictCharField(max_length=120)
     slug = serializers.SlugField(
         max_length=120, required=False, help_text="Made from the name when left out."
     )
-    privileged = serializers.BooleanField(required=False)
-    max_parallel_vvs = serializers.IntegerField(min_value=1, required=False)
-    max_tasks_per_vv = serializers.IntegerField(min_value=1, required=False)
-    storage_bytes = serializers.IntegerField(min_value=0, required=False)
-    cpu_ms_per_step = serializers.IntegerField(min_value=1, required=False)
-    heap_bytes = serializers.IntegerField(min_value=1024 * 1024, required=False)
+    privileged = StrictBooleanField(required=False)
+    max_parallel_vvs = StrictIntegerField(min_value=1, required=False)
+    max_tasks_per_vv = StrictIntegerField(min_value=1, required=False)
+    storage_bytes = StrictIntegerField(min_value=0, required=False)
+    cpu_ms_per_step = StrictIntegerField(min_value=1, required=False)
+    heap_bytes = StrictIntegerField(min_value=1024 * 1024, required=False)
     allowed_sensors = serializers.ListField(
-        child=serializers.CharField(),
+        child=StrictCharField(),
         required=False,
         help_text="SDC entry names its VVs may use; empty: every unprivileged entry "
         "(privileged ones too for a privileged customer).",
@@ -53,9 +54,9 @@ class CustomerOutSerializer(serializers.ModelSerializer):
     """A customer: its quotas, what its VVs may use, its users."""
 
     allowed_sensors = serializers.SlugRelatedField(slug_field="name", many=True, read_only=True)
-    allowed_api_calls = serializers.ListField(child=serializers.CharField())
+    allowed_api_calls = serializers.ListField(child=StrictCharField())
     users = serializers.SlugRelatedField(slug_field="username", many=True, read_only=True)
-    vvs_active = serializers.IntegerField(
+    vvs_active = StrictIntegerField(
         read_only=True, default=0, help_text="Its VVs that have not ended."
     )
 

@@ -6,6 +6,7 @@ from typing import Any
 
 from rest_framework import serializers
 
+from cpcc_site.api import StrictCharField, StrictFloatField, StrictIntegerField
 from fleet.models import Driver, GroundStation, SensorType, Vehicle
 from vvm_worker.services import GroundStationConfig, VehicleConfig
 
@@ -19,14 +20,14 @@ def _check_lat_lng(lat: float, lng: float, where: str) -> None:
 
 def _position_field(help_text: str) -> serializers.ListField:
     return serializers.ListField(
-        child=serializers.FloatField(), min_length=2, max_length=3, help_text=help_text
+        child=StrictFloatField(), min_length=2, max_length=3, help_text=help_text
     )
 
 
 class SensorOutSerializer(serializers.ModelSerializer):
     """An SDC entry as ``VV.sensor.list()`` shows it (``description`` equals ``name``)."""
 
-    description = serializers.CharField(source="name")
+    description = StrictCharField(source="name")
 
     class Meta:
         model = SensorType
@@ -43,9 +44,9 @@ class StaffSensorOutSerializer(SensorOutSerializer):
 class VehicleInSerializer(serializers.Serializer):
     """An RV's configuration: where it may fly, how, with which sensors."""
 
-    name = serializers.CharField(max_length=80)
+    name = StrictCharField(max_length=80)
     driver = serializers.ChoiceField(choices=Driver.choices, required=False)
-    driver_url = serializers.CharField(
+    driver_url = StrictCharField(
         max_length=200,
         required=False,
         allow_blank=True,
@@ -53,19 +54,19 @@ class VehicleInSerializer(serializers.Serializer):
     )
     depot = _position_field("[lat, lng] or [lat, lng, alt]: where it takes off and lands.")
     area = serializers.ListField(
-        child=serializers.ListField(child=serializers.FloatField(), min_length=2, max_length=2),
+        child=serializers.ListField(child=StrictFloatField(), min_length=2, max_length=2),
         help_text="Operation area: a closed ring of [lat, lng] points (the last repeats the "
         "first), at least 3 distinct points, not crossing itself.",
     )
-    min_altitude_m = serializers.FloatField(min_value=0.0, required=False)
-    max_altitude_m = serializers.FloatField(min_value=0.0)
-    max_speed_mps = serializers.FloatField(min_value=0.1)
-    climb_rate_mps = serializers.FloatField(min_value=0.1, required=False)
-    battery_s = serializers.FloatField(
+    min_altitude_m = StrictFloatField(min_value=0.0, required=False)
+    max_altitude_m = StrictFloatField(min_value=0.0)
+    max_speed_mps = StrictFloatField(min_value=0.1)
+    climb_rate_mps = StrictFloatField(min_value=0.1, required=False)
+    battery_s = StrictFloatField(
         min_value=1.0, required=False, allow_null=True, help_text="Flight endurance, seconds."
     )
     sensors = serializers.ListField(
-        child=serializers.CharField(), required=False, help_text="SDC entry names."
+        child=StrictCharField(), required=False, help_text="SDC entry names."
     )
 
     def validate_depot(self, value: list[float]) -> list[float]:
@@ -100,7 +101,7 @@ class VehicleOutSerializer(serializers.ModelSerializer):
         help_text="[lat, lng, alt] as last reported, or null before its first report."
     )
     sensors = serializers.SlugRelatedField(slug_field="name", many=True, read_only=True)
-    vvs_aboard = serializers.IntegerField(
+    vvs_aboard = StrictIntegerField(
         read_only=True, default=0, help_text="VVs on it that have not ended."
     )
 
@@ -141,7 +142,7 @@ class VehicleOutSerializer(serializers.ModelSerializer):
 class GroundStationInSerializer(serializers.Serializer):
     """A ground station: its name and where it is."""
 
-    name = serializers.CharField(max_length=80)
+    name = StrictCharField(max_length=80)
     position = _position_field("[lat, lng] or [lat, lng, alt].")
 
     def validate_position(self, value: list[float]) -> list[float]:
@@ -164,7 +165,7 @@ class GroundStationOutSerializer(serializers.ModelSerializer):
     """A ground station and how many VVs that have not ended it holds."""
 
     position = serializers.SerializerMethodField(help_text="[lat, lng, alt]")
-    vvs_here = serializers.IntegerField(
+    vvs_here = StrictIntegerField(
         read_only=True, default=0, help_text="VVs on it that have not ended."
     )
 

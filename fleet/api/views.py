@@ -131,7 +131,16 @@ class VehicleViewSet(
     noun = "vehicle"
 
     def get_queryset(self) -> QuerySet[Vehicle]:
-        return self._vehicles(status=self.request.query_params.get("status") or None)
+        wanted = self.request.query_params.get("status")
+        if wanted is not None and wanted not in VehicleStatus.values:
+            raise ValidationError(
+                {
+                    "status": [
+                        f"{wanted!r} is not a status; one of {', '.join(VehicleStatus.values)}."
+                    ]
+                }
+            )
+        return self._vehicles(status=wanted or None)
 
     @staticmethod
     def _vehicles(status: str | None = None) -> QuerySet[Vehicle]:

@@ -11,13 +11,14 @@ from drf_spectacular.types import OpenApiTypes
 from drf_spectacular.utils import extend_schema_field
 from rest_framework import serializers
 
+from cpcc_site.api import StrictCharField
 from missions.models import LogEntry, StorageDocument, Task, TaskStatus, VirtualVehicle
 from missions.readings import image_file, map_camera_readings
 
 
 class VVCreateSerializer(serializers.Serializer):
-    name = serializers.CharField(max_length=120)
-    program = serializers.CharField(trim_whitespace=False, max_length=1_000_000)
+    name = StrictCharField(max_length=120)
+    program = StrictCharField(trim_whitespace=False, max_length=1_000_000)
 
 
 class VVSerializer(serializers.ModelSerializer):
@@ -26,7 +27,7 @@ class VVSerializer(serializers.ModelSerializer):
     )
     tasks_done = serializers.SerializerMethodField()
     tasks_open = serializers.SerializerMethodField()
-    error = serializers.CharField()
+    error = StrictCharField()
 
     class Meta:
         model = VirtualVehicle
@@ -133,8 +134,8 @@ class TaskOutSerializer(serializers.ModelSerializer):
     readings = serializers.SerializerMethodField(
         help_text="One reading per sensor, in the order asked; camera readings have image_url."
     )
-    sensors = serializers.ListField(child=serializers.CharField(), help_text="SDC entry names.")
-    message = serializers.CharField(help_text="Why the task was rejected, if it was.")
+    sensors = serializers.ListField(child=StrictCharField(), help_text="SDC entry names.")
+    message = StrictCharField(help_text="Why the task was rejected, if it was.")
 
     class Meta:
         model = Task
@@ -174,7 +175,7 @@ class TaskOutSerializer(serializers.ModelSerializer):
 class StaffTaskOutSerializer(TaskOutSerializer):
     """A task as staff see it: also which vehicle served (or serves) it."""
 
-    vehicle = serializers.CharField(source="vehicle.name", default=None, allow_null=True)
+    vehicle = StrictCharField(source="vehicle.name", default=None, allow_null=True)
 
     class Meta(TaskOutSerializer.Meta):
         fields = [*TaskOutSerializer.Meta.fields, "vehicle"]

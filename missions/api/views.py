@@ -15,7 +15,7 @@ from drf_spectacular.types import OpenApiTypes
 from drf_spectacular.utils import OpenApiParameter, extend_schema, extend_schema_view
 from rest_framework import generics, mixins, status, viewsets
 from rest_framework.decorators import action
-from rest_framework.exceptions import NotFound, PermissionDenied
+from rest_framework.exceptions import NotFound, PermissionDenied, ValidationError
 from rest_framework.request import Request
 from rest_framework.response import Response
 from rest_framework.serializers import BaseSerializer
@@ -117,6 +117,10 @@ class VirtualVehicleViewSet(
     def get_queryset(self) -> QuerySet[VirtualVehicle]:
         vvs = vv_list_for_user(user=self.request.user).order_by("-created")  # type: ignore[arg-type]
         wanted = self.request.query_params.get("status")
+        if wanted is not None and wanted not in VVStatus.values:
+            raise ValidationError(
+                {"status": [f"{wanted!r} is not a status; one of {', '.join(VVStatus.values)}."]}
+            )
         return vvs.filter(status=wanted) if wanted else vvs
 
     def get_object(self) -> VirtualVehicle:
@@ -137,7 +141,8 @@ class VirtualVehicleViewSet(
         if problem is not None:
             error = {"message": problem.message, "line": problem.line, "column": problem.column}
             return Response(
-                {"program": [str(problem)], "error": error}, status=status.HTTP_400_BAD_REQUEST
+                {"detail": f"program: {problem}", "program": [str(problem)], "error": error},
+                status=status.HTTP_400_BAD_REQUEST,
             )
         return Response(self.get_serializer(vv).data, status=status.HTTP_201_CREATED)
 

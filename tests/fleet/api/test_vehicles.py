@@ -111,8 +111,10 @@ def test_bad_configurations_are_refused_naming_the_field(
     response = api_staff.post("/api/v1/vehicles/", {**NEW, **change}, format="json")
     assert response.status_code == 400
     errors = response.json()
+    detail = errors.pop("detail")
     assert list(errors) == [field], errors
     assert words in str(errors[field])
+    assert detail.startswith(f"{field}: ") or detail.startswith(f"{field}.")
     assert not Vehicle.objects.exists() and register_calls == []
 
 

@@ -48,7 +48,10 @@ def test_a_program_with_a_syntax_error_is_refused_with_line_and_column(api_a) ->
 def test_missing_fields_say_which(api_a) -> None:
     response = api_a.post("/api/v1/vvs/", {"name": "nothing"}, format="json")
     assert response.status_code == 400
-    assert response.json() == {"program": ["This field is required."]}
+    assert response.json() == {
+        "detail": "program: This field is required.",
+        "program": ["This field is required."],
+    }
 
 
 def test_another_customers_vv_answers_404(api_a, api_b) -> None:
