@@ -93,6 +93,9 @@ def test_a_customer_writes_vv1_watches_it_fly_and_gets_its_results_others_see_no
     with explained(workers):
         workers.start("gsworker", "GS Base")
         workers.start("rvworker", "Heli One")
+        # Staff watch the whole fleet's map from the start (VV 1 may be aboard for seconds).
+        page_staff, _ = new_page()
+        log_in(page_staff, "operator", then="/map/")
         log_in(page, "customer-a")
         vv_id = write_and_submit(page, "VV 1")
         dashboard = page
@@ -109,6 +112,12 @@ def test_a_customer_writes_vv1_watches_it_fly_and_gets_its_results_others_see_no
         assert first["vvs"] == [{"id": vv_id, "name": "VV 1", "customer": world.customer_a.pk}]
         # ...anonymous to the customer: no name, no route (it would show others' tasks).
         assert "name" not in first and "route" not in first
+        # Staff see the vehicle by its name, with VV 1 aboard.
+        page_staff.wait_for_function(
+            """() => Object.values(window.cpccMap.vehicles).some((v) =>
+                 v.name === 'Heli One' && v.vvs.some((vv) => vv.name === 'VV 1'))""",
+            timeout=FLIGHT_MS,
+        )
         # The marker moves: another frame puts the vehicle somewhere else, and the marker is
         # drawn there (on the next animation frame).
         page.wait_for_function(
@@ -135,15 +144,6 @@ def test_a_customer_writes_vv1_watches_it_fly_and_gets_its_results_others_see_no
         state_b = map_state(page_b)
         assert (state_b["vvs"], state_b["vehicles"], state_b["vvNames"]) == ("0", [], [])
         assert (state_b["tasksOpen"], state_b["tasksDone"]) == ("0", "0")
-
-        # Staff see the vehicle by its name, with VV 1 aboard.
-        page_staff, _ = new_page()
-        log_in(page_staff, "operator", then="/map/")
-        page_staff.wait_for_function(
-            """() => Object.values(window.cpccMap.vehicles).some((v) =>
-                 v.name === 'Heli One' && v.vvs.some((vv) => vv.name === 'VV 1'))""",
-            timeout=FLIGHT_MS,
-        )
 
         # All four tasks done (red), nothing open; the carrier leaves the customer's map.
         expect(live).to_have_attribute("data-tasks-done", "4", timeout=FLIGHT_MS)
