@@ -5,8 +5,8 @@ the next task through its driver, reads the sensors there for every task within 
 and resumes those VVs (``task_complete``). It asks the planner again when it arrives and,
 when the planner ``retargets``, whenever work is added in flight. With nothing left to do it
 waits in the air at its standby position for a while (planners that ``stand_by``) and then
-flies home and lands. Time comes from a scheduler: the discrete-event queue of ``simulate``, or real time in a
-worker.
+flies home and lands. Time comes from a scheduler: the discrete-event queue of ``simulate``,
+or real time in a worker.
 """
 
 from __future__ import annotations

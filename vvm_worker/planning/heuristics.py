@@ -309,7 +309,6 @@ def iterated_local_search(
         return best
     best_cost = path_cost(matrix, best)
     rng = random.Random(seed)
-    values = matrix.values
     for kick in range(kicks):
         if deadline is not None and kick % 16 == 0 and time.perf_counter() > deadline:
             break
@@ -321,8 +320,7 @@ def iterated_local_search(
         kicked = best[:a] + best[b:c] + best[a:b] + best[c:]
         touched = [kicked[k] for k in (a - 1, a, a + c - b - 1, a + c - b, c - 1, c) if k < m]
         candidate = improve_path(matrix, kicked, neighbours=neighbours, start=touched)
-        idx = np.asarray(candidate, dtype=np.intp)
-        cost = float(values[idx[:-1], idx[1:]].sum())
+        cost = path_cost(matrix, candidate)
         if cost <= best_cost * (1.0 + 1e-12):
             best, best_cost = candidate, cost
     return best

@@ -264,10 +264,9 @@ class RepairmanSearch:
 
     def insert(self, path: Sequence[int], node: int) -> list[int]:
         """`path` with `node` inserted where it raises the objective least."""
-        self._load(list(path))
-        n = len(self.path) - 1
+        n = len(path) - 1
         # Evaluated with the node appended at the end, then moved: reuse the block algebra.
-        self._load([*self.path, node])
+        self._load([*path, node])
         best_value, best_after = self.current, n
         segment = (n + 1, n + 1, False)
         for after in range(n):

@@ -92,9 +92,9 @@ def fleet_caps(vvm: VVM) -> list[VehicleCaps]:
 
 
 def planned_routes(vehicles: Sequence[Vehicle]) -> dict[int, tuple[Position, ...]]:
-    """The open tasks of each RV with work, in the order its planner last meant to serve
+    """The open tasks of each RV with work (`open_count` annotated, as `fleet_caps` does), in the order its planner last meant to serve
     them (its saved plan; tasks the plan does not know yet come last, oldest first)."""
-    busy = {v.pk: v for v in vehicles if getattr(v, "open_count", 1)}
+    busy = {v.pk: v for v in vehicles if v.open_count}
     if not busy:
         return {}
     rows = (
@@ -181,8 +181,8 @@ def _stays(
     own = next((c for c in fleet if c.id == host.pk), None)
     if own is None or not own.active:
         return False
-    requests = [request_of(t) for t in mine if best.can_serve(request_of(t))]
-    if len(requests) < len(mine):
+    requests = [request_of(t) for t in mine]
+    if not all(best.can_serve(r) for r in requests):
         return True
     ours = sum(own.cost_s(r) for r in requests)
     theirs = sum(best.cost_s(r) for r in requests)
