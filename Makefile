@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 SCENARIO ?= examples/scenarios/paper-fig3.json
 
-.PHONY: demo test lint check bench bench-planner screenshots simulate-fig2 simulate-fig3 vendor clean
+.PHONY: demo test lint check bench bench-planner bench-load screenshots simulate-fig2 simulate-fig3 vendor clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
@@ -47,12 +47,20 @@ bench: $(STAMP)
 	$(PY) -m bench.live_map --redis redis://127.0.0.1:6379/15
 	$(PY) -m bench.map_browser
 	$(MAKE) bench-planner
+	$(MAKE) bench-load
 
 # The route planners on the demo5 protocol, overlapping areas, a survey and replanning times:
 # tables for docs/benchmarks.md and docs/planner-latency.png (bench/planner.py, ~15 minutes).
 bench-planner: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[dev,bench]'
 	$(PY) -m bench.planner
+
+# The REST API and the live map under load, the platform run as in production (DEBUG off,
+# daphne, a worker per RV and GS) on the machine's PostgreSQL and Redis (127.0.0.1: database
+# cpcc_bench_load, dropped and created anew; Redis db 14, flushed): bench/load.py, ~2 minutes.
+bench-load: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[dev,bench]'
+	$(PY) -m bench.load
 
 # The README's pictures of the web front end, from the real pages of a demo run (Playwright
 # driving /usr/bin/chromium): bench/screenshots.py, into docs/screenshots/.

@@ -8,6 +8,9 @@ from channels.security.websocket import AllowedHostsOriginValidator
 from django.core.asgi import get_asgi_application
 
 os.environ.setdefault("DJANGO_SETTINGS_MODULE", "cpcc_site.settings")
+# Under ASGI each request runs in a thread of its own: a persistent database connection would
+# stay open per thread until the server refuses more clients (Django's advice: none).
+os.environ.setdefault("CPCC_DB_CONN_MAX_AGE", "0")
 django_asgi_app = get_asgi_application()
 
 from missions.routing import websocket_urlpatterns  # noqa: E402 - needs the apps loaded

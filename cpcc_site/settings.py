@@ -50,6 +50,8 @@ INSTALLED_APPS = [
 ]
 
 MIDDLEWARE = [
+    # 503, not 500, while the database is unavailable (listed first, asked last).
+    "cpcc_site.errors.DatabaseOutageMiddleware",
     "django.middleware.security.SecurityMiddleware",
     # Static files in every mode, under daphne (ASGI) too: Django serves them only under
     # runserver.
@@ -126,7 +128,11 @@ TEMPLATES = [
 
 DATABASE_URL = env_str("DATABASE_URL", f"sqlite:///{VAR_DIR / 'db.sqlite3'}")
 try:
-    DATABASES = {"default": dj_database_url.parse(DATABASE_URL, conn_max_age=60)}
+    DATABASES = {
+        "default": dj_database_url.parse(
+            DATABASE_URL, conn_max_age=int(env_float("CPCC_DB_CONN_MAX_AGE", 60, minimum=0))
+        )
+    }
 except ValueError as exc:  # dj-database-url raises ValueError for an unknown scheme
     raise ConfigError(f"DATABASE_URL={DATABASE_URL!r}: {exc}") from None
 if DATABASES["default"]["ENGINE"] == "django.db.backends.sqlite3":
@@ -136,11 +142,18 @@ if DATABASES["default"]["ENGINE"] == "django.db.backends.sqlite3":
     DATABASES["default"]["CONN_MAX_AGE"] = 0
     # Several worker processes share one SQLite file: wait for a lock instead of failing.
     # WAL lets the web server read while a worker writes.
+    # CPCC_SQLITE_TIMEOUT_S: how long a query waits for another process's lock (past it,
+    # the database counts as unavailable: workers wait it out, the web answers 503).
     DATABASES["default"]["OPTIONS"] = {
-        "timeout": 30,
+        "timeout": env_float("CPCC_SQLITE_TIMEOUT_S", 30.0),
         "transaction_mode": "IMMEDIATE",
         "init_command": "PRAGMA journal_mode=WAL;",
     }
+
+else:
+    # A database server that does not answer is unavailable after 5 s, not after the
+    # operating system's TCP timeout (minutes).
+    DATABASES["default"].setdefault("OPTIONS", {})["connect_timeout"] = 5
 
 AUTH_USER_MODEL = "accounts.User"
 AUTH_PASSWORD_VALIDATORS = [

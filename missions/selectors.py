@@ -56,6 +56,15 @@ def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:
     return qs.filter(customer_id=user.customer_id)
 
 
+def with_task_counts(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
+    """The VVs with ``tasks_done`` and ``tasks_open`` counted in the same query, and without
+    the columns a list does not show (program, catalog, pending request)."""
+    return vvs.defer("program", "catalog", "pending").annotate(
+        tasks_done=Count("tasks", filter=Q(tasks__status=TaskStatus.DONE)),
+        tasks_open=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)),
+    )
+
+
 def vv_get_for_user(*, user: User, vv_id: uuid.UUID | str) -> VirtualVehicle:
     """One VV the user may see; VVNotFound both for a missing VV and another customer's, and
     for an id that is no UUID at all."""

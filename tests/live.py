@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -64,13 +65,16 @@ class Workers:
         }
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
 
-    def start(self, kind: str, name: str) -> subprocess.Popen[bytes]:
-        """Start ``manage.py gsworker NAME`` or ``rvworker NAME``; returns once it runs."""
+    def start(
+        self, kind: str, name: str, *, env: dict[str, str] | None = None
+    ) -> subprocess.Popen[bytes]:
+        """Start ``manage.py gsworker NAME`` or ``rvworker NAME``; returns once it runs.
+        ``env``: more variables (a fault to inject: tests/inject/sitecustomize.py)."""
         log = (self.tmp / f"{kind}-{name}.log".replace(" ", "_")).open("ab")
         process = subprocess.Popen(
             [sys.executable, "manage.py", kind, name],
             cwd=ROOT,
-            env={**self.env, "DATABASE_URL": database_url()},
+            env={**self.env, "DATABASE_URL": database_url(), **faults(env or {})},
             stdout=log,
             stderr=subprocess.STDOUT,
             start_new_session=True,  # a process group of its own, to kill it with its children
@@ -116,6 +120,109 @@ class Workers:
                 f"VV {vv.name}: {vv.status} on {vv.host_name} pending={bool(vv.pending)} tasks={tasks}"
             )
         return "\n".join(parts)
+
+
+def faults(env: dict[str, str]) -> dict[str, str]:
+    """``env`` with tests/inject on PYTHONPATH when it names a fault to inject."""
+    if not any(name.startswith("CPCC_FAULT_") for name in env):
+        return env
+    path = os.pathsep.join(
+        filter(None, [str(ROOT / "tests" / "inject"), os.environ.get("PYTHONPATH")])
+    )
+    return {**env, "PYTHONPATH": path}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def production_env(var_dir: Path) -> dict[str, str]:
+    """The environment of a production web server on 127.0.0.1 over plain HTTP (DEBUG off)."""
+    return {
+        **os.environ,
+        "DEBUG": "0",
+        "SECRET_KEY": "test-only-" + "x" * 50,
+        "ALLOWED_HOSTS": "127.0.0.1",
+        "CPCC_HTTPS": "0",
+        "CPCC_VAR_DIR": str(var_dir),
+    }
+
+
+def collect_static(var_dir: Path) -> Path:
+    """What a provider does before starting the web server with DEBUG off: `collectstatic`
+    (into ``var_dir``/staticfiles, which WhiteNoise then serves)."""
+    subprocess.run(
+        [sys.executable, "manage.py", "collectstatic", "--noinput"],
+        cwd=ROOT,
+        env=production_env(var_dir),
+        check=True,
+        capture_output=True,
+    )
+    return var_dir
+
+
+class Web:
+    """The web server as a provider runs it (daphne, ASGI, DEBUG off) in a process of its own,
+    on a free port of 127.0.0.1, with the test database and broker; ``var_dir`` holds the
+    collected static files (``collect_static``)."""
+
+    def __init__(self, tmp: Path, redis_url: str, var_dir: Path) -> None:
+        self.tmp = tmp
+        self.port = free_port()
+        self.env = {
+            **production_env(var_dir),
+            "REDIS_URL": redis_url,
+            "CPCC_MEDIA_ROOT": str(settings.MEDIA_ROOT),
+            "DATABASE_URL": database_url(),
+        }
+        self.process: subprocess.Popen[bytes] | None = None
+        self.log = tmp / "web.log"
+
+    def url(self, path: str) -> str:
+        return f"http://127.0.0.1:{self.port}{path}"
+
+    def start(self) -> None:
+        """Start it; returns once it answers."""
+        log = self.log.open("ab")
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "daphne", "-b", "127.0.0.1", "-p", str(self.port),
+             "cpcc_site.asgi:application"],
+            cwd=ROOT,
+            env=self.env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )  # fmt: skip
+        process = self.process
+
+        def up() -> bool:
+            assert process.poll() is None, self.log.read_text()
+            try:
+                with socket.create_connection(("127.0.0.1", self.port), timeout=1):
+                    return True
+            except OSError:
+                return False
+
+        wait_for(up, timeout=60, what="the web server to answer")
+
+    def kill(self) -> None:
+        """SIGKILL it, as a crash would."""
+        assert self.process is not None
+        os.killpg(self.process.pid, signal.SIGKILL)
+        self.process.wait(timeout=10)
+        self.process = None
+
+    def stop(self) -> None:
+        if self.process is not None and self.process.poll() is None:
+            os.killpg(self.process.pid, signal.SIGTERM)
+            try:
+                self.process.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.process.pid, signal.SIGKILL)
+                self.process.wait()
+        self.process = None
 
 
 def _quiet(log: str) -> str:

@@ -14,11 +14,11 @@ committed, so a message is acknowledged only after its checkpoint is in the data
 from __future__ import annotations
 
 import concurrent.futures
-import datetime as dt
 import heapq
 import logging
 import queue
 import threading
+import time
 import uuid
 from collections.abc import Callable
 from typing import Any
@@ -26,8 +26,8 @@ from typing import Any
 from django.conf import settings
 from django.db import close_old_connections, connection
 from django.db.models import Q
-from django.utils import timezone
 
+from cpcc_site import database
 from fleet.mavlink.driver import MavlinkDriver
 from fleet.mavlink.errors import MavlinkError
 from fleet.models import Driver, GroundStation, Vehicle, VehicleStatus
@@ -47,7 +47,10 @@ from vvm_worker.services import (
     vehicles_check_leases,
     vv_admit_queued,
     vv_advance,
+    vvs_reroute_waiting,
 )
+from vvm_worker.services.base import db_time_ago
+from vvm_worker.services.routing import online_vehicles
 
 logger = logging.getLogger("cpcc.hosts")
 
@@ -55,6 +58,7 @@ logger = logging.getLogger("cpcc.hosts")
 INSTANT = 1e6
 WAIT_S = 60.0  # how long a Celery task waits for the host thread
 SWEEP_S = 5.0  # how often a host looks for work a lost message would have started
+WAITING_LOOK_S = 30.0  # how often a ground station routes a VV waiting for an RV again
 
 
 class RealTimeScheduler:
@@ -110,18 +114,26 @@ class RealTimeScheduler:
                 _, _, timer = heapq.heappop(self._timers)
                 self._run(timer, None)
 
-    @staticmethod
-    def _run(fn: Callable[[], Any], future: concurrent.futures.Future[Any] | None) -> None:
-        close_old_connections()
-        try:
-            result = fn()
-        except Exception as exc:
-            logger.exception("host work failed")
-            if future is not None:
-                future.set_exception(exc)
-        else:
-            if future is not None:
-                future.set_result(result)
+    def _run(self, fn: Callable[[], Any], future: concurrent.futures.Future[Any] | None) -> None:
+        """Run one piece of work. A database outage is waited out and the work done again
+        (each piece re-reads the state it needs, and what it committed stays committed), so
+        that no timer of the vehicle's control loop is lost to it."""
+        while True:
+            close_old_connections()
+            try:
+                result = fn()
+            except Exception as exc:
+                if database.is_outage(exc):
+                    logger.warning("database unavailable: waiting to do the work again")
+                    if database.wait_until_available(self._stopping):
+                        continue
+                logger.exception("host work failed")
+                if future is not None:
+                    future.set_exception(exc)
+            else:
+                if future is not None:
+                    future.set_result(result)
+            return
 
 
 class RVHost:
@@ -325,17 +337,34 @@ class GSHost:
 
     def _watch_leases(self) -> None:
         vvm = platform_vvm()  # a runtime of this thread's own
+        # No RV's worker can renew its lease while the database is down: after an outage,
+        # each gets a full lease's time to do so before its VVs are moved off it.
+        leases_from = 0.0
+        online: set[int] = set()
         try:
             while not self._stopping.wait(min(SWEEP_S, settings.CPCC_RV_LEASE_S / 4)):
                 close_old_connections()
                 try:
-                    vehicles_check_leases(vvm=vvm)
-                    # Messages are hints: pick up what a lost one would have started.
-                    for vv_id in stalled(host_gs_id=self.station_id):
+                    if time.monotonic() >= leases_from:
+                        vehicles_check_leases(vvm=vvm)
+                    # An RV whose lease came back (its worker stalled, or the database was
+                    # down) may serve VVs that were sent to wait meanwhile.
+                    now_online = set(online_vehicles(vvm).values_list("pk", flat=True))
+                    if now_online - online:
+                        vvs_reroute_waiting(vvm=vvm)
+                    online = now_online
+                    # Messages are hints: pick up what a lost one would have started, and
+                    # look again at VVs that have waited here for an RV for a while.
+                    for vv_id in stalled(host_gs_id=self.station_id, waiting_s=WAITING_LOOK_S):
                         vv_advance(vv_id=vv_id, vvm=vvm)
                     _admit_all(vvm)
-                except Exception:
-                    logger.exception("sweep failed")
+                except Exception as exc:
+                    if not database.is_outage(exc):
+                        logger.exception("sweep failed")
+                        continue
+                    logger.warning("database unavailable: the sweep waits")
+                    if database.wait_until_available(self._stopping):
+                        leases_from = time.monotonic() + settings.CPCC_RV_LEASE_S
         finally:
             connection.close()
 
@@ -347,13 +376,17 @@ def _admit_all(vvm: VVM) -> None:
         vv_admit_queued(customer_id=customer_id, vvm=vvm)
 
 
-def stalled(**host: int) -> list[uuid.UUID]:
+def stalled(*, waiting_s: float | None = None, **host: int) -> list[uuid.UUID]:
     """VVs on a host that have not moved for a while although they could: answered but not
-    resumed, or arrived but not taken up (their message was lost)."""
-    since = timezone.now() - dt.timedelta(seconds=SWEEP_S)
-    vvs = VirtualVehicle.objects.filter(updated__lt=since, **host).filter(
-        Q(status=VVStatus.MIGRATING) | Q(status=VVStatus.RUNNING, pending__isnull=True)
-    )
+    resumed, or arrived but not taken up (their message was lost); with ``waiting_s``, also
+    those that have waited that long for an RV (routed again, they wait ``waiting_s`` more)."""
+    moving = Q(status=VVStatus.MIGRATING) | Q(status=VVStatus.RUNNING, pending__isnull=True)
+    look = Q(updated__lt=db_time_ago(SWEEP_S)) & moving
+    if waiting_s is not None:
+        look |= Q(
+            status=VVStatus.RUNNING, pending__isnull=False, updated__lt=db_time_ago(waiting_s)
+        )
+    vvs = VirtualVehicle.objects.filter(look, **host)
     return list(vvs.order_by("submitted_s", "id").values_list("pk", flat=True))
 
 

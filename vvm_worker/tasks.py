@@ -8,9 +8,11 @@ again, and a worker that restarts recovers from the database anyway.
 from __future__ import annotations
 
 import uuid
+from collections.abc import Callable
 
 from celery import shared_task
 
+from cpcc_site import database
 from vvm_worker.dispatch import ADMIT_TASK, VEHICLE_CHANGED_TASK, VV_ADVANCE_TASK
 from vvm_worker.hosts import GSHost, current_host
 from vvm_worker.platform import platform_vvm
@@ -23,9 +25,9 @@ def vv_advance(vv_id: str) -> None:
     """The VV arrived on this worker's host (or must be looked at again): step and route it."""
     host = current_host()
     if host is None:
-        advance(vv_id=uuid.UUID(vv_id), vvm=platform_vvm())
+        _through_outages(lambda: advance(vv_id=uuid.UUID(vv_id), vvm=platform_vvm()))
     else:
-        host.advance(uuid.UUID(vv_id))
+        _through_outages(lambda: host.advance(uuid.UUID(vv_id)))
 
 
 @shared_task(name=VEHICLE_CHANGED_TASK, acks_late=True, ignore_result=True)
@@ -41,6 +43,18 @@ def admit(customer_id: int) -> None:
     """Start the customer's queued VVs as far as its quota allows (any ground station)."""
     host = current_host()
     if isinstance(host, GSHost):
-        host.admit(customer_id)
+        _through_outages(lambda: host.admit(customer_id))
     else:
-        vv_admit_queued(customer_id=customer_id, vvm=platform_vvm())
+        _through_outages(lambda: vv_admit_queued(customer_id=customer_id, vvm=platform_vvm()))
+
+
+def _through_outages(work: Callable[[], None]) -> None:
+    """Do the work; if the database is down meanwhile, wait until it is back and do it again
+    (the message stays unacknowledged meanwhile: a worker killed then gets it again)."""
+    while True:
+        try:
+            work()
+            return
+        except Exception as exc:
+            if not database.is_outage(exc) or not database.wait_until_available():
+                raise

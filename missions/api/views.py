@@ -43,6 +43,7 @@ from missions.selectors import (
     vv_storage_for_user,
     vv_storage_get_for_user,
     vv_tasks_for_user,
+    with_task_counts,
 )
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
@@ -115,7 +116,7 @@ class VirtualVehicleViewSet(
     lookup_value_regex = UUID_PATTERN
 
     def get_queryset(self) -> QuerySet[VirtualVehicle]:
-        vvs = vv_list_for_user(user=self.request.user).order_by("-created")  # type: ignore[arg-type]
+        vvs = with_task_counts(vv_list_for_user(user=self.request.user)).order_by("-created")  # type: ignore[arg-type]
         wanted = self.request.query_params.get("status")
         if wanted is not None and wanted not in VVStatus.values:
             raise ValidationError(
@@ -153,7 +154,8 @@ class VirtualVehicleViewSet(
         "409 when it had already ended.",
     )
     @action(detail=True, methods=["post"])
-    def cancel(self, request: Request, pk: str) -> Response:
+    def cancel(self, request: Request, pk: str, format: str | None = None) -> Response:
+        # ``format``: the router's suffix route (.../cancel.json) passes it.
         vv = vv_cancel_for_user(user=request.user, vv_id=pk, vvm=platform_vvm())  # type: ignore[arg-type]
         return Response(self.get_serializer(vv).data)
 

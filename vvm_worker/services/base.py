@@ -11,7 +11,8 @@ from dataclasses import field as dataclass_field
 from typing import Any
 
 from django.core.exceptions import ValidationError
-from django.db.models import Count, Q
+from django.db.models import Count, DateTimeField, ExpressionWrapper, Q
+from django.db.models.functions import Now
 
 from fleet.geo import Position, distance_m
 from fleet.models import GroundStation, SensorType
@@ -100,6 +101,12 @@ def pending_of(vv: VirtualVehicle) -> PendingRequest | None:
         tasks=tuple(TaskRequest.from_json(t) for t in data["tasks"]),
         open=tuple(data.get("open", ())),
     )
+
+
+def db_time_ago(seconds: float) -> ExpressionWrapper:
+    """That long ago by the database's clock: the same for every worker, whatever its own
+    clock says (leases, sweeps)."""
+    return ExpressionWrapper(Now() - dt.timedelta(seconds=seconds), output_field=DateTimeField())
 
 
 def as_datetime(vvm: VVM, t_s: float) -> dt.datetime:

@@ -8,6 +8,7 @@ from typing import Any, TypedDict
 
 from django.core.exceptions import ValidationError
 from django.db import transaction
+from django.db.models.functions import Now
 
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
@@ -20,7 +21,7 @@ from missions.models import (
     VirtualVehicle,
     VVStatus,
 )
-from vvm_worker.services.base import VVM, as_datetime, logger, sensor_entries
+from vvm_worker.services.base import VVM, logger, sensor_entries
 from vvm_worker.services.routing import (
     fleet_caps,
     migrate_to_ground_station,
@@ -158,8 +159,10 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
 
 
 def vehicle_heartbeat(*, vehicle_id: int, vvm: VVM) -> None:
-    """The vehicle's worker is alive (it renews its lease)."""
-    Vehicle.objects.filter(pk=vehicle_id).update(worker_seen=as_datetime(vvm, vvm.clock.now_s()))
+    """The vehicle's worker is alive (it renews its lease). The time is the database's: a
+    worker whose clock is behind or ahead renews its lease all the same (``online_vehicles``
+    reads the same clock)."""
+    Vehicle.objects.filter(pk=vehicle_id).update(worker_seen=Now())
 
 
 def vehicles_check_leases(*, vvm: VVM) -> list[str]:

@@ -29,7 +29,7 @@ from vvm_worker.runtime import (
 from vvm_worker.services.base import (
     VVM,
     announcing,
-    as_datetime,
+    db_time_ago,
     ground_station_for,
     logger,
     pending_of,
@@ -115,9 +115,10 @@ def planned_routes(vehicles: Sequence[Vehicle]) -> dict[int, tuple[Position, ...
 
 
 def online_vehicles(vvm: VVM) -> QuerySet[Vehicle]:
+    """RVs whose worker renewed its lease within ``lease_s``, by the database's clock (the
+    one ``vehicle_heartbeat`` writes with), whatever the clocks of the workers say."""
     assert vvm.lease_s is not None
-    since = as_datetime(vvm, vvm.clock.now_s() - vvm.lease_s)
-    return Vehicle.objects.filter(worker_seen__gte=since)
+    return Vehicle.objects.filter(worker_seen__gte=db_time_ago(vvm.lease_s))
 
 
 def route(vv: VirtualVehicle, vvm: VVM) -> bool:

@@ -1,0 +1,78 @@
+"""Database outages: telling one from a fault of the work, and waiting one out.
+
+An outage is the database server unreachable (refused, reset, timed out) or, with SQLite, the
+file locked past its busy timeout. Work that meets one is not wrong: a worker waits until the
+database answers and does it again (the work is transactional, and what it committed before
+stays committed); the web answers 503 with Retry-After (cpcc_site.errors).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+
+from django.db import DEFAULT_DB_ALIAS, InterfaceError, OperationalError, connections
+
+logger = logging.getLogger("cpcc.database")
+
+RETRY_AFTER_S = 5  # what a 503 tells a client during an outage
+_FIRST_WAIT_S = 0.1
+_LONGEST_WAIT_S = 2.0
+# SQLite's words for a lock held past the busy timeout (the database is there, but not to us).
+_LOCKED = ("database is locked", "database table is locked", "database is busy")
+
+
+def answers(alias: str = DEFAULT_DB_ALIAS) -> bool:
+    """Whether the database takes a new connection and a query, asked on a connection of its
+    own (the caller's may be broken, or inside a transaction)."""
+    probe = connections.create_connection(alias)
+    try:
+        with probe.cursor() as cursor:
+            cursor.execute("SELECT 1")
+            cursor.fetchone()
+        return True
+    except (OperationalError, InterfaceError):
+        return False
+    finally:
+        with contextlib.suppress(OperationalError, InterfaceError):
+            probe.close()
+
+
+def is_outage(exc: BaseException, alias: str = DEFAULT_DB_ALIAS) -> bool:
+    """Whether ``exc`` means the database is unavailable, as opposed to a query that is wrong
+    (SQLite reports both as OperationalError: the server is asked when in doubt)."""
+    if isinstance(exc, InterfaceError):  # the connection was closed under us
+        return True
+    if not isinstance(exc, OperationalError):
+        return False
+    if any(words in str(exc).lower() for words in _LOCKED):
+        return True
+    return not answers(alias)
+
+
+def wait_until_available(
+    stopping: threading.Event | None = None, alias: str = DEFAULT_DB_ALIAS
+) -> bool:
+    """Wait until the database answers again (backing off to one look every 2 s). Closes this
+    thread's connection first, so that the next query opens a new one. False if ``stopping``
+    was set meanwhile."""
+    stopping = stopping or threading.Event()
+    _drop_connection(alias)
+    wait = _FIRST_WAIT_S
+    while not answers(alias):
+        if stopping.wait(wait):
+            return False
+        wait = min(wait * 2, _LONGEST_WAIT_S)
+    logger.warning("database available again")
+    return True
+
+
+def _drop_connection(alias: str) -> None:
+    conn = connections[alias]
+    if conn.in_atomic_block:  # only the outermost caller may throw a transaction away
+        return
+    try:
+        conn.close()
+    except (OperationalError, InterfaceError):
+        conn.connection = None

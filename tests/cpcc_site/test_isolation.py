@@ -1,0 +1,936 @@
+"""Tenant isolation, route by route.
+
+Every URL pattern of the project (Django's resolver, walked to its leaves: admin, REST API,
+pages, auth views, schema and docs) and every WebSocket route of cpcc_site/asgi.py is
+classified in ROUTES and WEBSOCKET_ROUTES below; a pattern that is in neither fails
+``test_every_url_pattern_is_classified``, so a new URL cannot be forgotten. Each classified
+pattern is then tried with real data of two customers (each with a VV flown to its end, with
+tasks, storage, log, camera pictures and migrations, and a queued one):
+
+- an object of a customer answers 404 to the other customer for every HTTP method, exactly as
+  an object that does not exist, changes nothing, and shows none of the owner's data;
+- a list shows its caller's data only;
+- anyone who is not logged in is sent to the login page (pages, admin) or refused (API);
+- staff routes refuse customers' users, and let staff in;
+- the live map's socket refuses strangers and other sites, and never sends a customer another
+  customer's VVs.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlencode
+
+import pytest
+from channels.auth import AuthMiddleware
+from channels.routing import URLRouter
+from channels.security.websocket import OriginValidator
+from channels.testing import WebsocketCommunicator
+from django.apps import apps
+from django.conf import settings as django_settings
+from django.contrib import admin
+from django.contrib.auth.models import Group
+from django.db import transaction
+from django.http import HttpResponseBase
+from django.test import Client, RequestFactory, override_settings
+from django.urls import URLResolver, get_resolver, resolve
+from django.utils.encoding import force_bytes
+from django.utils.http import urlsafe_base64_encode
+from rest_framework.authtoken.models import Token
+from rest_framework.test import APIClient
+
+from accounts.models import Customer, User
+from cpcc_site.asgi import application
+from fleet.models import GroundStation, SensorType, Vehicle
+from missions.api.views import UUID_PATTERN
+from missions.consumers import MapConsumer
+from missions.events import EVENTS_STREAM, POSITIONS_STREAM, VEHICLES_HASH
+from missions.models import LogEntry, Migration, StorageDocument, Task, VirtualVehicle, VVStatus
+from missions.readings import image_file, image_references
+from tests.api_fixtures import MISSION
+from tests.conftest import RecordingDispatcher
+from tests.factories import CustomerFactory, GroundStationFactory, UserFactory, VehicleFactory
+
+METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
+UNSAFE = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+READ = ("GET", "HEAD")
+ANY = METHODS  # a plain Django view answers whatever the method
+# An id that no object has: another customer's object must answer exactly like it.
+MISSING_VV = "00000000-0000-4000-8000-000000000000"
+MISSING_ID = "987654321"
+# What a hole would act on: a valid program, a name, a form's confirmation.
+API_BODY = {"name": "taken over", "program": "var x = 1;"}
+FORM_BODY = {"name": "taken over", "program": "var x = 1;", "copies": "1", "post": "yes"}
+
+
+class Kind(StrEnum):
+    PUBLIC = "public"  # anyone, logged in or not; no customer's data
+    SIGNED_IN = "signed in"  # any logged-in user; no customer's data
+    OWN_LIST = "own list"  # the caller's customer's VVs (staff: all)
+    OBJECT = "object"  # one VV of a customer, or its data: 404 for anyone else
+    STAFF = "staff"  # platform staff only: the admin, the fleet, the customers
+
+
+@dataclass(frozen=True)
+class Route:
+    """How a URL pattern is tried: what it is, a URL of it (``{name}`` filled from the data of
+    the customer who owns the objects), the methods its view acts on."""
+
+    kind: Kind
+    url: str
+    methods: tuple[str, ...] = READ
+    # OBJECT: the same view reached through a query string (``?from=<id>``) and the methods
+    # that read it there.
+    also: str = ""
+    also_methods: tuple[str, ...] = ()
+    # STAFF: what staff get for GET when it is not 200 or a redirect (a view that needs
+    # more than being staff, or a missing object).
+    staff_status: int | None = None
+    # STAFF: the model of a view every ModelAdmin has (generated below).
+    model: str = ""
+
+
+# --- the classification -----------------------------------------------------------------------
+
+ROUTES: dict[str, Route] = {
+    # Django's auth views (the site's login) and the icon.
+    "favicon.ico": Route(Kind.PUBLIC, "/favicon.ico"),
+    "accounts/login/": Route(Kind.PUBLIC, "/accounts/login/"),
+    "accounts/logout/": Route(Kind.PUBLIC, "/accounts/logout/", ("POST",)),
+    "accounts/password_change/": Route(
+        Kind.SIGNED_IN, "/accounts/password_change/", ("GET", "POST")
+    ),
+    "accounts/password_change/done/": Route(Kind.SIGNED_IN, "/accounts/password_change/done/"),
+    "accounts/password_reset/": Route(Kind.PUBLIC, "/accounts/password_reset/"),
+    "accounts/password_reset/done/": Route(Kind.PUBLIC, "/accounts/password_reset/done/"),
+    # A's user id with a token that is not one: the page says the link is invalid.
+    "accounts/reset/<uidb64>/<token>/": Route(Kind.PUBLIC, "/accounts/reset/{uidb64}/x-y/"),
+    "accounts/reset/done/": Route(Kind.PUBLIC, "/accounts/reset/done/"),
+    # The REST API: VVs (DefaultRouter, with format suffixes) and what hangs off one VV.
+    "api/v1/": Route(Kind.SIGNED_IN, "/api/v1/"),
+    "api/v1/<drf_format_suffix:format>": Route(Kind.SIGNED_IN, "/api/v1/.json"),
+    "api/v1/vvs/$": Route(Kind.OWN_LIST, "/api/v1/vvs/", ("GET", "POST")),
+    r"api/v1/vvs\.(?P<format>[a-z0-9]+)/?$": Route(Kind.OWN_LIST, "/api/v1/vvs.json"),
+    "api/v1/vvs/(?P<pk>{uuid})/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/"),
+    r"api/v1/vvs/(?P<pk>{uuid})\.(?P<format>[a-z0-9]+)/?$": Route(
+        Kind.OBJECT, "/api/v1/vvs/{vv}.json"
+    ),
+    "api/v1/vvs/(?P<pk>{uuid})/cancel/$": Route(
+        Kind.OBJECT, "/api/v1/vvs/{queued}/cancel/", ("POST",)
+    ),
+    r"api/v1/vvs/(?P<pk>{uuid})/cancel\.(?P<format>[a-z0-9]+)/?$": Route(
+        Kind.OBJECT, "/api/v1/vvs/{queued}/cancel.json", ("POST",)
+    ),
+    "api/v1/vvs/(?P<id>{uuid})/storage/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/storage/"),
+    r"api/v1/vvs/(?P<id>{uuid})/storage/(?P<key>[\s\S]+)/$": Route(
+        Kind.OBJECT, "/api/v1/vvs/{vv}/storage/{key}/"
+    ),
+    "api/v1/vvs/(?P<id>{uuid})/images/(?P<file>[^/]+)$": Route(
+        Kind.OBJECT, "/api/v1/vvs/{vv}/images/{file}"
+    ),
+    "api/v1/vvs/(?P<id>{uuid})/tasks/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/tasks/"),
+    "api/v1/vvs/(?P<id>{uuid})/log/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/log/"),
+    r"api/v1/vvs/(?P<id>{uuid})/results\.zip$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/results.zip"),
+    # The SDC entries the caller may use: the same catalog for every customer by default.
+    "api/v1/sensors/": Route(Kind.SIGNED_IN, "/api/v1/sensors/"),
+    "api/v1/vehicles/$": Route(Kind.STAFF, "/api/v1/vehicles/", ("GET", "POST")),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/$": Route(
+        Kind.STAFF, "/api/v1/vehicles/{vehicle}/", ("GET", "PATCH", "DELETE")
+    ),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/maintenance/$": Route(
+        Kind.STAFF, "/api/v1/vehicles/{vehicle}/maintenance/", ("POST",)
+    ),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/remove/$": Route(
+        Kind.STAFF, "/api/v1/vehicles/{vehicle}/remove/", ("POST",)
+    ),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/return/$": Route(
+        Kind.STAFF, "/api/v1/vehicles/{vehicle}/return/", ("POST",)
+    ),
+    "api/v1/ground-stations/$": Route(Kind.STAFF, "/api/v1/ground-stations/", ("GET", "POST")),
+    "api/v1/ground-stations/(?P<pk>[^/.]+)/$": Route(
+        Kind.STAFF, "/api/v1/ground-stations/{gs}/", ("GET", "PUT", "PATCH", "DELETE")
+    ),
+    "api/v1/customers/$": Route(Kind.STAFF, "/api/v1/customers/", ("GET", "POST")),
+    "api/v1/customers/(?P<pk>[^/.]+)/$": Route(
+        Kind.STAFF, "/api/v1/customers/{customer}/", ("GET", "PUT", "PATCH", "DELETE")
+    ),
+    # The API's schema and docs are public (drf-spectacular's default): endpoints, no data.
+    "api/schema/": Route(Kind.PUBLIC, "/api/schema/"),
+    "api/docs/": Route(Kind.PUBLIC, "/api/docs/"),
+    "api/redoc/": Route(Kind.PUBLIC, "/api/redoc/"),
+    "api/redoc/redoc.standalone.js": Route(Kind.PUBLIC, "/api/redoc/redoc.standalone.js"),
+    # The pages (missions/urls.py).
+    "": Route(Kind.OWN_LIST, "/"),
+    "vvs/rows/": Route(Kind.OWN_LIST, "/vvs/rows/"),
+    "vvs/new/": Route(
+        Kind.SIGNED_IN,
+        "/vvs/new/",
+        ("GET", "POST"),
+        # The editor starts from one of the user's VVs with ?from=; a POST ignores it.
+        also="/vvs/new/?from={vv}",
+        also_methods=("GET", "HEAD", "PUT", "PATCH", "DELETE", "OPTIONS"),
+    ),
+    "vvs/check/": Route(Kind.SIGNED_IN, "/vvs/check/", ("POST",)),
+    "vvs/<uuid:vv_id>/": Route(Kind.OBJECT, "/vvs/{vv}/", ANY),
+    "vvs/<uuid:vv_id>/edit/": Route(Kind.OBJECT, "/vvs/{queued}/edit/", ANY),
+    "vvs/<uuid:vv_id>/cancel/": Route(Kind.OBJECT, "/vvs/{queued}/cancel/", ("POST",)),
+    "vvs/<uuid:vv_id>/restart/": Route(Kind.OBJECT, "/vvs/{vv}/restart/", ("POST",)),
+    "vvs/<uuid:vv_id>/storage.json": Route(Kind.OBJECT, "/vvs/{vv}/storage.json", ANY),
+    "vvs/<uuid:vv_id>/map.json": Route(Kind.OBJECT, "/vvs/{vv}/map.json", ANY),
+    # The live map's page holds no data: it comes over the socket (tested at the end).
+    "map/": Route(Kind.SIGNED_IN, "/map/"),
+    # The admin site's own views (every one behind AdminSite.admin_view but the login).
+    "admin/": Route(Kind.STAFF, "/admin/", ("GET", "POST")),
+    "admin/login/": Route(Kind.PUBLIC, "/admin/login/"),
+    "admin/logout/": Route(Kind.STAFF, "/admin/logout/", ("POST",)),
+    "admin/password_change/": Route(Kind.STAFF, "/admin/password_change/", ("GET", "POST")),
+    "admin/password_change/done/": Route(Kind.STAFF, "/admin/password_change/done/"),
+    # The task admin's autocompletion of VVs: their names and customers, to staff only.
+    "admin/autocomplete/": Route(
+        Kind.STAFF, "/admin/autocomplete/?app_label=missions&model_name=task&field_name=vv&term=a"
+    ),
+    "admin/jsi18n/": Route(Kind.STAFF, "/admin/jsi18n/"),
+    # "View on site" of A's customer: customers have no page of their own on the site.
+    "admin/r/<path:content_type_id>/<path:object_id>/": Route(
+        Kind.STAFF, "/admin/r/{customer_type}/{customer}/", staff_status=404
+    ),
+    "admin/(?P<app_label>{apps})/$": Route(Kind.STAFF, "/admin/missions/", ("GET", "POST")),
+    "admin/(?P<url>.*)$": Route(Kind.STAFF, "/admin/no/such/page/", staff_status=404),
+    # Custom views of the model admins (ModelAdmin.get_urls overrides).
+    "admin/fleet/vehicle/overview/": Route(Kind.STAFF, "/admin/fleet/vehicle/overview/"),
+    "admin/accounts/user/<id>/password/": Route(
+        Kind.STAFF, "/admin/accounts/user/{user}/password/", ("GET", "POST")
+    ),
+}
+
+# The views every ModelAdmin has (ModelAdmin.get_urls): generated for each registered model,
+# each behind AdminSite.admin_view. A model admin's own views are not: they are listed above.
+ADMIN_MODEL_VIEWS = {
+    "": "",
+    "add/": "add/",
+    "<path:object_id>/history/": "{obj}/history/",
+    "<path:object_id>/delete/": "{obj}/delete/",
+    "<path:object_id>/change/": "{obj}/change/",
+    "<path:object_id>/": "{obj}/",
+}
+
+
+def _admin_model_routes() -> dict[str, Route]:
+    routes = {}
+    for model in admin.site._registry:
+        base = f"{model._meta.app_label}/{model._meta.model_name}/"
+        for pattern, url in ADMIN_MODEL_VIEWS.items():
+            filled = url.replace("{obj}", "{admin:" + model._meta.label_lower + "}")
+            routes[f"admin/{base}{pattern}"] = Route(
+                Kind.STAFF, f"/admin/{base}{filled}", ("GET", "POST"), model=model._meta.label_lower
+            )
+    return routes
+
+
+ROUTES |= _admin_model_routes()
+
+# WebSocket routes (cpcc_site/asgi.py): the consumer each one must reach; tested at the end.
+WEBSOCKET_ROUTES = {"ws/map/": MapConsumer}
+
+
+def _join(prefix: str, route: str) -> str:
+    """Patterns joined as Django's resolver does (ResolverMatch.route)."""
+    return route if not prefix else prefix + route.removeprefix("^")
+
+
+def normalized(route: str) -> str:
+    """A pattern as ROUTES names it: the VV id pattern and the admin's app list shortened."""
+    route = route.replace(UUID_PATTERN, "{uuid}")
+    return re.sub(r"\(\?P<app_label>[\w|]+\)", "(?P<app_label>{apps})", route)
+
+
+def url_patterns(patterns: list[Any] | None = None, prefix: str = "") -> Iterator[str]:
+    """Every leaf pattern of the project's URLconf, as its full route."""
+    for pattern in get_resolver().url_patterns if patterns is None else patterns:
+        route = _join(prefix, str(pattern.pattern))
+        if isinstance(pattern, URLResolver):
+            yield from url_patterns(pattern.url_patterns, route)
+        else:
+            yield normalized(route)
+
+
+def websocket_routes() -> Iterator[tuple[str, Any, list[type]]]:
+    """Every WebSocket route of the ASGI application: (route, consumer class, the layers of
+    the stack it sits under)."""
+
+    def walk(node: Any, stack: list[type]) -> Iterator[tuple[str, Any, list[type]]]:
+        if isinstance(node, URLRouter):
+            for route in node.routes:
+                if isinstance(route, URLResolver):
+                    raise AssertionError("nested WebSocket routers: walk them here")
+                callback = route.callback
+                yield str(route.pattern), getattr(callback, "consumer_class", callback), stack
+            return
+        inner = getattr(node, "inner", None) or getattr(node, "application", None)
+        if inner is None:
+            raise AssertionError(f"no routes under {node!r}")
+        yield from walk(inner, [*stack, type(node)])
+
+    yield from walk(application.application_mapping["websocket"], [])
+
+
+# --- the data -----------------------------------------------------------------------------------
+
+# Customer A's flown VV: the API tests' mission plus a stored value and a log line that appear
+# nowhere else (the program builds them, so the program's text does not contain them).
+A_FLOWN_PROGRAM = (
+    MISSION
+    + """
+VV.storage.store('alpha note', 'alpha-storage-' + 'secret');
+VV.log('alpha-log-' + 'secret');
+"""
+)
+B_FLOWN_PROGRAM = """
+var cam = VV.sensor.get('Camera 640x480');
+var points = [new VV.types.LatLngAlt(48.1100, 12.8600, 40),
+              new VV.types.LatLngAlt(48.1130, 12.8630, 40)];
+for (var n = 0; n < points.length; ++n) {
+  VV.task.execute({type: 'point', position: points[n], tolerance: 2, sensors: [cam]},
+    function (d) { VV.storage.store('b' + n + '.camera', d[0]); });
+}
+VV.storage.store('bravo note', 'bravo-storage-' + 'secret');
+VV.log('bravo-log-' + 'secret');
+"""
+
+
+@dataclass
+class Side:
+    """One customer and its objects."""
+
+    customer: Customer
+    user: User
+    token: str
+    flown: VirtualVehicle  # ended, with tasks, storage, log, pictures and migrations
+    queued: VirtualVehicle  # waiting: it can still be cancelled and edited
+    image: str  # the file name of one of its camera pictures
+    key: str  # a storage key whose value is a camera reading
+    markers: tuple[str, ...] = ()  # strings that are its data and nobody else's
+
+    def values(self) -> dict[str, str]:
+        return {
+            "vv": str(self.flown.pk),
+            "queued": str(self.queued.pk),
+            "file": self.image,
+            "key": self.key,
+        }
+
+
+@dataclass
+class World:
+    a: Side
+    b: Side
+    staff: User
+    media: Path
+    ids: dict[str, str] = field(default_factory=dict)  # staff objects, mostly A's
+
+    def url(self, template: str, owner: Side | None = None) -> str:
+        """The URL with A's objects (or ``owner``'s) filled in."""
+        values = self.ids | (owner or self.a).values()
+        return re.sub(r"\{([^{}]+)\}", lambda m: values.get(m[1], MISSING_ID), template)
+
+    def missing_url(self, template: str) -> str:
+        """The same URL with a VV that does not exist (the rest of A's values kept)."""
+        values = self.ids | self.a.values() | {"vv": MISSING_VV, "queued": MISSING_VV}
+        return re.sub(r"\{([^{}]+)\}", lambda m: values[m[1]], template)
+
+
+def _flight(sim: Any, customer: Customer, prefix: str, program: str) -> Side:
+    from vvm_worker.services import vv_submit
+
+    flown = vv_submit(customer=customer, name=f"{prefix}-flown-vv", program=program, vvm=sim.vvm)
+    user = UserFactory(username=f"{prefix}-user", customer=customer)
+    token, _ = Token.objects.get_or_create(user=user)
+    return Side(customer, user, token.key, flown, queued=flown, image="", key="")
+
+
+def _finish(side: Side, prefix: str, vvm: Any) -> None:
+    """After the flights: the customer's queued VV (submitted now, or the simulation would
+    start it), and what only its data holds."""
+    from vvm_worker.services import vv_submit
+
+    side.queued = vv_submit(
+        customer=side.customer,
+        name=f"{prefix}-queued-vv",
+        program=f"// {prefix}-program-secret\nvar x = 1;",
+        vvm=vvm,
+        admit=False,
+    )
+    side.flown.refresh_from_db()
+    side.queued.refresh_from_db()
+    assert side.flown.status == VVStatus.FINISHED, side.flown.error
+    assert side.queued.status == VVStatus.QUEUED
+    camera = StorageDocument.objects.filter(vv=side.flown, key__endswith=".camera").order_by("key")
+    side.key = camera[0].key
+    side.image = image_file(camera[0].value["image"])
+    images = {
+        image_file(ref) for t in side.flown.tasks.all() for ref in image_references(t.readings)
+    }
+    assert side.image in images and Migration.objects.filter(vv=side.flown).exists()
+    side.markers = (
+        side.customer.name,
+        side.user.username,
+        side.flown.name,
+        side.queued.name,
+        str(side.flown.pk),
+        str(side.queued.pk),
+        f"{prefix}-program-secret",
+        f"{prefix}-storage-secret",
+        f"{prefix}-log-secret",
+        *sorted(images),
+    )
+
+
+@pytest.fixture(scope="class")
+def world(django_db_setup, django_db_blocker, tmp_path_factory) -> Iterator[World]:
+    """Two customers, each with a VV flown in-process to its end and a queued one, a vehicle,
+    a ground station and staff: built once for the class in a transaction that is rolled back
+    at its end (each test runs in a savepoint inside it, as Django's setUpTestData)."""
+    from fleet.simulation import SensorField
+    from vvm_worker.clock import SimulatedClock
+    from vvm_worker.services import VVM
+    from vvm_worker.simulation import Simulation
+
+    media = tmp_path_factory.mktemp("isolation-media")
+    fast = ["django.contrib.auth.hashers.MD5PasswordHasher"]
+    with (
+        django_db_blocker.unblock(),
+        transaction.atomic(),
+        override_settings(MEDIA_ROOT=media, PASSWORD_HASHERS=fast),
+    ):
+        station = GroundStationFactory(name="GS Base")
+        vehicle = VehicleFactory(name="Heli One")
+        sim = Simulation(planner="nearest", seed=1)
+        sim.add_vehicle_loop(vehicle)
+        waiting = VVM(
+            clock=SimulatedClock(), dispatcher=RecordingDispatcher(), field=SensorField(1)
+        )
+        a = _flight(sim, CustomerFactory(name="Alpha Isolation Ltd"), "alpha", A_FLOWN_PROGRAM)
+        b = _flight(sim, CustomerFactory(name="Bravo Isolation Ltd"), "bravo", B_FLOWN_PROGRAM)
+        sim.drain()
+        _finish(a, "alpha", waiting)
+        _finish(b, "bravo", waiting)
+        staff = UserFactory(username="isolation-staff", is_staff=True, is_superuser=True)
+        world = World(a=a, b=b, staff=staff, media=media)
+        world.ids = _staff_ids(world, vehicle, station)
+        yield world
+        transaction.set_rollback(True)
+
+
+def _staff_ids(world: World, vehicle: Vehicle, station: GroundStation) -> dict[str, str]:
+    """The objects the staff routes name: A's where they belong to a customer."""
+    from auditlog.models import LogEntry as AuditEntry
+    from django.contrib.contenttypes.models import ContentType
+
+    a, vv = world.a, world.a.flown
+    objects: dict[str, Any] = {
+        "accounts.customer": a.customer,
+        "accounts.user": a.user,
+        "authtoken.tokenproxy": a.user,  # the token admin looks tokens up by their user
+        "auditlog.logentry": AuditEntry.objects.get_for_object(a.customer).first(),
+        "fleet.sensortype": SensorType.objects.order_by("pk").first(),
+        "fleet.groundstation": station,
+        "fleet.vehicle": vehicle,
+        "missions.virtualvehicle": vv,
+        "missions.task": vv.tasks.order_by("pk").first(),
+        "missions.storagedocument": vv.storage.order_by("pk").first(),
+        "missions.logentry": vv.log.order_by("pk").first(),
+        "missions.migration": vv.migrations.order_by("pk").first(),
+    }
+    ids = {f"admin:{label}": str(obj.pk) for label, obj in objects.items() if obj is not None}
+    return ids | {
+        "customer": str(a.customer.pk),
+        "customer_type": str(ContentType.objects.get_for_model(Customer).pk),
+        "user": str(a.user.pk),
+        "uidb64": urlsafe_base64_encode(force_bytes(a.user.pk)),
+        "vehicle": str(vehicle.pk),
+        "gs": str(station.pk),
+    }
+
+
+# --- asking -------------------------------------------------------------------------------------
+
+
+def send(client: Client, method: str, url: str) -> tuple[HttpResponseBase, bytes]:
+    """The response and its whole body (files too); unsafe methods carry a body that would act:
+    JSON to the API, a form to the pages and the admin."""
+    if method in UNSAFE and url.startswith("/api/"):
+        response = client.generic(method, url, json.dumps(API_BODY), "application/json")
+    elif method in UNSAFE:
+        response = client.generic(
+            method, url, urlencode(FORM_BODY), "application/x-www-form-urlencoded"
+        )
+    else:
+        response = client.generic(method, url)
+    # The test client closes the response itself (a file's once it is read): closing it
+    # again would end the request a second time and close the test's database connection.
+    body = b"".join(response.streaming_content) if response.streaming else response.content
+    return response, body
+
+
+def leaked(body: bytes, markers: tuple[str, ...], url: str) -> list[str]:
+    """The markers in a body, but those the caller put in the URL itself."""
+    return [m for m in markers if m.encode() in body and m not in url]
+
+
+def session_client(user: User) -> Client:
+    client = Client()
+    client.force_login(user)
+    return client
+
+
+def token_client(side: Side) -> APIClient:
+    client = APIClient()
+    client.credentials(HTTP_AUTHORIZATION=f"Token {side.token}")
+    return client
+
+
+def client_for(side: Side, via: str) -> Client:
+    return token_client(side) if via == "token" else session_client(side.user)
+
+
+def fingerprint(world: World) -> dict[str, Any]:
+    """What the other customer or a customer's user must not be able to change: A's VVs and
+    their data, every customer, A's user and token, the fleet and the SDC."""
+    a = world.a
+    of_a = {"vv__customer": a.customer}
+    return {
+        "vvs": list(
+            VirtualVehicle.objects.filter(customer=a.customer)
+            .order_by("pk")
+            .values("pk", "name", "program", "status", "updated")
+        ),
+        "tasks": list(Task.objects.filter(**of_a).order_by("pk").values("pk", "status")),
+        "storage": list(StorageDocument.objects.filter(**of_a).order_by("pk").values()),
+        "log": LogEntry.objects.filter(**of_a).count(),
+        "customers": list(Customer.objects.order_by("pk").values()),
+        "user": list(User.objects.filter(pk=a.user.pk).values()),
+        "tokens": list(Token.objects.order_by("key").values()),
+        "vehicles": list(Vehicle.objects.order_by("pk").values()),
+        "stations": list(GroundStation.objects.order_by("pk").values()),
+        "sensors": list(SensorType.objects.order_by("pk").values()),
+        "groups": Group.objects.count(),
+    }
+
+
+def is_login_redirect(response: HttpResponseBase, login: str) -> bool:
+    return response.status_code == 302 and response["Location"].startswith(f"{login}?next=")
+
+
+def refused_by_the_admin(response: HttpResponseBase) -> bool:
+    """AdminSite.admin_view's answer to anyone but staff: its login page (its index for
+    logout)."""
+    return is_login_redirect(response, "/admin/login/") or (
+        response.status_code == 302 and response["Location"] == "/admin/"
+    )
+
+
+def refused_anonymously(response: HttpResponseBase, url: str) -> bool:
+    if url.startswith("/admin/"):
+        return refused_by_the_admin(response)
+    if url.startswith("/api/"):
+        return response.status_code in (401, 403)
+    return is_login_redirect(response, django_settings.LOGIN_URL)
+
+
+def _json(body: bytes, response: HttpResponseBase) -> Any:
+    if response.get("Content-Type", "").startswith("application/json") and body:
+        return json.loads(body)
+    return None
+
+
+def _cases(kinds: set[Kind], *, methods: str = "declared", vias: bool = False) -> list[Any]:
+    """pytest parameters: (route key, url template, method[, via]) with a readable id; GET
+    and the declared methods (``methods="get"``: GET, or the one the view acts on)."""
+    params = []
+    for key, route in ROUTES.items():
+        if route.kind not in kinds:
+            continue
+        url, declared = route.url, route.methods
+        if methods == "get":
+            chosen = ("GET",) if "GET" in declared else declared[:1]
+        else:
+            chosen = tuple(dict.fromkeys(("GET", *declared)))
+        for method in chosen:
+            if vias and url.startswith("/api/"):
+                for via in ("token", "session"):
+                    params.append(pytest.param(key, url, method, via, id=f"{method} {url} {via}"))
+            elif vias:
+                params.append(pytest.param(key, url, method, "session", id=f"{method} {url}"))
+            else:
+                params.append(pytest.param(key, url, method, id=f"{method} {url}"))
+    return params
+
+
+def _object_references() -> list[Any]:
+    """Every URL that names a VV: the OBJECT routes and the query strings naming one."""
+    params = []
+    for key, route in ROUTES.items():
+        if route.kind is Kind.OBJECT:
+            params.append((key, route.url, route.methods))
+        if route.also:
+            params.append((key, route.also, route.also_methods))
+    return params
+
+
+def _object_cases() -> list[Any]:
+    return [
+        pytest.param(key, url, method, via, declared, id=f"{method} {url} {via}")
+        for key, url, declared in _object_references()
+        for method in METHODS
+        for via in (("token", "session") if url.startswith("/api/") else ("session",))
+    ]
+
+
+# --- every pattern is classified ----------------------------------------------------------------
+
+
+def test_every_url_pattern_is_classified() -> None:
+    patterns = list(url_patterns())
+    unclassified = sorted(set(patterns) - set(ROUTES))
+    assert not unclassified, (
+        "URL patterns with no entry in ROUTES of tests/cpcc_site/test_isolation.py: say who "
+        f"may use each and how to build its URL: {unclassified}"
+    )
+    stale = sorted(set(ROUTES) - set(patterns))
+    assert not stale, f"ROUTES names patterns the project no longer has: {stale}"
+    assert len(patterns) == len(set(patterns)), "two patterns with the same route"
+
+
+def test_every_classified_url_reaches_its_own_pattern() -> None:
+    """Each table URL resolves to the pattern it is filed under: the tests below try the view
+    the table says they do."""
+    values = {"vv": MISSING_VV, "queued": MISSING_VV, "file": "0" * 32 + ".png", "key": "k"}
+    wrong = {}
+    for key, route in ROUTES.items():
+        for template in filter(None, (route.url, route.also)):
+            path = re.sub(r"\{([^{}]+)\}", lambda m: values.get(m[1], "1"), template)
+            reached = normalized(resolve(path.split("?")[0]).route)
+            if reached != key:
+                wrong[template] = reached
+    assert not wrong, f"URLs that reach another pattern than theirs: {wrong}"
+
+
+def test_every_websocket_route_is_classified_and_guarded() -> None:
+    routes = list(websocket_routes())
+    assert {route: consumer for route, consumer, _ in routes} == WEBSOCKET_ROUTES, (
+        "WebSocket routes of cpcc_site/asgi.py and WEBSOCKET_ROUTES differ: classify the new one"
+    )
+    for route, _, stack in routes:
+        # Only pages of this site may open a socket; the user comes from their session.
+        assert OriginValidator in stack, route
+        assert AuthMiddleware in stack, route
+
+
+# --- HTTP, with both customers' data ------------------------------------------------------------
+
+
+@pytest.mark.django_db
+class TestHttp:
+    @pytest.fixture(autouse=True)
+    def _world_media(self, settings, world: World) -> None:
+        """The pictures the class's flights took (conftest.py gives each test its own
+        MEDIA_ROOT)."""
+        settings.MEDIA_ROOT = world.media
+
+    @pytest.mark.parametrize(("key", "url", "method", "via", "declared"), _object_cases())
+    def test_another_customers_object_is_not_found(
+        self, world: World, key: str, url: str, method: str, via: str, declared: tuple[str, ...]
+    ) -> None:
+        """B gets for A's object what it gets for an object that does not exist (404 for the
+        methods the view acts on), sees nothing of A and changes nothing; A gets through."""
+        theirs = world.url(url)
+        b = client_for(world.b, via)
+        before = fingerprint(world)
+        response, body = send(b, method, theirs)
+        assert fingerprint(world) == before, f"B's {method} changed A's data"
+        assert not leaked(body, world.a.markers, theirs), body[:500]
+        missing, missing_body = send(b, method, world.missing_url(url))
+        assert response.status_code == missing.status_code, (
+            "A's object and one that does not exist must look the same to B"
+        )
+        assert _json(body, response) == _json(missing_body, missing)
+        if method in declared:
+            assert response.status_code == 404
+            # The owner gets through: the 404 above is about who asks.
+            own, own_body = send(client_for(world.a, via), method, theirs)
+            assert own.status_code not in (404, 405), own_body[:300]
+            if own.status_code == 200 and (
+                _json(own_body, own) is not None or b"<html" in own_body
+            ):
+                assert leaked(own_body, world.a.markers, ""), "the owner sees its own data"
+
+    @pytest.mark.parametrize(
+        ("key", "url", "method"),
+        [
+            pytest.param(key, url, "GET" if "GET" in declared else declared[0], id=url)
+            for key, url, declared in _object_references()
+        ],
+    )
+    @pytest.mark.parametrize("owner", ["a", "b"])
+    def test_a_customers_object_shows_only_its_data(
+        self, world: World, key: str, url: str, method: str, owner: str
+    ) -> None:
+        mine, other = (world.a, world.b) if owner == "a" else (world.b, world.a)
+        path = world.url(url, mine)
+        via = "token" if path.startswith("/api/") else "session"
+        response, body = send(client_for(mine, via), method, path)
+        assert response.status_code in (200, 302), body[:300]
+        assert not is_login_redirect(response, django_settings.LOGIN_URL)
+        assert not leaked(body, other.markers, path), body[:500]
+
+    @pytest.mark.parametrize(
+        ("key", "url", "method", "via"),
+        _cases({Kind.OWN_LIST, Kind.SIGNED_IN}, vias=True),
+    )
+    def test_lists_and_pages_hold_only_the_callers_data(
+        self, world: World, key: str, url: str, method: str, via: str
+    ) -> None:
+        declared = ROUTES[key].methods
+        for mine, other in ((world.a, world.b), (world.b, world.a)):
+            before = fingerprint(world)
+            response, body = send(client_for(mine, via), method, url)
+            if method in declared:
+                assert response.status_code < 400, body[:300]
+            else:
+                assert response.status_code == 405, body[:300]
+            assert not leaked(body, other.markers, url), body[:500]
+            if mine is world.b:
+                assert fingerprint(world) == before, f"B's {method} changed A's data"
+            if ROUTES[key].kind is Kind.OWN_LIST and method == "GET":
+                assert mine.flown.name.encode() in body, "the caller's own VVs are listed"
+
+    @pytest.mark.parametrize(
+        ("key", "url", "method"),
+        _cases({Kind.SIGNED_IN, Kind.OWN_LIST, Kind.OBJECT, Kind.STAFF}),
+    )
+    def test_anonymous_requests_are_sent_to_log_in(
+        self, world: World, key: str, url: str, method: str
+    ) -> None:
+        path = world.url(url)
+        before = fingerprint(world)
+        response, body = send(Client(), method, path)
+        assert refused_anonymously(response, path), (response.status_code, body[:300])
+        assert not leaked(body, world.a.markers + world.b.markers, ""), body[:500]
+        assert fingerprint(world) == before
+
+    @pytest.mark.parametrize(("key", "url", "method"), _cases({Kind.PUBLIC}))
+    def test_public_routes_serve_anyone_and_no_customers_data(
+        self, world: World, key: str, url: str, method: str
+    ) -> None:
+        path = world.url(url)
+        response, body = send(Client(), method, path)
+        assert response.status_code < 400 or method not in ROUTES[key].methods, body[:300]
+        assert not is_login_redirect(response, django_settings.LOGIN_URL)
+        assert not leaked(body, world.a.markers + world.b.markers, ""), body[:500]
+
+    @pytest.mark.parametrize(("key", "url", "method"), _cases({Kind.STAFF}))
+    def test_customers_users_are_refused_staff_routes(
+        self, world: World, key: str, url: str, method: str
+    ) -> None:
+        path = world.url(url)
+        before = fingerprint(world)
+        client = token_client(world.b) if path.startswith("/api/") else session_client(world.b.user)
+        response, body = send(client, method, path)
+        if path.startswith("/api/"):
+            assert response.status_code == 403, body[:300]
+        else:
+            assert refused_by_the_admin(response), (response.status_code, body[:300])
+        assert not leaked(body, world.a.markers, ""), body[:500]
+        assert fingerprint(world) == before
+
+    @pytest.mark.parametrize(("key", "url", "method"), _cases({Kind.STAFF}, methods="get"))
+    def test_staff_get_in(self, world: World, key: str, url: str, method: str) -> None:
+        path = world.url(url)
+        response, body = send(session_client(world.staff), method, path)
+        route = ROUTES[key]
+        expected = route.staff_status
+        if route.model and key.endswith(("/add/", "/delete/")):
+            # A read-only model admin (the audit log, login attempts) lets no one add or delete.
+            model_admin = admin.site._registry[apps.get_model(route.model)]
+            request = RequestFactory().get(path)
+            request.user = world.staff
+            if key.endswith("/add/"):
+                allowed = model_admin.has_add_permission(request)
+            else:
+                allowed = model_admin.has_delete_permission(request)
+            expected = None if allowed else 403
+        if expected is not None:
+            assert response.status_code == expected, body[:300]
+        else:
+            assert response.status_code in (200, 302), body[:300]
+            assert not is_login_redirect(response, "/admin/login/")
+
+    def test_pictures_are_not_served_by_their_path(self, world: World) -> None:
+        reference = next(
+            ref for t in world.a.flown.tasks.all() for ref in image_references(t.readings)
+        )
+        assert (world.media / reference).is_file()
+        for client in (Client(), session_client(world.b.user), session_client(world.a.user)):
+            assert client.get(f"/media/{reference}").status_code == 404
+
+    def test_the_owners_actions_change_what_the_refusals_keep(self, world: World) -> None:
+        """The fingerprint sees what a hole would change: the owner's cancel, restart and edit
+        (the same requests B is refused above) change it."""
+        a = session_client(world.a.user)
+        for template in ("/vvs/{queued}/cancel/", "/vvs/{vv}/restart/"):
+            before = fingerprint(world)
+            response, _ = send(a, "POST", world.url(template))
+            assert response.status_code == 302
+            assert fingerprint(world) != before, template
+        before = fingerprint(world)
+        response, _ = send(token_client(world.a), "POST", "/api/v1/vvs/")
+        assert response.status_code == 201 and fingerprint(world) != before
+
+
+# --- the live map's socket ----------------------------------------------------------------------
+
+PROGRAM = """
+var co2 = VV.sensor.get('CO2');
+VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(48.1111, 12.8619, 50),
+                 tolerance: 2, sensors: [co2]});
+"""
+
+
+@pytest.fixture
+async def _close_socket_connections():
+    """The sockets read the database in a worker thread: close its connection after each test,
+    or PostgreSQL refuses to drop the test database at the end of the run."""
+    yield
+    from channels.db import database_sync_to_async
+    from django.db import connections
+
+    await database_sync_to_async(connections.close_all)()
+
+
+@pytest.fixture
+def feed(broker):
+    """The test run's Redis carries the feed; empty before and after each test."""
+    broker.delete(EVENTS_STREAM, POSITIONS_STREAM, VEHICLES_HASH)
+    yield broker
+    broker.delete(EVENTS_STREAM, POSITIONS_STREAM, VEHICLES_HASH)
+
+
+def _socket(client: Client, path: str = "/ws/map/", origin: bytes = b"http://testserver") -> Any:
+    headers = [(b"origin", origin)]
+    cookie = client.cookies.get("sessionid")
+    if cookie is not None:
+        headers.append((b"cookie", f"sessionid={cookie.value}".encode()))
+    return WebsocketCommunicator(application, path, headers=headers)
+
+
+def _state(vehicle: Vehicle, vvs: list[VirtualVehicle], t: float) -> dict[str, Any]:
+    return {
+        "id": vehicle.pk,
+        "name": vehicle.name,
+        "lat": 48.1105,
+        "lng": 12.8605,
+        "alt": 40.0,
+        "phase": "cruise",
+        "status": "active",
+        "battery": None,
+        "vvs": [{"id": str(vv.pk), "name": vv.name, "customer": vv.customer_id} for vv in vvs],
+        "route": [[48.1111, 12.8619]],
+        "t": t,
+    }
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
+@pytest.mark.usefixtures("_close_socket_connections", "feed")
+class TestMapSocket:
+    async def test_an_anonymous_socket_is_refused(self, client, mission) -> None:
+        for path in ("/ws/map/", f"/ws/map/?vv={mission.pk}"):
+            connected, code = await _socket(client, path).connect()
+            assert not connected and code == 4403, path
+
+    async def test_a_socket_from_another_site_is_refused(self, client, user_b) -> None:
+        from asgiref.sync import sync_to_async
+
+        await sync_to_async(client.force_login)(user_b)
+        for origin in (b"http://evil.example", b"https://testserver.evil.example", b"null"):
+            connected, _ = await _socket(client, origin=origin).connect()
+            assert not connected, origin
+        socket = _socket(client)  # the same user from the site's own page is let in
+        assert (await socket.connect())[0]
+        await socket.disconnect()
+
+    async def test_another_customers_vv_cannot_be_followed(self, client, user_b, mission) -> None:
+        from asgiref.sync import sync_to_async
+
+        await sync_to_async(client.force_login)(user_b)
+        connected, code = await _socket(client, f"/ws/map/?vv={mission.pk}").connect()
+        assert not connected and code == 4404
+
+    async def test_a_customer_receives_nothing_of_another_customers_vvs(
+        self, client, mission, customer_a, customer_b, user_b, vvm_factory, feed
+    ) -> None:
+        """B's map while A's flown VV is in the database, A's queued VV is cancelled and a
+        vehicle carries A's VV (alone, then with B's): B sees its own VV and a nameless
+        carrier with only its VV aboard, nothing of A."""
+        import time
+
+        from asgiref.sync import sync_to_async
+
+        from vvm_worker.live import FeedAnnouncer, publish_vehicle
+        from vvm_worker.services import vv_cancel, vv_submit
+
+        vvm = vvm_factory()
+        vvm.announcer = FeedAnnouncer()
+        theirs = await sync_to_async(vv_submit)(
+            customer=customer_a, name="alpha-live-vv", program=PROGRAM, vvm=vvm
+        )
+        mine = await sync_to_async(vv_submit)(
+            customer=customer_b, name="bravo-live-vv", program=PROGRAM, vvm=vvm
+        )
+        alone = await sync_to_async(VehicleFactory)(name="Heli Two")
+        shared = await sync_to_async(Vehicle.objects.get)(name="Heli One")
+        a_markers = [str(mission.pk), mission.name, str(theirs.pk), theirs.name, "Heli", "GS Base"]
+
+        await sync_to_async(client.force_login)(user_b)
+        socket = _socket(client)
+        assert (await socket.connect())[0]
+        snapshot = await socket.receive_json_from(timeout=5)
+        assert snapshot["type"] == "snapshot"
+        assert [vv["vv"] for vv in snapshot["vvs"]] == [str(mine.pk)]
+        assert not [m for m in a_markers if m in json.dumps(snapshot)]
+
+        now = time.time()
+        publish_vehicle(_state(alone, [mission, theirs], now))
+        publish_vehicle(_state(shared, [theirs, mine], now))
+        await sync_to_async(vv_cancel)(vv_id=theirs.pk, vvm=vvm)
+        await sync_to_async(vv_cancel)(vv_id=mine.pk, vvm=vvm)  # the last thing announced
+        frames = []
+        while not any(
+            e.get("vv") == str(mine.pk) and e.get("status") == "cancelled"
+            for f in frames
+            for e in f.get("events", ())
+        ):
+            frames.append(await socket.receive_json_from(timeout=5))
+        await socket.send_json_to({"type": "resync"})
+        while frames[-1]["type"] != "snapshot":
+            frames.append(await socket.receive_json_from(timeout=5))
+        await socket.disconnect()
+
+        announced = b"".join(fields[b"e"] for _, fields in feed.xrange(EVENTS_STREAM))
+        assert str(theirs.pk).encode() in announced, "A's cancellation went through the feed"
+        seen = json.dumps(frames)
+        assert not [m for m in a_markers if m in seen], seen[:1000]
+        assert {e["vv"] for f in frames for e in f.get("events", ())} == {str(mine.pk)}
+        carriers = [v for f in frames for v in f.get("vehicles", ())]
+        assert carriers, "the vehicle carrying B's VV is shown to B"
+        for carrier in carriers:
+            assert carrier["id"] not in (alone.pk, shared.pk) and "route" not in carrier
+            assert carrier["vvs"] == [
+                {"id": str(mine.pk), "name": "bravo-live-vv", "customer": customer_b.pk}
+            ]
+        assert [vv["vv"] for vv in frames[-1]["vvs"]] == [str(mine.pk)]
