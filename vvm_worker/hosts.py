@@ -41,6 +41,7 @@ from vvm_worker.planning import DEFAULT_PLANNER, TravelTime, make_planner
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     VVM,
+    LeasesUnsure,
     vehicle_heartbeat,
     vehicle_register,
     vehicle_set_status,
@@ -346,7 +347,10 @@ class GSHost:
                 close_old_connections()
                 try:
                     if time.monotonic() >= leases_from:
-                        vehicles_check_leases(vvm=vvm)
+                        try:
+                            vehicles_check_leases(vvm=vvm)
+                        except LeasesUnsure:
+                            leases_from = time.monotonic() + settings.CPCC_RV_LEASE_S
                     # An RV whose lease came back (its worker stalled, or the database was
                     # down) may serve VVs that were sent to wait meanwhile.
                     now_online = set(online_vehicles(vvm).values_list("pk", flat=True))

@@ -36,6 +36,7 @@ from vvm_worker.dispatch import VV_ADVANCE_TASK
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_submit
 
+# `workers` (tests/live.py): worker processes of the test, flights 25 times as fast as flown.
 pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
 
 # TASKS points, in Heli One's area and Heli Two's by turns: the VV migrates at every task, so
@@ -76,16 +77,6 @@ def fleet(transactional_db: None) -> dict[str, object]:
     users = [UserFactory(username=f"customer-{c.name[-1].lower()}", customer=c) for c in customers]
     tokens = [Token.objects.create(user=u).key for u in users]
     return {"gs": gs, "rvs": [heli_one, heli_two], "customers": customers, "tokens": tokens}
-
-
-@pytest.fixture
-def workers(broker_url: str, tmp_path: Path, transactional_db: None) -> Iterator[Workers]:
-    """Worker processes of this test, flights 25 times as fast as flown, stopped at its end."""
-    pool = Workers(tmp_path, broker_url, speed=25)
-    try:
-        yield pool
-    finally:
-        pool.stop_all()
 
 
 @pytest.fixture(scope="module")

@@ -3,6 +3,7 @@ service, their workers' leases and live state, and what each change means for th
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from typing import Any, TypedDict
 
@@ -165,6 +166,11 @@ def vehicle_heartbeat(*, vehicle_id: int, vvm: VVM) -> None:
     Vehicle.objects.filter(pk=vehicle_id).update(worker_seen=Now())
 
 
+class LeasesUnsure(Exception):
+    """The leases cannot be judged now: the database kept the checker (and so the heartbeats)
+    waiting. The caller gives every RV a full lease before it looks again."""
+
+
 def vehicles_check_leases(*, vvm: VVM) -> list[str]:
     """Move the VVs off every RV whose worker has stopped reporting; returns those RVs' names.
 
@@ -179,7 +185,15 @@ def vehicles_check_leases(*, vvm: VVM) -> list[str]:
         Vehicle.objects.exclude(pk__in=online).filter(vvs__status__in=ACTIVE_STATUSES).distinct()
     )
     for vehicle in stale:
+        asked = time.monotonic()
         with transaction.atomic():
+            # Waiting long for the database (SQLite's write lock, say) means the workers'
+            # heartbeats waited too: their leases are not theirs to lose.
+            renewed = online_vehicles(vvm).filter(pk=vehicle.pk).exists()
+            if time.monotonic() - asked > vvm.lease_s / 4:
+                raise LeasesUnsure(vehicle.name)
+            if renewed:  # since the look above
+                continue
             stranded = (
                 VirtualVehicle.objects.select_for_update(of=("self",))
                 .filter(host_rv=vehicle, status__in=ACTIVE_STATUSES)
