@@ -1,0 +1,110 @@
+"""``python -m bench.profile_simulate``: where a simulated task's time goes.
+
+Runs ``simulate`` in this process on a generated grid scenario (``--rows`` x ``--cols`` RVs
+in cells of 200 m, ``--vvs`` VVs of ``--tasks`` random point tasks anywhere on the grid, so
+that they migrate often) on a fresh SQLite database, under cProfile, and prints: wall time,
+tasks a second, the queries per task by statement and table (with their time in the
+database), transactions per task, and the functions with the most cumulative time. The
+profiler slows the run down (about 1.4 times); the wall time without it is what ``manage.py
+simulate`` prints.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import cProfile
+import os
+import pstats
+import re
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+_TABLE = re.compile(r'(?:FROM|INTO|UPDATE)\s+"(\w+)"')
+
+
+def scenario(rows: int, cols: int, vvs: int, tasks: int) -> dict[str, Any]:
+    from vvm_worker.scenario_gen import grid_box, grid_scenario, original_style_program
+
+    program = original_style_program(box=grid_box(rows=rows, cols=cols, cell_m=200), tasks=tasks)
+    return grid_scenario(
+        rows=rows,
+        cols=cols,
+        cell_m=200,
+        customers=10,
+        max_parallel_vvs=vvs,
+        vvs=[
+            {"name": f"VV {n}", "customer": f"Customer {n % 10 + 1}", "source": program}
+            for n in range(vvs)
+        ],
+        name=f"{vvs} VVs x {tasks} tasks on {rows}x{cols} RVs",
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--rows", type=int, default=4)
+    parser.add_argument("--cols", type=int, default=4)
+    parser.add_argument("--vvs", type=int, default=100)
+    parser.add_argument("--tasks", type=int, default=10)
+    parser.add_argument("--top", type=int, default=30, help="functions to list")
+    args = parser.parse_args()
+
+    tmp = tempfile.mkdtemp(prefix="cpcc-profile-")
+    os.environ.update(
+        CPCC_VAR_DIR=tmp,
+        CPCC_MEDIA_ROOT=str(Path(tmp) / "media"),
+        DJANGO_SETTINGS_MODULE="cpcc_site.settings",
+    )
+    os.chdir(ROOT)
+    import django
+
+    django.setup()
+    from django.db import connection
+
+    from vvm_worker.management.commands.simulate import use_fresh_database
+    from vvm_worker.scenario import parse_scenario
+    from vvm_worker.simulation import Simulation
+
+    use_fresh_database(Path(tmp))
+    count: collections.Counter[str] = collections.Counter()
+    spent: collections.Counter[str] = collections.Counter()
+
+    def measure(execute: Any, sql: str, params: Any, many: bool, context: Any) -> Any:
+        table = _TABLE.search(sql)
+        key = f"{sql.split()[0].upper()} {table.group(1) if table else ''}".strip()
+        started = time.perf_counter()
+        try:
+            return execute(sql, params, many, context)
+        finally:
+            count[key] += 1
+            spent[key] += time.perf_counter() - started
+
+    data = scenario(args.rows, args.cols, args.vvs, args.tasks)
+    simulation = Simulation(parse_scenario(data, base_dir=ROOT), seed=1, speed=0)
+    profile = cProfile.Profile()
+    with connection.execute_wrapper(measure):
+        started = time.perf_counter()
+        profile.enable()
+        summary = simulation.run()
+        profile.disable()
+        wall = time.perf_counter() - started
+    tasks = sum(v["tasks_done"] for v in summary["vvs"]) or 1
+    queries = sum(count.values())
+    print(f"{data['name']}: {wall:.1f} s under the profiler, {tasks} tasks, {tasks / wall:.1f} "
+          f"tasks/s, {len(summary['migrations'])} migrations, {simulation.events_run} events")  # fmt: skip
+    print(
+        f"{queries} statements = {queries / tasks:.1f} a task, {sum(spent.values()):.1f} s in "
+        f"the database; transactions: {count['BEGIN'] / tasks:.1f} a task"
+    )
+    print("statements a task, mean time, kind and table:")
+    for key, n in count.most_common(20):
+        print(f"  {n / tasks:6.2f}  {spent[key] * 1000 / n:6.3f} ms  {key}")
+    pstats.Stats(profile).sort_stats("cumulative").print_stats(args.top)
+
+
+if __name__ == "__main__":
+    main()
