@@ -415,6 +415,13 @@ class Run:
 EXPECTED = {"POST /vvs/": "201"}
 
 
+async def _get_vv(http: Any, run: Run, vv: str, suffix: str, turn: float) -> tuple[str, Any]:
+    """GET one of a VV's resources (``suffix``: "", "storage/", "log/", "results.zip")."""
+    return await _request(
+        http, run, f"GET /vvs/{{id}}/{suffix}", "GET", f"/api/v1/vvs/{vv}/{suffix}", turn
+    )
+
+
 async def _request(
     http: Any, run: Run, endpoint: str, method: str, path: str, sched: float, **kw: Any
 ) -> tuple[str, Any]:
@@ -461,14 +468,7 @@ async def _customer(
                 await asyncio.sleep(delay)
             if fetch:
                 vv, suffix = fetch.pop(0)
-                await _request(
-                    http,
-                    run,
-                    f"GET /vvs/{{id}}/{suffix}",
-                    "GET",
-                    f"/api/v1/vvs/{vv}/{suffix}",
-                    turn,
-                )
+                await _get_vv(http, run, vv, suffix, turn)
             elif mine is not None:
                 polls += 1
                 if polls % LIST_EVERY == 0:
@@ -503,14 +503,7 @@ async def _customer(
                 else:
                     vv = rng.choice(recent)
                     suffix = {"detail": "", "storage": "storage/", "log": "log/"}[kind]
-                    await _request(
-                        http,
-                        run,
-                        f"GET /vvs/{{id}}/{suffix}",
-                        "GET",
-                        f"/api/v1/vvs/{vv}/{suffix}",
-                        turn,
-                    )
+                    await _get_vv(http, run, vv, suffix, turn)
             turn += period
 
 

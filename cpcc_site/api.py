@@ -75,24 +75,22 @@ def _note_actor(user: Any) -> None:
     context["actor"] = user
 
 
-class AuditedTokenAuthentication(TokenAuthentication):
-    """Token authentication whose user the audit log records as the actor."""
+class _Audited:
+    """An authentication class whose user the audit log records as the actor."""
 
     def authenticate(self, request: Request) -> tuple[Any, Any] | None:
-        result = super().authenticate(request)
+        result = super().authenticate(request)  # type: ignore[misc]
         if result is not None:
             _note_actor(result[0])
-        return result
+        return result  # type: ignore[no-any-return]
 
 
-class AuditedSessionAuthentication(SessionAuthentication):
+class AuditedTokenAuthentication(_Audited, TokenAuthentication):
+    """Token authentication, audited."""
+
+
+class AuditedSessionAuthentication(_Audited, SessionAuthentication):
     """Session authentication (the browsable API, the pages' scripts), audited likewise."""
-
-    def authenticate(self, request: Request) -> tuple[Any, Any] | None:
-        result = super().authenticate(request)
-        if result is not None:
-            _note_actor(result[0])
-        return result
 
 
 class AddressRateThrottle(SimpleRateThrottle):

@@ -11,10 +11,13 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+from collections.abc import Callable
+from typing import TypeVar
 
 from django.db import DEFAULT_DB_ALIAS, InterfaceError, OperationalError, connections
 
 logger = logging.getLogger("cpcc.database")
+T = TypeVar("T")
 
 RETRY_AFTER_S = 5  # what a 503 tells a client during an outage
 _FIRST_WAIT_S = 0.1
@@ -66,6 +69,22 @@ def wait_until_available(
         wait = min(wait * 2, _LONGEST_WAIT_S)
     logger.warning("database available again")
     return True
+
+
+def through_outages(work: Callable[[], T], stopping: threading.Event | None = None) -> T:
+    """Do ``work``; if it meets a database outage, wait until the database is back and do it
+    again (it must be safe to redo: each piece of the platform's work re-reads the state it
+    needs, and what it committed stays committed). Any other error, or an outage met while
+    ``stopping`` is set, is raised."""
+    while True:
+        try:
+            return work()
+        except Exception as exc:
+            if not is_outage(exc):
+                raise
+            logger.warning("database unavailable: waiting to do the work again")
+            if not wait_until_available(stopping):
+                raise
 
 
 def _drop_connection(alias: str) -> None:

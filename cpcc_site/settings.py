@@ -149,7 +149,6 @@ if DATABASES["default"]["ENGINE"] == "django.db.backends.sqlite3":
         "transaction_mode": "IMMEDIATE",
         "init_command": "PRAGMA journal_mode=WAL;",
     }
-
 else:
     # A database server that does not answer is unavailable after 5 s, not after the
     # operating system's TCP timeout (minutes).

@@ -116,25 +116,18 @@ class RealTimeScheduler:
                 self._run(timer, None)
 
     def _run(self, fn: Callable[[], Any], future: concurrent.futures.Future[Any] | None) -> None:
-        """Run one piece of work. A database outage is waited out and the work done again
-        (each piece re-reads the state it needs, and what it committed stays committed), so
+        """Run one piece of work. A database outage is waited out and the work done again, so
         that no timer of the vehicle's control loop is lost to it."""
-        while True:
-            close_old_connections()
-            try:
-                result = fn()
-            except Exception as exc:
-                if database.is_outage(exc):
-                    logger.warning("database unavailable: waiting to do the work again")
-                    if database.wait_until_available(self._stopping):
-                        continue
-                logger.exception("host work failed")
-                if future is not None:
-                    future.set_exception(exc)
-            else:
-                if future is not None:
-                    future.set_result(result)
-            return
+        close_old_connections()
+        try:
+            result = database.through_outages(fn, self._stopping)
+        except Exception as exc:
+            logger.exception("host work failed")
+            if future is not None:
+                future.set_exception(exc)
+        else:
+            if future is not None:
+                future.set_result(result)
 
 
 class RVHost:

@@ -2,13 +2,13 @@
 
 Every task is safe to run twice (``acks_late``: Celery delivers at least once) and returns only
 after its work is committed, so a worker that dies mid-task leaves the message to be delivered
-again, and a worker that restarts recovers from the database anyway.
+again, and a worker that restarts recovers from the database anyway. A database outage is
+waited out and the work done again, the message unacknowledged meanwhile.
 """
 
 from __future__ import annotations
 
 import uuid
-from collections.abc import Callable
 
 from celery import shared_task
 
@@ -25,9 +25,9 @@ def vv_advance(vv_id: str) -> None:
     """The VV arrived on this worker's host (or must be looked at again): step and route it."""
     host = current_host()
     if host is None:
-        _through_outages(lambda: advance(vv_id=uuid.UUID(vv_id), vvm=platform_vvm()))
+        database.through_outages(lambda: advance(vv_id=uuid.UUID(vv_id), vvm=platform_vvm()))
     else:
-        _through_outages(lambda: host.advance(uuid.UUID(vv_id)))
+        database.through_outages(lambda: host.advance(uuid.UUID(vv_id)))
 
 
 @shared_task(name=VEHICLE_CHANGED_TASK, acks_late=True, ignore_result=True)
@@ -43,18 +43,8 @@ def admit(customer_id: int) -> None:
     """Start the customer's queued VVs as far as its quota allows (any ground station)."""
     host = current_host()
     if isinstance(host, GSHost):
-        _through_outages(lambda: host.admit(customer_id))
+        database.through_outages(lambda: host.admit(customer_id))
     else:
-        _through_outages(lambda: vv_admit_queued(customer_id=customer_id, vvm=platform_vvm()))
-
-
-def _through_outages(work: Callable[[], None]) -> None:
-    """Do the work; if the database is down meanwhile, wait until it is back and do it again
-    (the message stays unacknowledged meanwhile: a worker killed then gets it again)."""
-    while True:
-        try:
-            work()
-            return
-        except Exception as exc:
-            if not database.is_outage(exc) or not database.wait_until_available():
-                raise
+        database.through_outages(
+            lambda: vv_admit_queued(customer_id=customer_id, vvm=platform_vvm())
+        )

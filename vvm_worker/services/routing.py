@@ -92,8 +92,9 @@ def fleet_caps(vvm: VVM) -> list[VehicleCaps]:
 
 
 def planned_routes(vehicles: Sequence[Vehicle]) -> dict[int, tuple[Position, ...]]:
-    """The open tasks of each RV with work (`open_count` annotated, as `fleet_caps` does), in the order its planner last meant to serve
-    them (its saved plan; tasks the plan does not know yet come last, oldest first)."""
+    """The open tasks of each RV with work (`open_count` annotated, as `fleet_caps` does), in
+    the order its planner last meant to serve them (its saved plan; tasks the plan does not
+    know yet come last, oldest first)."""
     busy = {v.pk: v for v in vehicles if v.open_count}
     if not busy:
         return {}
