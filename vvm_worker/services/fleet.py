@@ -180,20 +180,21 @@ def vehicles_check_leases(*, vvm: VVM) -> list[str]:
     """
     assert vvm.lease_s is not None
     gone = []
-    online = online_vehicles(vvm).values("pk")
-    stale = (
-        Vehicle.objects.exclude(pk__in=online).filter(vvs__status__in=ACTIVE_STATUSES).distinct()
-    )
-    for vehicle in stale:
-        asked = time.monotonic()
-        with transaction.atomic():
-            # Waiting long for the database (SQLite's write lock, say) means the workers'
-            # heartbeats waited too: their leases are not theirs to lose.
-            renewed = online_vehicles(vvm).filter(pk=vehicle.pk).exists()
-            if time.monotonic() - asked > vvm.lease_s / 4:
-                raise LeasesUnsure(vehicle.name)
-            if renewed:  # since the look above
-                continue
+    asked = time.monotonic()
+    # One transaction, taken before the leases are read, every time: with SQLite it waits
+    # for the write lock, which also kept the workers' heartbeats waiting. Having waited long,
+    # the check judges no lease (LeasesUnsure); a lock that outlasts SQLite's timeout is an
+    # outage (OperationalError), after which the caller gives every RV a full lease too.
+    with transaction.atomic():
+        online = online_vehicles(vvm).values("pk")
+        stale = list(
+            Vehicle.objects.exclude(pk__in=online)
+            .filter(vvs__status__in=ACTIVE_STATUSES)
+            .distinct()
+        )
+        if time.monotonic() - asked > vvm.lease_s / 4:
+            raise LeasesUnsure(", ".join(v.name for v in stale))
+        for vehicle in stale:
             stranded = (
                 VirtualVehicle.objects.select_for_update(of=("self",))
                 .filter(host_rv=vehicle, status__in=ACTIVE_STATUSES)
@@ -204,8 +205,9 @@ def vehicles_check_leases(*, vvm: VVM) -> list[str]:
                     vv, reason="its vehicle's worker stopped reporting", vvm=vvm
                 )
                 vv.save()
-        gone.append(vehicle.name)
-        logger.warning("vehicle worker lost", extra={"vehicle": vehicle.name})
+            gone.append(vehicle.name)
+    for name in gone:
+        logger.warning("vehicle worker lost", extra={"vehicle": name})
     return gone
 
 
