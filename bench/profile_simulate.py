@@ -17,6 +17,7 @@ import cProfile
 import os
 import pstats
 import re
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -51,6 +52,12 @@ def main() -> None:
     parser.add_argument("--vvs", type=int, default=100)
     parser.add_argument("--tasks", type=int, default=10)
     parser.add_argument("--top", type=int, default=30, help="functions to list")
+    parser.add_argument(
+        "--sort", default="cumulative", help="order of the functions (cumulative, tottime)"
+    )
+    parser.add_argument(
+        "--sites", action="store_true", help="also list where in the project the queries come from"
+    )
     args = parser.parse_args()
 
     tmp = tempfile.mkdtemp(prefix="cpcc-profile-")
@@ -72,6 +79,7 @@ def main() -> None:
     use_fresh_database(Path(tmp))
     count: collections.Counter[str] = collections.Counter()
     spent: collections.Counter[str] = collections.Counter()
+    sites: collections.Counter[str] = collections.Counter()
 
     def measure(execute: Any, sql: str, params: Any, many: bool, context: Any) -> Any:
         table = _TABLE.search(sql)
@@ -82,9 +90,11 @@ def main() -> None:
         finally:
             count[key] += 1
             spent[key] += time.perf_counter() - started
+            if args.sites:
+                sites[f"{key:<32} {_project_frames()}"] += 1
 
     data = scenario(args.rows, args.cols, args.vvs, args.tasks)
-    simulation = Simulation(parse_scenario(data, base_dir=ROOT), seed=1, speed=0)
+    simulation = Simulation(parse_scenario(data, base_dir=ROOT), seed=1, speed=0, logins=False)
     profile = cProfile.Profile()
     with connection.execute_wrapper(measure):
         started = time.perf_counter()
@@ -103,7 +113,23 @@ def main() -> None:
     print("statements a task, mean time, kind and table:")
     for key, n in count.most_common(20):
         print(f"  {n / tasks:6.2f}  {spent[key] * 1000 / n:6.3f} ms  {key}")
-    pstats.Stats(profile).sort_stats("cumulative").print_stats(args.top)
+    if args.sites:
+        print("statements a task by kind, table and the project's calls that made them:")
+        for site, n in sites.most_common(40):
+            print(f"  {n / tasks:6.2f}  {site}")
+    pstats.Stats(profile).sort_stats(args.sort).print_stats(args.top)
+
+
+def _project_frames(depth: int = 3) -> str:
+    """The innermost project functions on the stack (file:function), innermost first."""
+    frames = []
+    frame = sys._getframe(2)
+    while frame is not None and len(frames) < depth:
+        name = frame.f_code.co_filename
+        if name.startswith(str(ROOT)) and "/.venv/" not in name and "/bench/" not in name:
+            frames.append(f"{Path(name).stem}:{frame.f_code.co_name}")
+        frame = frame.f_back
+    return " < ".join(frames)
 
 
 if __name__ == "__main__":

@@ -101,6 +101,9 @@ class VehicleLoop:
         self.aboard: list[dict[str, Any]] = []
         self.route: list[Position] = []
         self._last_track: Position | None = None
+        self._last_state: tuple[Any, ...] | None = None  # what _save_state wrote last
+        self._changes = 0  # changes announced by `changed`
+        self._planned_at_change = 0  # how many of them the last plan had seen
 
     # --- events ------------------------------------------------------------------------------
 
@@ -120,6 +123,19 @@ class VehicleLoop:
                 self.aboard = self._aboard()
             return
         self._plan(now)
+
+    def changed(self) -> Callable[[], None]:
+        """The vehicle's tasks or status were just changed (committed): the wake-up to run
+        for it, which does nothing if the loop has planned in the meantime (it saw the
+        change then): a VV resumed on this RV while it serves its stop needs no second plan."""
+        self._changes += 1
+        seen = self._changes
+
+        def wake_unless_planned() -> None:
+            if self._planned_at_change < seen:
+                self.wake()
+
+        return wake_unless_planned
 
     def _arrive(self, token: int, target: Position, tolerance_m: float, due_s: float) -> None:
         if token != self._token:
@@ -229,6 +245,7 @@ class VehicleLoop:
         return Task.objects.filter(vehicle_id=self.vehicle_id, status=TaskStatus.OPEN)
 
     def _plan(self, now: float) -> None:
+        self._planned_at_change = self._changes
         status = Vehicle.objects.values_list("status", flat=True).get(pk=self.vehicle_id)
         self.status = VehicleStatus(status)
         tasks = list(self._assigned()) if status == VehicleStatus.ACTIVE else []
@@ -377,19 +394,31 @@ class VehicleLoop:
 
     def _save_state(self, now: float) -> None:
         here = self.driver.position_at(now)
-        self.aboard = self._aboard()
         # A leg is straight: its two ends are the path the VVs aboard travel.
         moved = here != self._last_track
         self._last_track = here
+        if moved or announcing(self.vvm):  # the track and the map need the VVs aboard
+            self.aboard = self._aboard()
+        state = (
+            here,
+            self.driver.phase_at(now),
+            self.driver.distance_m(now),
+            self.driver.flight_s(now),
+            self.planner.state(),
+        )
+        if state == self._last_state:
+            return  # the row says all this already (a second look at the same moment)
+        self._last_state = state
+        position, phase, distance, flight, planner_state = state
         vehicle_record_state(
             vehicle_id=self.vehicle_id,
             t_s=now,
             carrying=[vv["id"] for vv in self.aboard] if moved else [],
-            position=here,
-            phase=self.driver.phase_at(now),
-            distance_m=self.driver.distance_m(now),
-            flight_s=self.driver.flight_s(now),
-            planner_state=self.planner.state(),
+            position=position,
+            phase=phase,
+            distance_m=distance,
+            flight_s=flight,
+            planner_state=planner_state,
         )
 
 

@@ -196,7 +196,9 @@ class RVHost:
         self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
 
     def wake_later(self) -> None:
-        self.scheduler.submit(self._changed)
+        # This host changed its own work (a VV it advanced): no new fence, and no second plan
+        # if the loop plans anyway before it gets to this.
+        self.scheduler.submit(self.loop.changed())
 
     # --- what Celery tasks ask -----------------------------------------------------------------
 

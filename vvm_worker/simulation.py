@@ -9,12 +9,13 @@ time t waits until t / N seconds of wall time have passed since the start.
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import logging
 import math
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,7 @@ from missions.readings import map_camera_readings
 from vvm_worker.clock import SimulatedClock
 from vvm_worker.executor import VehicleLoop
 from vvm_worker.planning import DEFAULT_PLANNER, TravelTime, make_planner
+from vvm_worker.runtime import Runtime
 from vvm_worker.scenario import FleetEvent, Scenario, vv_instances
 from vvm_worker.services import (
     VVM,
@@ -46,6 +48,9 @@ logger = logging.getLogger("cpcc.simulation")
 
 ProgressFn = Callable[["Progress"], None]
 _PROGRESS_EVERY_S = 0.1
+# Warm V8 contexts kept by the one runtime every host shares (about 1 MB each); a VV beyond
+# them resumes by replay, as it would on another host.
+WARM_CONTEXTS = 512
 
 
 @dataclass(frozen=True)
@@ -94,7 +99,7 @@ class _QueueDispatcher:
     def vehicle_changed(self, vehicle_id: int) -> None:
         loop = self.sim.loops.get(vehicle_id)
         if loop is not None:
-            self.sim.queue.call_now(loop.wake)
+            self.sim.queue.call_now(loop.changed())
 
     def customer_slot_freed(self, customer_id: int) -> None:
         self.sim.queue.call_now(lambda: vv_admit_queued(customer_id=customer_id, vvm=self.sim.vvm))
@@ -110,12 +115,14 @@ class Simulation:
         planner: str = DEFAULT_PLANNER,
         seed: int = 1,
         speed: float = 0.0,
+        logins: bool = True,
     ) -> None:
         make_planner(planner)  # an unknown name fails here, before anything is loaded
         self.scenario = scenario
         self.planner_name = planner
         self.seed = seed
         self.speed = speed
+        self.logins = logins  # a login user for each customer (results kept to look at)
         self.clock = SimulatedClock()
         self.queue = EventQueue(self.clock)
         self.vvm = VVM(
@@ -123,11 +130,14 @@ class Simulation:
             dispatcher=_QueueDispatcher(self),
             field=SensorField(seed),
             world_seed=seed,
+            runtime=Runtime(max_contexts=WARM_CONTEXTS),
+            hosts_share_runtime=True,
         )
         self.loops: dict[int, VehicleLoop] = {}
         self.drivers: dict[int, SimVehicle] = {}
         self.loaded: LoadedScenario | None = None
         self.events_run = 0
+        self.wall_s = 0.0  # how long `run` took
         self.vv_ids: list[uuid.UUID] = []  # the VVs this run submitted
 
     # --- set-up --------------------------------------------------------------------------------
@@ -174,7 +184,7 @@ class Simulation:
 
     def _setup(self) -> None:
         assert self.scenario is not None
-        self.loaded = scenario_apply(scenario=self.scenario)
+        self.loaded = scenario_apply(scenario=self.scenario, logins=self.logins)
         for vehicle in self.loaded.vehicles.values():
             self.add_vehicle_loop(vehicle)
         for spec, name in vv_instances(self.scenario):
@@ -194,10 +204,25 @@ class Simulation:
 
     def run(self, *, progress: ProgressFn | None = None) -> dict[str, Any]:
         """Run the scenario until nothing is left to happen; returns the summary."""
-        if self.loaded is None:
-            self._setup()
-        self.drain(progress=progress, total=self.vv_count)
-        return self.summary()
+        started = time.perf_counter()
+        with _no_statement_log():
+            if self.loaded is None:
+                self._setup()
+            self.drain(progress=progress, total=self.vv_count)
+            summary = self.summary()
+        self.wall_s = time.perf_counter() - started
+        return summary
+
+    def speed_line(self, summary: dict[str, Any]) -> str:
+        """How fast the run went (wall time, so never part of the summary itself, which is the
+        same on every run): tasks done a second of wall time, from loading to the summary."""
+        tasks = sum(vv["tasks_done"] for vv in summary["vvs"])
+        rate = tasks / self.wall_s if self.wall_s > 0 else 0.0
+        return (
+            f"simulated {tasks:,} tasks, {len(summary['migrations']):,} migrations and "
+            f"{self.events_run:,} events in {self.wall_s:.1f} s of wall time: "
+            f"{rate:,.1f} tasks/s"
+        )
 
     @property
     def vv_count(self) -> int:
@@ -303,6 +328,17 @@ class Simulation:
             "migrations": migrations,
             "latency": latency_summary(waits),
         }
+
+
+@contextlib.contextmanager
+def _no_statement_log() -> Iterator[None]:
+    """With DEBUG on, Django formats and keeps every SQL statement: a tenth of a run's time."""
+    debug = settings.DEBUG
+    settings.DEBUG = False
+    try:
+        yield
+    finally:
+        settings.DEBUG = debug
 
 
 def latency_summary(waits: list[float]) -> dict[str, Any]:

@@ -145,6 +145,8 @@ class VirtualVehicleViewSet(
                 {"detail": f"program: {problem}", "program": [str(problem)], "error": error},
                 status=status.HTTP_400_BAD_REQUEST,
             )
+        # Just created: no task yet (not two counts to say so).
+        vv.tasks_done = vv.tasks_open = 0  # type: ignore[attr-defined]
         return Response(self.get_serializer(vv).data, status=status.HTTP_201_CREATED)
 
     @extend_schema(

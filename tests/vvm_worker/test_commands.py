@@ -6,6 +6,7 @@ import fcntl
 import json
 import os
 import pty
+import re
 import select
 import struct
 import subprocess
@@ -109,6 +110,26 @@ def test_simulate_prints_the_same_json_summary_twice(tmp_path: Path, scenario: s
     assert summary["latency"]["max_s"] == pytest.approx(waits[-1], abs=1e-3)
     # A fresh database each time: the configured one was never created.
     assert not (tmp_path / "configured.sqlite3").exists()
+
+
+def test_simulate_reports_its_own_speed_apart_from_the_summary(tmp_path: Path) -> None:
+    speed = re.compile(
+        r"^simulated (\d+) tasks, (\d+) migrations and \d+ events in [\d.]+ s of wall time: "
+        r"[\d,.]+ tasks/s$",
+        re.M,
+    )
+    args = ("simulate", str(SCENARIOS / "paper-fig2.json"), "--speed", "0")
+    shown = manage(*args, tmp=tmp_path)
+    line = shown.stdout.strip().splitlines()[-1]
+    assert speed.match(line), shown.stdout[-500:]
+    as_json = manage(*args, "--json", tmp=tmp_path)
+    summary = json.loads(as_json.stdout.strip().splitlines()[-1])
+    # With --json the speed goes to stderr: the summary is the same on every run.
+    match = speed.search(as_json.stderr)
+    assert match is not None, as_json.stderr[-500:]
+    assert int(match.group(1)) == sum(vv["tasks_done"] for vv in summary["vvs"]) > 0
+    assert int(match.group(2)) == len(summary["migrations"])
+    assert "tasks/s" not in as_json.stdout
 
 
 def test_simulate_keep_leaves_the_results_in_the_configured_database(tmp_path: Path) -> None:

@@ -49,6 +49,9 @@ class VVM:
     lease_s: float | None = None
     # Who hears of changes as they happen (the live map's feed).
     announcer: Announcer = dataclass_field(default_factory=Silent)
+    # Every host runs in this process with this one runtime (`simulate`): a VV that migrates
+    # keeps its warm context, which the next host would otherwise rebuild by replay.
+    hosts_share_runtime: bool = False
 
 
 class ProgramRejected(ValueError):

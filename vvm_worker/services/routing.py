@@ -6,7 +6,9 @@ import dataclasses
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from django.db.models import Count, Max, Q, QuerySet
+from django.db.models import Count, Max, QuerySet
+from shapely import STRtree
+from shapely.geometry import Point
 
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
@@ -75,31 +77,104 @@ def _sensor_names(vehicle: Vehicle) -> frozenset[str]:
     return names
 
 
-def fleet_caps(vvm: VVM) -> list[VehicleCaps]:
+@dataclasses.dataclass(frozen=True)
+class _FleetShape:
+    """The part of the mapper's view that changes only when the provider changes an RV (a new
+    version of the fleet's rows): each RV in service or maintenance with its area, altitudes,
+    sensors and speeds, a spatial index of the areas, and which areas overlap."""
+
+    caps: dict[int, VehicleCaps]  # in name order; live fields are filled in per call
+    ids: tuple[int, ...]  # in the order of the index's geometries
+    index: STRtree
+    overlaps: dict[int, frozenset[int]]
+
+    def covering(self, requests: Iterable[TaskRequest]) -> set[int]:
+        """The RVs whose areas hold any of the requests' points (border included)."""
+        found: set[int] = set()
+        for r in requests:
+            found.update(self.ids[i] for i in self.index.query(Point(r.lng, r.lat)))
+        return found
+
+
+_shapes_seen: dict[tuple[Any, ...], _FleetShape] = {}
+
+
+def _fleet_shape() -> _FleetShape:
+    """The fleet's shape, read again only when a vehicle row changed: one light query."""
+    version = Vehicle.objects.aggregate(count=Count("id"), changed=Max("updated"), top=Max("id"))
+    key = (version["count"], version["changed"], version["top"])
+    shape = _shapes_seen.get(key)
+    if shape is None:
+        vehicles = list(
+            Vehicle.objects.exclude(status=VehicleStatus.REMOVED).prefetch_related("sensors")
+        )
+        # The live fields come with each call; a vehicle that never flew is at its depot.
+        caps = {v.pk: dataclasses.replace(vehicle_caps(v), position=v.depot) for v in vehicles}
+        ids = tuple(caps)
+        areas = [caps[i].area for i in ids]
+        index = STRtree(areas)
+        overlaps = {}
+        for k, a in enumerate(ids):
+            near = (ids[j] for j in index.query(areas[k]) if ids[j] != a)
+            overlaps[a] = frozenset(
+                b for b in near if caps[a].area.intersection(caps[b].area).area > 0.0
+            )
+        shape = _FleetShape(caps, ids, index, overlaps)
+        _shapes_seen.clear()
+        _shapes_seen[key] = shape
+    return shape
+
+
+def fleet_caps(
+    vvm: VVM, requests: Sequence[TaskRequest] | None = None, shape: _FleetShape | None = None
+) -> list[VehicleCaps]:
     """The mapper's view of the fleet: every RV that is in service or in maintenance; one whose
-    worker is gone counts as in maintenance (it may come back)."""
-    vehicles = list(
-        Vehicle.objects.exclude(status=VehicleStatus.REMOVED)
-        .prefetch_related("sensors")
-        .annotate(open_count=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)))
-    )
-    routes = planned_routes(vehicles)
-    caps = [vehicle_caps(v, v.open_count, routes.get(v.pk, ())) for v in vehicles]
+    worker is gone counts as in maintenance (it may come back). With ``requests``, only the RVs
+    whose areas hold one of them: no other could serve them (`map_task` decides the same)."""
+    shape = shape or _fleet_shape()
+    wanted = shape.covering(requests) if requests is not None else set(shape.ids)
+    if not wanted:
+        return []
+    live = {
+        pk: (
+            status,
+            Position(lat, lng, alt or 0.0) if lat is not None and lng is not None else None,
+            state,
+        )
+        for pk, status, lat, lng, alt, state in Vehicle.objects.filter(pk__in=sorted(wanted))
+        .exclude(status=VehicleStatus.REMOVED)
+        .values_list("pk", "status", "lat", "lng", "alt", "planner_state")
+    }
+    routes, counts = planned_routes({pk: state for pk, (_, _, state) in live.items()})
+    online = None
     if vvm.lease_s is not None:
-        online = set(online_vehicles(vvm).values_list("pk", flat=True))
-        caps = [dataclasses.replace(c, active=c.active and c.id in online) for c in caps]
+        online = set(online_vehicles(vvm).filter(pk__in=list(live)).values_list("pk", flat=True))
+    caps = []
+    for pk, static in shape.caps.items():
+        if pk not in live:
+            continue
+        status, position, _ = live[pk]
+        active = status == VehicleStatus.ACTIVE and (online is None or pk in online)
+        caps.append(
+            dataclasses.replace(
+                static,
+                active=active,
+                position=position or static.position,
+                open_tasks=counts.get(pk, 0),
+                route=routes.get(pk, ()),
+            )
+        )
     return caps
 
 
-def planned_routes(vehicles: Sequence[Vehicle]) -> dict[int, tuple[Position, ...]]:
-    """The open tasks of each RV with work (`open_count` annotated, as `fleet_caps` does), in
-    the order its planner last meant to serve them (its saved plan; tasks the plan does not
-    know yet come last, oldest first)."""
-    busy = {v.pk: v for v in vehicles if v.open_count}
-    if not busy:
-        return {}
+def planned_routes(
+    plans: dict[int, Any],
+) -> tuple[dict[int, tuple[Position, ...]], dict[int, int]]:
+    """The open tasks of these RVs (id -> the planner state it saved), in the order its planner
+    last meant to serve them (tasks the plan does not know yet come last, oldest first), and
+    how many each has."""
     rows = (
-        Task.objects.filter(status=TaskStatus.OPEN, vehicle_id__in=list(busy))
+        Task.objects.filter(status=TaskStatus.OPEN, vehicle_id__in=sorted(plans))
         .order_by("requested_s", "id")
         .values_list("pk", "vehicle_id", "lat", "lng", "alt")
     )
@@ -108,11 +183,12 @@ def planned_routes(vehicles: Sequence[Vehicle]) -> dict[int, tuple[Position, ...
         tasks.setdefault(vehicle_id, []).append((pk, Position(lat, lng, alt)))
     routes = {}
     for vehicle_id, items in tasks.items():
-        plan = busy[vehicle_id].planner_state.get("route", [])
+        state = plans[vehicle_id]
+        plan = state.get("route", []) if isinstance(state, dict) else []
         rank = {task_id: k for k, task_id in enumerate(plan if isinstance(plan, list) else [])}
         items.sort(key=lambda item: rank.get(item[0], len(rank)))
         routes[vehicle_id] = tuple(position for _, position in items)
-    return routes
+    return routes, {vehicle_id: len(items) for vehicle_id, items in tasks.items()}
 
 
 def online_vehicles(vvm: VVM) -> QuerySet[Vehicle]:
@@ -129,17 +205,18 @@ def route(vv: VirtualVehicle, vvm: VVM) -> bool:
     open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
     host = vv.host_rv
     mine: list[Task] = []
+    shape = _fleet_shape()
     if host is not None and host.status == VehicleStatus.ACTIVE:
         # The common case needs no look at the rest of the fleet: the RV aboard can go on, and
         # no other RV's area overlaps its own.
         caps = vehicle_caps(host)
         mine = [t for t in open_tasks if caps.can_serve(request_of(t))]
-        if mine and not overlapping_vehicles(host.pk):
+        if mine and not shape.overlaps.get(host.pk):
             assign(mine, host, vvm)
             return False
         if not mine and any(t.vehicle_id == host.pk for t in open_tasks):
             return False
-    fleet = fleet_caps(vvm)
+    fleet = fleet_caps(vvm, [request_of(t) for t in open_tasks], shape)
     decisions = {t.pk: map_task(request_of(t), fleet) for t in open_tasks}
     if host is not None and mine and _stays(host, mine, fleet, decisions):
         assign(mine, host, vvm)
@@ -156,7 +233,7 @@ def route(vv: VirtualVehicle, vvm: VVM) -> bool:
     best = _best_vehicle(open_tasks, decisions)
     if best is not None:
         vehicle = Vehicle.objects.get(pk=best.id)
-        release_tasks(vv, vvm)
+        release_tasks(vv, vvm, open_tasks)
         record_migration(vv, to=vehicle, reason="its next task", vvm=vvm)
         vv.status = VVStatus.MIGRATING
         vvm.dispatcher.vv_arrived(vv.id)
@@ -191,26 +268,10 @@ def _stays(
     return theirs + HANDOVER_MARGIN_S >= ours
 
 
-# For each version of the fleet (vehicle count, last change), which RVs' areas overlap.
-_overlaps_seen: dict[tuple[Any, ...], dict[int, frozenset[int]]] = {}
-
-
 def overlapping_vehicles(vehicle_id: int) -> frozenset[int]:
     """The RVs in service or maintenance whose operation areas overlap this RV's (sharing more
     than a border). Remembered per version of the fleet: one light query when nothing changed."""
-    fleet = Vehicle.objects.exclude(status=VehicleStatus.REMOVED)
-    version = fleet.aggregate(count=Count("id"), changed=Max("updated"), top=Max("id"))
-    key = (version["count"], version["changed"], version["top"])
-    table = _overlaps_seen.get(key)
-    if table is None:
-        areas = {v.pk: v.area_polygon for v in fleet.only("id", "area")}
-        table = {
-            a: frozenset(b for b in areas if b != a and areas[a].intersection(areas[b]).area > 0.0)
-            for a in areas
-        }
-        _overlaps_seen.clear()
-        _overlaps_seen[key] = table
-    return table.get(vehicle_id, frozenset())
+    return _fleet_shape().overlaps.get(vehicle_id, frozenset())
 
 
 def _partly_answered(vv: VirtualVehicle, pending: PendingRequest) -> bool:
@@ -246,11 +307,18 @@ def assign(tasks: Iterable[Task], vehicle: Vehicle, vvm: VVM) -> None:
         vvm.dispatcher.vehicle_changed(vehicle.pk)
 
 
-def release_tasks(vv: VirtualVehicle, vvm: VVM) -> None:
-    """Take the VV's open tasks off the RVs they were planned on."""
-    held = vv.tasks.filter(status=TaskStatus.OPEN, vehicle__isnull=False)
-    vehicles = set(held.values_list("vehicle_id", flat=True))
-    held.update(vehicle=None)
+def release_tasks(vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None = None) -> None:
+    """Take the VV's open tasks off the RVs they were planned on; ``open_tasks``: all of them,
+    as the caller has just read them (in the same transaction)."""
+    if open_tasks is None:
+        held = vv.tasks.filter(status=TaskStatus.OPEN, vehicle__isnull=False)
+        vehicles = set(held.values_list("vehicle_id", flat=True))
+        held.update(vehicle=None)
+    else:
+        taken = [t for t in open_tasks if t.vehicle_id is not None]
+        vehicles = {t.vehicle_id for t in taken}
+        if taken:
+            Task.objects.filter(pk__in=[t.pk for t in taken]).update(vehicle=None)
     for vehicle_id in sorted(vehicles):
         vvm.dispatcher.vehicle_changed(vehicle_id)
 
@@ -303,8 +371,10 @@ def record_migration(
         vv.host_rv, vv.host_gs = to, None
     else:
         vv.host_rv, vv.host_gs = None, to
-    # The VV's warm context stays with the host it left: the new host resumes it by replay.
-    vvm.runtime.forget(str(vv.pk))
+    # The VV's warm context stays with the host it left: the new host resumes it by replay
+    # (unless both are in this process, sharing one runtime).
+    if not vvm.hosts_share_runtime:
+        vvm.runtime.forget(str(vv.pk))
     logger.info(
         "vv migrated",
         extra={"vv": str(vv.id), "from": getattr(source, "name", None), "to": to.name},

@@ -122,7 +122,7 @@ def vv_submit(
         vvm.announcer.announce(vv_event(vv))
     if admit:
         vv_admit_queued(customer_id=customer.pk, vvm=vvm)
-    vv.refresh_from_db()
+        vv.refresh_from_db()  # admission changed it through another instance
     return vv
 
 
@@ -343,7 +343,7 @@ def task_complete(
         # cannot deadlock.
         if vv_id is None:
             vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
-        vv = VirtualVehicle.objects.select_for_update().get(pk=vv_id)
+        vv = VirtualVehicle.objects.select_for_update().defer("program", "catalog").get(pk=vv_id)
         task = Task.objects.select_for_update().get(pk=task_id)
         pending = pending_of(vv)
         if task.status != TaskStatus.OPEN or pending is None or pending.q != task.q:
