@@ -15,6 +15,10 @@
 // after `effectsApplied` are reported to the host, so replaying never applies an effect twice.
 // Storage itself is rebuilt by the replay, which makes `load` deterministic.
 //
+// In a warm context every step replays what the last one did, so what a program cannot tell
+// apart is kept from one run to the next: the journal's readings and requests, parsed
+// (JournalEntry), and the strings of the last run's storage.
+//
 // The host talks to this file only through `__cpcc_host`, whose functions refuse to run while
 // the program runs, and reads results as strings made with functions captured here first.
 (function (hostKey) {
@@ -31,6 +35,7 @@
   const reflectApply = Reflect.apply;
   const reflectDeleteProperty = Reflect.deleteProperty;
   const isArray = Array.isArray;
+  const objectKeys = Object.keys;
   const numberIsFinite = Number.isFinite;
   const mathImul = Math.imul;
   const stringOf = String;
@@ -190,12 +195,161 @@
 
   // --- the context's own data: catalog, journal, program ------------------------------------
   let catalog = [];
-  const journal = []; // [{q, k, t, r, i, message, data (JSON text)}]
+  const journal = []; // JournalEntry, in order
   let program = null;
   let tainted = false;
 
+  // Readings nested deeper than this stay JSON text, parsed again by each run: copying them
+  // recursively could overflow a stack that parsing does not.
+  const MAX_COPY_DEPTH = 16;
+
+  function depthAtMost(value, depth) {
+    if (value === null || typeof value !== 'object') return true;
+    if (depth === 0) return false;
+    if (isArray(value)) {
+      for (let i = 0; i < value.length; i++) if (!depthAtMost(value[i], depth - 1)) return false;
+      return true;
+    }
+    const keys = objectKeys(value);
+    for (let i = 0; i < keys.length; i++) if (!depthAtMost(value[keys[i]], depth - 1)) return false;
+    return true;
+  }
+
+  // A fresh copy of a value JSON.parse made (plain arrays, plain objects, primitives), equal to
+  // what parsing its text again would give and three to five times cheaper: no number is read
+  // from text again. `for in` sees only the object's own keys (the frozen Object.prototype has
+  // no enumerable property, and a program cannot add one). Assigning a key Object.prototype has
+  // is safe: every such property is an accessor whose setter defines the property on the object
+  // (enableOverride), except `__proto__`.
+  function copyJson(value) {
+    if (value === null || typeof value !== 'object') return value;
+    if (isArray(value)) {
+      const n = value.length;
+      const array = [];
+      for (let i = 0; i < n; i++) push(array, copyJson(value[i]));
+      return array;
+    }
+    const object = {};
+    for (const key in value) {
+      if (key === '__proto__') {
+        defineProperty(object, key, { value: copyJson(value[key]), writable: true, enumerable: true, configurable: true });
+      } else {
+        object[key] = copyJson(value[key]);
+      }
+    }
+    return object;
+  }
+
+  // One answer of the journal. The first run that reads it (in a new context, the only one)
+  // parses its readings from text and writes the request it answers as text to compare, as
+  // runs always did; a second run keeps both parsed for every run after it. The parsed
+  // readings are never handed out: each run gets its own copy, so a program that changes the
+  // readings it got cannot change what the next run gets.
+  class JournalEntry {
+    constructor(e) {
+      this.q = e.q;
+      this.k = e.k;
+      this.t = e.t;
+      this.r = e.r;
+      this.i = e.i;
+      this.message = e.message;
+      this.text = e.data === undefined ? undefined : jsonStringify(e.data);
+      this.readings = undefined; // parsed from `text`, once a second run reads them
+      this.reads = 0;
+      this.request = undefined; // `r` parsed, once compared a second time (null: not comparable)
+      this.compared = false;
+    }
+
+    // The readings for the program, a copy of its own.
+    freshData() {
+      if (this.readings !== undefined) return copyJson(this.readings);
+      const data = jsonParse(this.text);
+      this.reads++;
+      if (this.reads === 2 && depthAtMost(data, MAX_COPY_DEPTH)) {
+        this.readings = data;
+        this.text = undefined;
+        return copyJson(data);
+      }
+      return data;
+    }
+
+    // Whether this entry answers `request` (a task, or the tasks of a batch, as normalizeTask
+    // makes them): whether the request's JSON text is `r`.
+    answers(request) {
+      if (this.request === undefined) {
+        if (!this.compared) {
+          this.compared = true;
+          return jsonStringify(request) === this.r;
+        }
+        this.request = comparableRequest(this.r);
+      }
+      return this.request === null ? jsonStringify(request) === this.r : sameRequest(request, this.request);
+    }
+  }
+
+  // `r` parsed, when it is exactly the text the prelude writes for a task or a batch of tasks;
+  // null otherwise. For such a text, sameRequest() compares values where the texts would be
+  // compared, with the same result (finite numbers and strings are equal exactly when their
+  // JSON texts are, and the keys are in the same order), and without writing the program's
+  // request as text again in every run.
+  function comparableRequest(r) {
+    if (typeof r !== 'string') return null;
+    let parsed;
+    try {
+      parsed = jsonParse(r);
+    } catch (e) {
+      return null;
+    }
+    if (isArray(parsed) ? !everyTaskShaped(parsed) : !taskShaped(parsed)) return null;
+    return jsonStringify(parsed) === r ? parsed : null;
+  }
+
+  function keysAre(value, expected) {
+    if (value === null || typeof value !== 'object' || isArray(value)) return false;
+    const keys = objectKeys(value);
+    if (keys.length !== expected.length) return false;
+    for (let i = 0; i < keys.length; i++) if (keys[i] !== expected[i]) return false;
+    return true;
+  }
+
+  const TASK_KEYS = freeze(['type', 'position', 'tolerance', 'sensors']);
+  const POSITION_KEYS = freeze(['lat', 'lng', 'alt']);
+
+  function taskShaped(task) {
+    return keysAre(task, TASK_KEYS) && keysAre(task.position, POSITION_KEYS) && isArray(task.sensors);
+  }
+
+  function everyTaskShaped(tasks) {
+    for (let i = 0; i < tasks.length; i++) if (!taskShaped(tasks[i])) return false;
+    return true;
+  }
+
+  // `made` comes from normalizeTask, `recorded` from comparableRequest.
+  function sameTask(made, recorded) {
+    const p = made.position;
+    const r = recorded.position;
+    if (made.type !== recorded.type || p.lat !== r.lat || p.lng !== r.lng || p.alt !== r.alt ||
+        made.tolerance !== recorded.tolerance) return false;
+    const names = made.sensors;
+    const recordedNames = recorded.sensors;
+    if (names.length !== recordedNames.length) return false;
+    for (let i = 0; i < names.length; i++) if (names[i] !== recordedNames[i]) return false;
+    return true;
+  }
+
+  function sameRequest(made, recorded) {
+    if (isArray(made) !== isArray(recorded)) return false;
+    if (!isArray(made)) return sameTask(made, recorded);
+    if (made.length !== recorded.length) return false;
+    for (let i = 0; i < made.length; i++) if (!sameTask(made[i], recorded[i])) return false;
+    return true;
+  }
+
   // --- one run of the program -----------------------------------------------------------------
   const SUSPEND = freeze({ cpccSuspend: true });
+  const TASK_ANSWERS = freeze(['done', 'reject']);
+  const FIRST_PART_ANSWERS = freeze(['part', 'reject']);
+  const PART_ANSWERS = freeze(['part']);
   const MAX_ALT_M = 20000;
   const MAX_KEY = 128;
   const MAX_LINE = 4000;
@@ -257,7 +411,8 @@
     });
   }
 
-  function newRun(input) {
+  // `previousStorage`: the storage the last run of this context ended with, or null.
+  function newRun(input, previousStorage) {
     const state = {
       clockMs: input.startMs,
       random: null,
@@ -366,11 +521,14 @@
 
     // The journal must answer the same requests the program makes now; anything else means
     // the program is not deterministic and its state after a migration would be wrong.
-    function expect(q, fingerprint, kinds) {
+    // `request` is what the program asks for (undefined for the later parts of a batch, which
+    // are not compared); `kinds` the kinds of answer it may have.
+    function expect(q, request, kinds) {
       const entry = journal[cursor];
       if (entry.q !== q || kinds.indexOf(entry.k) < 0 ||
-          (fingerprint !== undefined && entry.r !== undefined && entry.r !== fingerprint)) {
-        stop('failed', 'non-determinism: on replay the program made request #' + (q + 1) + ' ' + fingerprint +
+          (request !== undefined && entry.r !== undefined && !entry.answers(request))) {
+        stop('failed', 'non-determinism: on replay the program made request #' + (q + 1) + ' ' +
+          (request === undefined ? undefined : jsonStringify(request)) +
           ' but its journal holds ' + (entry.r === undefined ? jsonStringify(entry.k) : entry.r) +
           ' there; a VV must decide only from what the VVM-API gave it');
       }
@@ -387,15 +545,14 @@
       }
       countTasks(1);
       const q = requestSeq++;
-      const fingerprint = jsonStringify(request);
       if (cursor >= journal.length) {
-        pending = { kind: 'task', q: q, r: fingerprint, tasks: [request] };
+        pending = { kind: 'task', q: q, r: jsonStringify(request), tasks: [request] };
         suspended = true;
         halt();
       }
-      const entry = expect(q, fingerprint, ['done', 'reject']);
+      const entry = expect(q, request, TASK_ANSWERS);
       if (entry.k === 'reject') throw new TaskRejectedError(entry.message);
-      const data = jsonParse(entry.data);
+      const data = entry.freshData();
       if (typeof callback === 'function') callback(data);
       return data;
     }
@@ -413,25 +570,24 @@
       if (requests.length === 0) return results;
       countTasks(requests.length);
       const q = requestSeq++;
-      const fingerprint = jsonStringify(requests);
       let first = true;
       let remaining = requests.length;
       while (remaining > 0) {
         if (cursor >= journal.length) {
           const open = [];
           for (let i = 0; i < requests.length; i++) if (results[i] === undefined) push(open, i);
-          pending = { kind: 'batch', q: q, r: first ? fingerprint : null, tasks: requests, open: open };
+          pending = { kind: 'batch', q: q, r: first ? jsonStringify(requests) : null, tasks: requests, open: open };
           suspended = true;
           halt();
         }
-        const entry = expect(q, first ? fingerprint : undefined, first ? ['part', 'reject'] : ['part']);
+        const entry = expect(q, first ? requests : undefined, first ? FIRST_PART_ANSWERS : PART_ANSWERS);
         first = false;
         if (entry.k === 'reject') throw new TaskRejectedError(entry.message);
         const i = entry.i;
         if (typeof i !== 'number' || i < 0 || i >= requests.length || results[i] !== undefined) {
           stop('failed', 'non-determinism: the journal answers part ' + i + ' of a batch of ' + requests.length + ' twice or out of range');
         }
-        const data = jsonParse(entry.data);
+        const data = entry.freshData();
         results[i] = data;
         remaining--;
         if (typeof callback === 'function') callback(data, i);
@@ -464,7 +620,12 @@
           limits.storageBytes + ' allowed (quota: storage bytes)', 'storage');
       }
       storageChars = used;
-      reflectApply(mapSet, storage, [key, text]);
+      // A replayed write usually stores the text the last run ended with under the key: keep
+      // that string. Equal strings are indistinguishable to a program, and the new one then
+      // dies young instead of being copied by the garbage collections of the run (for
+      // thousands of replayed writes, a good part of its time).
+      const last = previousStorage === null ? undefined : reflectApply(mapGet, previousStorage, [key]);
+      reflectApply(mapSet, storage, [key, last === text ? last : text]);
       effect('store', key, text, null);
     }
 
@@ -562,6 +723,9 @@
     };
     state.rethrow = function (e) { if (e === SUSPEND || suspended) throw SUSPEND; };
     state.isSuspended = function () { return suspended; };
+    state.storage = storage;
+    // Suspended at a call without an answer, and not stopped by a quota or non-determinism.
+    state.isPending = function () { return pending !== null && fatal === null; };
     state.outcome = function () {
       let status;
       if (fatal !== null) status = fatal.kind;
@@ -584,6 +748,16 @@
   }
 
   // --- what the host calls ----------------------------------------------------------------------
+  function appendEntries(json) {
+    const entries = jsonParse(json);
+    for (let i = 0; i < entries.length; i++) push(journal, new JournalEntry(entries[i]));
+  }
+
+  function finish() {
+    if (!resetGlobals()) tainted = true;
+    return run === null ? 'null' : run.outcome();
+  }
+
   // Every host function wants the key this file was installed with: the program can reach
   // `__cpcc_host` through globalThis, but not the key, which lives only in this closure.
   function host(key, what) {
@@ -602,32 +776,37 @@
     // The VV's SDC entries: part of its checkpoint, the same for every run.
     setCatalog: function (key, json) { host(key, 'setCatalog'); catalog = jsonParse(json); },
     setProgram: function (key, fn) { host(key, 'setProgram'); program = fn; },
-    // Journal entries as JSON text; the readings stay text until a run consumes them, so a
-    // program that changes the readings it got cannot change what the next run gets.
+    // Journal entries as a JSON array (see JournalEntry).
     append: function (key, json) {
       host(key, 'append');
-      const entries = jsonParse(json);
-      for (let i = 0; i < entries.length; i++) {
-        const e = entries[i];
-        push(journal, freeze({ q: e.q, k: e.k, t: e.t, r: e.r, i: e.i, message: e.message,
-          data: e.data === undefined ? undefined : jsonStringify(e.data) }));
-      }
+      appendEntries(json);
       return journal.length;
     },
-    step: function (key, json) {
+    // One run, after appending the journal entries `entries` (a JSON array) when given. Returns
+    // the outcome (see `outcome`) when the program suspends at a call or returns, in the same
+    // call, which saves the host a second one. Anything else the program throws (an error, or
+    // SUSPEND after a quota or non-determinism stopped it) propagates with the place it was
+    // thrown at, and the host asks for the outcome then.
+    step: function (key, json, entries) {
       host(key, 'step');
+      if (entries !== undefined) appendEntries(entries);
+      const previousStorage = run === null ? null : run.storage;
       run = null;
       if (!resetGlobals()) tainted = true;
-      run = newRun(jsonParse(json));
+      run = newRun(jsonParse(json), previousStorage);
       for (let i = 0; i < RUN_GLOBALS.length; i++) {
         const name = RUN_GLOBALS[i];
         defineProperty(global, name, { value: run.globals[name], writable: false, enumerable: false, configurable: true });
       }
+      let returned = false;
       running = true;
       try {
         reflectApply(program, undefined, []);
+        returned = true;
       } finally {
         running = false;
+        // A `return` here ends the propagation of SUSPEND; anything else keeps propagating.
+        if (returned || run.isPending()) return finish();
       }
     },
     // V8 stopped the program (a quota): its `finally` above did not run.
@@ -639,8 +818,7 @@
     // the outcome says the context is tainted and the host does not reuse it.
     outcome: function (key) {
       host(key, 'outcome');
-      if (!resetGlobals()) tainted = true;
-      return run === null ? 'null' : run.outcome();
+      return finish();
     },
   }));
 
