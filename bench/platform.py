@@ -3,9 +3,17 @@
 Starts one ground-station worker and one worker per RV (separate processes, as on separate
 machines) on a grid of cells, submits many original-style VVs with instant flights (time
 acceleration 0: what is measured is the software's own limit), waits until every VV has ended
-and reports, from the database:
+and reports how the submission went and, from the database, how the VVs ran.
 
-- throughput: tasks done per second of wall time, from the first submission to the last end;
+The submission, with ``--rest`` (the default): one daphne web process (DEBUG off, the API's
+throttles raised far above the load, so that no 429 is measured) and ``--clients`` concurrent
+clients, each with one keep-alive connection, POST every VV to ``/api/v1/vvs/`` with their
+customer's API token. Reported: the wall time from the first POST to the last 201, requests a
+second and each request's latency; any other answer stops the bench with its body.
+``--direct`` submits the same VVs in this process instead (``scenario_submit_all``), no HTTP.
+
+- throughput: tasks done per second of wall time, from the first submission (the first POST)
+  to the last end;
 - completion to the VV's next request: from a task's answer to the program's next blocking call
   (the RV that took the reading resumes the VV itself: a step, no message);
 - completion to next task on the same RV: from a task's answer to the VV's next task being
@@ -21,17 +29,37 @@ and ``REDIS_URL`` for a real Redis; by default a fresh SQLite file and the embed
 from __future__ import annotations
 
 import argparse
+import http.client
 import itertools
+import json
 import os
 import platform
+import queue
+import secrets
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
+from bench.load import REQUEST_TIMEOUT_S, START_TIMEOUT_S, _listening_socket
+
 ROOT = Path(__file__).resolve().parents[1]
+# The web process as in production (bench.load does the same), with the API's throttles far
+# above the bench's rate: every client comes from 127.0.0.1 and each customer's from one user.
+THROTTLE_RATE = "1000000/minute"
+WEB_ENV = {
+    "DEBUG": "0",
+    "ALLOWED_HOSTS": "127.0.0.1",
+    "CPCC_HTTPS": "0",
+    "CPCC_API_RATE_USER": THROTTLE_RATE,
+    "CPCC_API_RATE_ADDRESS": THROTTLE_RATE,
+}
+TARGET_VVS, TARGET_S = 200, 2.0  # issue 13: 200 VVs submitted over REST in under 2 s
 
 
 def _fresh_postgres(url: str) -> None:
@@ -54,6 +82,90 @@ def _pcts(values: list[float]) -> str:
     return f"p50 {statistics.median(ms):8.1f} ms   p90 {p90:8.1f} ms   p99 {p99:8.1f} ms   (n={len(ms)})"
 
 
+@dataclass
+class Post:
+    """One POST /api/v1/vvs/ and its answer (``status``: the HTTP status, or the exception's
+    name when there was none)."""
+
+    sent: float
+    done: float
+    status: int | str
+    body: bytes
+
+
+def _post(conn: http.client.HTTPConnection, token: str, body: bytes) -> tuple[int | str, bytes]:
+    headers = {
+        "Authorization": f"Token {token}",
+        "Content-Type": "application/json",
+        "Accept": "application/json",
+    }
+    try:
+        conn.request("POST", "/api/v1/vvs/", body, headers)
+        answer = conn.getresponse()
+        return answer.status, answer.read()
+    except (OSError, http.client.HTTPException) as exc:
+        conn.close()  # the next request opens a new connection
+        return type(exc).__name__, str(exc).encode()
+
+
+def _wait_for_web(port: int, token: str, web: subprocess.Popen[bytes], log: Path) -> None:
+    """Until the web process answers a GET with the token, then one POST of a program that
+    does not parse: answered 400 with nothing created, it starts V8 in the web process, which
+    the first measured POST would pay for otherwise."""
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=REQUEST_TIMEOUT_S)
+    deadline = time.monotonic() + START_TIMEOUT_S
+    try:
+        while True:
+            if web.poll() is not None:
+                raise SystemExit(f"the web process exited; see {log}")
+            try:
+                conn.request("GET", "/api/v1/sensors/", headers={"Authorization": f"Token {token}"})
+                answer = conn.getresponse()
+                answer.read()
+                if answer.status == 200:
+                    break
+            except (OSError, http.client.HTTPException):
+                conn.close()
+            if time.monotonic() > deadline:
+                raise SystemExit(f"the web process did not answer; see {log}")
+            time.sleep(0.2)
+        status, body = _post(conn, token, json.dumps({"name": "warm-up", "program": "("}).encode())
+        if status != 400:
+            raise SystemExit(f"a program that does not parse was answered {status}: {body!r}")
+    finally:
+        conn.close()
+
+
+def _post_all(port: int, jobs: list[tuple[str, bytes]], clients: int) -> list[Post]:
+    """POST every (token, JSON body) to /api/v1/vvs/ from ``clients`` threads, each with one
+    keep-alive connection and sending its next request once the previous one is answered."""
+    todo: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
+    for job in jobs:
+        todo.put(job)
+    posts: list[Post] = []
+
+    def client() -> None:
+        conn = http.client.HTTPConnection("127.0.0.1", port, timeout=REQUEST_TIMEOUT_S)
+        try:
+            while True:
+                try:
+                    token, body = todo.get_nowait()
+                except queue.Empty:
+                    return
+                sent = time.time()
+                status, answer = _post(conn, token, body)
+                posts.append(Post(sent, time.time(), status, answer))
+        finally:
+            conn.close()
+
+    threads = [threading.Thread(target=client) for _ in range(clients)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return posts
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument(
@@ -64,6 +176,23 @@ def main() -> None:
     parser.add_argument("--cell", type=float, default=200.0, help="cell size, metres")
     parser.add_argument(
         "--database", default="", help="postgres://... (default: a new SQLite file)"
+    )
+    how = parser.add_mutually_exclusive_group()
+    how.add_argument(
+        "--rest",
+        dest="rest",
+        action="store_true",
+        default=True,
+        help="submit the VVs over REST to one daphne web process (the default)",
+    )
+    how.add_argument(
+        "--direct",
+        dest="rest",
+        action="store_false",
+        help="submit them in this process (scenario_submit_all), without HTTP",
+    )
+    parser.add_argument(
+        "--clients", type=int, default=8, help="concurrent REST clients (keep-alive each)"
     )
     args = parser.parse_args()
 
@@ -85,7 +214,9 @@ def main() -> None:
     django.setup()
     from django.conf import settings
     from django.core.management import call_command
+    from rest_framework.authtoken.models import Token
 
+    from accounts.models import User
     from cpcc_site.embedded_redis import EmbeddedRedis
     from missions.models import (
         ENDED_STATUSES,
@@ -96,7 +227,7 @@ def main() -> None:
         VVStatus,
     )
     from vvm_worker.platform import platform_vvm
-    from vvm_worker.scenario import parse_scenario
+    from vvm_worker.scenario import parse_scenario, vv_instances
     from vvm_worker.scenario_gen import grid_box, grid_scenario, original_style_program
     from vvm_worker.services.scenarios import scenario_apply, scenario_submit_all
 
@@ -117,37 +248,85 @@ def main() -> None:
     ]
     scenario = parse_scenario(data, base_dir=ROOT)
     loaded = scenario_apply(scenario=scenario)
+    # The same VVs as scenario_submit_all's, each POSTed with its customer's token (the
+    # customer's login user is named after its slug).
+    tokens = {
+        c.slug: Token.objects.get_or_create(user=User.objects.get(username=c.slug))[0].key
+        for c in loaded.customers.values()
+    }
+    jobs = [
+        (
+            tokens[loaded.customers[spec.customer].slug],
+            json.dumps({"name": name, "program": spec.source}).encode(),
+        )
+        for spec, name in vv_instances(scenario)
+    ]
 
     env = {**os.environ, "REDIS_URL": redis_url}
-    children = []
+    children: list[subprocess.Popen[bytes]] = []
     logs = []
+    posts: list[Post] = []
+
+    def start(
+        label: str,
+        command: list[str],
+        extra_env: dict[str, str] | None = None,
+        pass_fds: tuple[int, ...] = (),
+    ) -> subprocess.Popen[bytes]:
+        log = (tmp / f"{label}.log".replace(" ", "_")).open("wb")
+        logs.append(log)
+        child = subprocess.Popen(
+            [sys.executable, *command],
+            cwd=ROOT,
+            env={**env, **(extra_env or {})},
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            pass_fds=pass_fds,
+        )
+        children.append(child)
+        return child
+
     try:
         for kind, names in (("gsworker", loaded.ground_stations), ("rvworker", loaded.vehicles)):
             for name in names:
-                log = (tmp / f"{kind}-{name}.log".replace(" ", "_")).open("wb")
-                logs.append(log)
-                children.append(
-                    subprocess.Popen(
-                        [sys.executable, "manage.py", kind, name],
-                        cwd=ROOT,
-                        env=env,
-                        stdout=log,
-                        stderr=subprocess.STDOUT,
-                    )
+                start(f"{kind}-{name}", ["manage.py", kind, name])
+        workers = len(children)
+        if args.rest:
+            listener = _listening_socket(0)
+            port = listener.getsockname()[1]
+            with listener:
+                web = start(
+                    "web",
+                    ["-m", "daphne", "--fd", str(listener.fileno()), "cpcc_site.asgi:application"],
+                    extra_env={**WEB_ENV, "SECRET_KEY": secrets.token_urlsafe(50)},
+                    pass_fds=(listener.fileno(),),
                 )
-        # Let every worker announce itself before the clock starts.
-        deadline = time.monotonic() + 120
-        while sum(1 for p in tmp.glob("*.log") if b"worker " in p.read_bytes()) < len(children):
+        # Let every worker announce itself, and the web process answer, before the clock starts.
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while sum(1 for p in tmp.glob("*worker-*.log") if b"worker " in p.read_bytes()) < workers:
             if time.monotonic() > deadline:
                 raise SystemExit("the workers did not start; see " + str(tmp))
             time.sleep(0.2)
-        started = time.time()
-        vvs = scenario_submit_all(scenario=scenario, loaded=loaded, vvm=platform_vvm())
-        total = len(vvs)
+        if args.rest:
+            _wait_for_web(port, next(iter(tokens.values())), web, tmp / "web.log")
+            posts = _post_all(port, jobs, args.clients)
+            refused = [p for p in posts if p.status != 201]
+            if refused:
+                counts = Counter(str(p.status) for p in refused)
+                raise SystemExit(
+                    f"{len(refused)} of {len(posts)} POSTs not answered 201 "
+                    f"({', '.join(f'{n} x {st}' for st, n in counts.most_common())}); the first: "
+                    f"{refused[0].status} {refused[0].body.decode(errors='replace')}"
+                )
+            started = min(p.sent for p in posts)
+            total = len(posts)
+        else:
+            started = time.time()
+            total = len(scenario_submit_all(scenario=scenario, loaded=loaded, vvm=platform_vvm()))
         while VirtualVehicle.objects.filter(status__in=ENDED_STATUSES).count() < total:
             time.sleep(0.5)
             if any(p.poll() is not None for p in children):
-                raise SystemExit("a worker died; see " + str(tmp))
+                raise SystemExit("a worker or the web process died; see " + str(tmp))
         ended = time.time()
     finally:
         for p in children:
@@ -200,6 +379,23 @@ def main() -> None:
         f"# {machine} · {os.cpu_count()} cores · {engine} · Redis {'external' if settings.REDIS_URL else 'embedded'}"
     )
     print(f"{args.rvs} RV workers + 1 GS worker, {total} VVs x {args.tasks} tasks, instant flights")
+    if args.rest:
+        print(
+            f"submitted over REST: {args.clients} clients (keep-alive) POST /api/v1/vvs/ to one "
+            f"daphne process, DEBUG off, API throttles raised to {THROTTLE_RATE} (no 429s)"
+        )
+        wall = max(p.done for p in posts) - started
+        target = f"issue 13: {TARGET_VVS} in under {TARGET_S:g} s"
+        if total >= TARGET_VVS:
+            target += ", met" if wall < TARGET_S else ", not met"
+        print(
+            f"{f'{total} VVs submitted over REST':<41}{wall:8.2f} s   first POST -> last 201 "
+            f"({target})"
+        )
+        print(f"REST submissions                         {total / wall:8.1f} requests/s")
+        print(f"POST /api/v1/vvs/                        {_pcts([p.done - p.sent for p in posts])}")
+    else:
+        print("submitted directly (scenario_submit_all in the bench's process, no HTTP)")
     print(f"VVs finished {finished}/{total}, tasks done {done} in {ended - started:.1f} s")
     print(f"throughput                               {done / (ended - started):8.1f} tasks/s")
     print(f"completion -> the VV's next request      {_pcts(request)}")
