@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 SCENARIO ?= examples/scenarios/paper-fig3.json
 
-.PHONY: demo test lint check bench bench-planner bench-load screenshots simulate-fig2 simulate-fig3 vendor clean
+.PHONY: demo test lint check bench bench-simulate bench-planner bench-load screenshots simulate-fig2 simulate-fig3 vendor clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
@@ -43,11 +43,17 @@ simulate-fig3: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m bench
 	$(PY) -m bench.platform
+	$(MAKE) bench-simulate
 	$(PY) -m bench.live_map
 	$(PY) -m bench.live_map --redis redis://127.0.0.1:6379/15
 	$(PY) -m bench.map_browser
 	$(MAKE) bench-planner
 	$(MAKE) bench-load
+
+# simulate on growing fleets (10 and 100 RVs, 10 VVs an RV, 10 tasks a VV; bench/simulate.py,
+# ~15 minutes; BENCH_SIMULATE="--large" adds 1,000 RVs and 100,000 tasks, hours).
+bench-simulate: $(STAMP)
+	$(PY) -m bench.simulate $(BENCH_SIMULATE)
 
 # The route planners on the demo5 protocol, overlapping areas, a survey and replanning times:
 # tables for docs/benchmarks.md and docs/planner-latency.png (bench/planner.py, ~15 minutes).

@@ -45,8 +45,9 @@ import time
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from bench.load import REQUEST_TIMEOUT_S, START_TIMEOUT_S, _listening_socket
+from bench.load import REQUEST_TIMEOUT_S, START_TIMEOUT_S, _cpu_s, _listening_socket, _pids_of
 
 ROOT = Path(__file__).resolve().parents[1]
 # The web process as in production (bench.load does the same), with the API's throttles far
@@ -106,6 +107,38 @@ def _post(conn: http.client.HTTPConnection, token: str, body: bytes) -> tuple[in
     except (OSError, http.client.HTTPException) as exc:
         conn.close()  # the next request opens a new connection
         return type(exc).__name__, str(exc).encode()
+
+
+def _commits(database: str) -> int | None:
+    """Transactions committed in the database so far (PostgreSQL's statistics), or None."""
+    if not database.startswith("postgres"):
+        return None
+    from django.db import connection
+
+    with connection.cursor() as cursor:
+        cursor.execute("SELECT pg_stat_clear_snapshot()")
+        cursor.execute(
+            "SELECT xact_commit FROM pg_stat_database WHERE datname = current_database()"
+        )
+        return int(cursor.fetchone()[0])
+
+
+def _idle(seconds: float, cpu_by_role: Any, rvs: int, database: str) -> None:
+    """What the workers cost with nothing to do: CPU by role and, with PostgreSQL, commits."""
+    cpu, commits = cpu_by_role(), _commits(database)
+    time.sleep(seconds)
+    after, commits_after = cpu_by_role(), _commits(database)
+    print(f"idle for {seconds:g} s, before any VV:")
+    for role in ("rvworker", "gsworker"):
+        share = (after.get(role, 0.0) - cpu.get(role, 0.0)) / seconds
+        each = share / (rvs if role == "rvworker" else 1)
+        print(f"  {role:<38} {share * 100:6.1f} % of a core   ({each * 100:.2f} % each)")
+    if commits is not None and commits_after is not None:
+        rate = (commits_after - commits) / seconds
+        # The benchmark's own statistics queries commit too: two a snapshot.
+        print(
+            f"  transactions committed                 {rate:6.1f}/s   ({rate / rvs:.2f}/s an RV)"
+        )
 
 
 def _wait_for_web(port: int, token: str, web: subprocess.Popen[bytes], log: Path) -> None:
@@ -193,6 +226,12 @@ def main() -> None:
     )
     parser.add_argument(
         "--clients", type=int, default=8, help="concurrent REST clients (keep-alive each)"
+    )
+    parser.add_argument(
+        "--idle-s",
+        type=float,
+        default=0.0,
+        help="first measure the workers idle for this long (CPU; transactions with PostgreSQL)",
     )
     args = parser.parse_args()
 
@@ -286,10 +325,25 @@ def main() -> None:
         children.append(child)
         return child
 
+    # The workers as in production: DEBUG off (Django then keeps no statement log).
+    worker_env = {"DEBUG": "0", "CPCC_HTTPS": "0", "SECRET_KEY": secrets.token_urlsafe(50)}
+    servers = {"PostgreSQL": ("postgres", ""), "Redis": ("redis-server", "")}
+    cpu: dict[str, float] = {}
+
+    def cpu_by_role() -> dict[str, float]:
+        """CPU seconds so far by role (a server's processes that have exited, such as a
+        connection's backend, no longer count)."""
+        spent = {role: sum(_cpu_s(p) for p in _pids_of(*what)) for role, what in servers.items()}
+        for child in children:
+            role = child.args[2] if child.args[1] == "manage.py" else "web (daphne)"
+            spent[role] = spent.get(role, 0.0) + _cpu_s(child.pid)
+        spent["this benchmark"] = time.process_time()
+        return spent
+
     try:
         for kind, names in (("gsworker", loaded.ground_stations), ("rvworker", loaded.vehicles)):
             for name in names:
-                start(f"{kind}-{name}", ["manage.py", kind, name])
+                start(f"{kind}-{name}", ["manage.py", kind, name], extra_env=worker_env)
         workers = len(children)
         if args.rest:
             listener = _listening_socket(0)
@@ -309,6 +363,10 @@ def main() -> None:
             time.sleep(0.2)
         if args.rest:
             _wait_for_web(port, next(iter(tokens.values())), web, tmp / "web.log")
+        if args.idle_s > 0:
+            _idle(args.idle_s, cpu_by_role, len(loaded.vehicles), database)
+        cpu_at_start = cpu_by_role()
+        if args.rest:
             posts = _post_all(port, jobs, args.clients)
             refused = [p for p in posts if p.status != 201]
             if refused:
@@ -328,6 +386,7 @@ def main() -> None:
             if any(p.poll() is not None for p in children):
                 raise SystemExit("a worker or the web process died; see " + str(tmp))
         ended = time.time()
+        cpu = {role: s - cpu_at_start.get(role, 0.0) for role, s in cpu_by_role().items()}
     finally:
         for p in children:
             p.terminate()
@@ -402,6 +461,11 @@ def main() -> None:
     print(f"completion -> next task, same RV         {_pcts(same)}")
     print(f"completion -> next task, another RV      {_pcts(other)}")
     print(f"migration RV -> RV to task taken on      {_pcts(migration)}")
+    spent = sum(cpu.values())
+    print(f"CPU from the first submission to the last end: {spent:.1f} s, "
+          f"{spent * 1000 / max(done, 1):.1f} ms a task:")  # fmt: skip
+    for role, seconds in sorted(cpu.items(), key=lambda item: -item[1]):
+        print(f"  {role:<38} {seconds:8.1f} s   {seconds * 1000 / max(done, 1):6.1f} ms a task")
 
 
 if __name__ == "__main__":

@@ -74,7 +74,12 @@ class VirtualVehicle(models.Model):
                 name="vv_one_host",
             ),
         ]
-        indexes = [models.Index(fields=["customer", "status"])]
+        indexes = [
+            models.Index(fields=["customer", "status"]),
+            # A ground station's load (the VVs on it that have not ended), read at admission:
+            # the VVs that ended there do not count and are not read.
+            models.Index(fields=["host_gs", "status"], name="vv_gs_load"),
+        ]
 
     def __str__(self) -> str:
         return f"{self.name} ({self.customer})"

@@ -11,8 +11,8 @@ from dataclasses import field as dataclass_field
 from typing import Any
 
 from django.core.exceptions import ValidationError
-from django.db.models import Count, DateTimeField, ExpressionWrapper, Q
-from django.db.models.functions import Now
+from django.db.models import Count, DateTimeField, ExpressionWrapper, OuterRef, Subquery
+from django.db.models.functions import Coalesce, Now
 
 from fleet.geo import Position, distance_m
 from fleet.models import GroundStation, SensorType
@@ -65,14 +65,22 @@ class ProgramRejected(ValueError):
 def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> GroundStation | None:
     """The ground station for a VV: the nearest to ``near`` (an RV it leaves), else the one
     with the fewest VVs; None when there is none."""
-    stations = list(
-        GroundStation.objects.annotate(load=Count("vvs", filter=Q(vvs__status__in=ACTIVE_STATUSES)))
-    )
-    if not stations:
-        return None
     if near is not None:
+        stations = list(GroundStation.objects.all())
+        if not stations:
+            return None
         return min(stations, key=lambda gs: (distance_m(near, gs.position), gs.name))
-    return min(stations, key=lambda gs: (gs.load, gs.name))
+    on_it = (
+        VirtualVehicle.objects.filter(host_gs=OuterRef("pk"), status__in=ACTIVE_STATUSES)
+        .order_by()
+        .values("host_gs")
+        .annotate(n=Count("pk"))
+        .values("n")
+    )
+    loaded = list(GroundStation.objects.annotate(load=Coalesce(Subquery(on_it), 0)))
+    if not loaded:
+        return None
+    return min(loaded, key=lambda gs: (gs.load, gs.name))
 
 
 def pending_json(p: PendingRequest) -> dict[str, Any]:

@@ -323,17 +323,20 @@ def vehicle_record_state(
     """What an RV's control loop reports of its vehicle at ``t_s``: where it is, its flight
     phase, its odometer and flight time, and the planner's state (kept for a restarted worker);
     ``carrying`` names the VVs aboard whose track gets this point."""
-    if carrying:
-        TrackPoint.objects.bulk_create(
-            TrackPoint(vv_id=vv_id, t_s=t_s, lat=position.lat, lng=position.lng, alt=position.alt)
-            for vv_id in carrying
+    with transaction.atomic():  # one commit for both
+        if carrying:
+            TrackPoint.objects.bulk_create(
+                TrackPoint(
+                    vv_id=vv_id, t_s=t_s, lat=position.lat, lng=position.lng, alt=position.alt
+                )
+                for vv_id in carrying
+            )
+        Vehicle.objects.filter(pk=vehicle_id).update(
+            lat=position.lat,
+            lng=position.lng,
+            alt=position.alt,
+            phase=phase,
+            distance_m=distance_m,
+            flight_s=flight_s,
+            planner_state=planner_state,
         )
-    Vehicle.objects.filter(pk=vehicle_id).update(
-        lat=position.lat,
-        lng=position.lng,
-        alt=position.alt,
-        phase=phase,
-        distance_m=distance_m,
-        flight_s=flight_s,
-        planner_state=planner_state,
-    )
