@@ -201,6 +201,7 @@ def main() -> None:
         times, _ = drive(Runtime(), program(5000))
         total = time.perf_counter() - started
         print(f"{'5,000-task VV, all steps in one warm context':<62} {total:9.1f} s total")
+        show("  its steps 41-60 (journal of 40-59 answers)", times[40:60])
         show("  its last 100 steps", times[-100:])
 
 

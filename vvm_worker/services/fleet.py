@@ -3,6 +3,7 @@ service, their workers' leases and live state, and what each change means for th
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Sequence
 from typing import Any, TypedDict
@@ -323,7 +324,8 @@ def vehicle_record_state(
     """What an RV's control loop reports of its vehicle at ``t_s``: where it is, its flight
     phase, its odometer and flight time, and the planner's state (kept for a restarted worker);
     ``carrying`` names the VVs aboard whose track gets this point."""
-    with transaction.atomic():  # one commit for both
+    # One commit for the track points and the row (a lone UPDATE commits by itself).
+    with transaction.atomic() if carrying else contextlib.nullcontext():
         if carrying:
             TrackPoint.objects.bulk_create(
                 TrackPoint(
