@@ -6,7 +6,7 @@ import pytest
 
 from fleet.models import VehicleStatus
 from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
-from tests.factories import AREA_TWO, VehicleFactory
+from tests.factories import AREA_ONE, AREA_TWO, VehicleFactory
 from vvm_worker.services import ProgramRejected, task_complete, vehicle_set_status, vv_submit
 
 ONE_TASK = """
@@ -288,3 +288,31 @@ def test_late_messages_about_deleted_vvs_or_customers_are_ignored(vvm_factory, c
         (waiting.pk, VVStatus.QUEUED, waiting.updated)
     ]
     assert not Task.objects.exists() and not Migration.objects.exists()
+
+
+def test_the_mapper_sees_an_rv_added_or_an_area_changed_at_once(
+    platform, fleet, customer_a
+) -> None:
+    # The mapper keeps the fleet's areas between decisions: a change must reach the next one.
+    there = program(48.1116, 12.8667)  # in AREA_TWO only
+
+    def run_one(name: str) -> VirtualVehicle:
+        vv = vv_submit(customer=customer_a, name=name, program=there, vvm=platform.vvm)
+        platform.drain()
+        vv.refresh_from_db()
+        return vv
+
+    first = run_one("before")
+    assert first.status == VVStatus.FAILED and "outside every operation area" in first.error
+    two = VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.8675)
+    platform.add_vehicle_loop(two)
+    second = run_one("added")
+    assert second.status == VVStatus.FINISHED
+    assert second.tasks.get().vehicle == two
+    two.area = [list(p) for p in AREA_ONE]  # the provider moves Heli Two's area away
+    two.save()
+    fleet.area = [list(p) for p in AREA_TWO]  # and Heli One's over the point
+    fleet.save()
+    third = run_one("moved")
+    assert third.status == VVStatus.FINISHED
+    assert third.tasks.get().vehicle == fleet
