@@ -396,7 +396,6 @@ class VehicleLoop:
         here = self.driver.position_at(now)
         # A leg is straight: its two ends are the path the VVs aboard travel.
         moved = here != self._last_track
-        self._last_track = here
         if moved or announcing(self.vvm):  # the track and the map need the VVs aboard
             self.aboard = self._aboard()
         state = (
@@ -408,7 +407,6 @@ class VehicleLoop:
         )
         if state == self._last_state:
             return  # the row says all this already (a second look at the same moment)
-        self._last_state = state
         position, phase, distance, flight, planner_state = state
         vehicle_record_state(
             vehicle_id=self.vehicle_id,
@@ -420,6 +418,8 @@ class VehicleLoop:
             flight_s=flight,
             planner_state=planner_state,
         )
+        # Only once written: work redone after a database outage writes it again.
+        self._last_track, self._last_state = here, state
 
 
 def _plan_task(task: Task) -> PlanTask:
