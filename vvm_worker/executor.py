@@ -100,8 +100,8 @@ class VehicleLoop:
         self.status = VehicleStatus.ACTIVE
         self.aboard: list[dict[str, Any]] = []
         self.route: list[Position] = []
-        self._last_track: Position | None = None
-        self._last_state: tuple[Any, ...] | None = None  # what _save_state wrote last
+        # What _save_state wrote last: (position, phase, odometer, flight time, planner state).
+        self._last_state: tuple[Any, ...] | None = None
         self._changes = 0  # changes announced by `changed`
         self._planned_at_change = 0  # how many of them the last plan had seen
 
@@ -395,7 +395,7 @@ class VehicleLoop:
     def _save_state(self, now: float) -> None:
         here = self.driver.position_at(now)
         # A leg is straight: its two ends are the path the VVs aboard travel.
-        moved = here != self._last_track
+        moved = self._last_state is None or here != self._last_state[0]
         if moved or announcing(self.vvm):  # the track and the map need the VVs aboard
             self.aboard = self._aboard()
         state = (
@@ -418,8 +418,7 @@ class VehicleLoop:
             flight_s=flight,
             planner_state=planner_state,
         )
-        # Only once written: work redone after a database outage writes it again.
-        self._last_track, self._last_state = here, state
+        self._last_state = state  # only once written: work redone after an outage writes it
 
 
 def _plan_task(task: Task) -> PlanTask:

@@ -59,22 +59,9 @@ def vehicle_caps(
     )
 
 
-# An RV's sensors, remembered per version of the vehicle row: a step on an RV asks each time
-# whether the RV aboard can serve the next task. Changing the sensors touches the row
-# (fleet.signals), so a new version is read again.
-_sensors_seen: dict[tuple[int, Any], frozenset[str]] = {}
-
-
 def _sensor_names(vehicle: Vehicle) -> frozenset[str]:
-    if "sensors" in getattr(vehicle, "_prefetched_objects_cache", {}):
-        return frozenset(s.name for s in vehicle.sensors.all())
-    key = (vehicle.pk, vehicle.updated)
-    names = _sensors_seen.get(key)
-    if names is None:
-        if len(_sensors_seen) > 10_000:
-            _sensors_seen.clear()
-        names = _sensors_seen[key] = frozenset(vehicle.sensors.values_list("name", flat=True))
-    return names
+    # From the prefetched sensors when the caller prefetched them, else one query.
+    return frozenset(s.name for s in vehicle.sensors.all())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -208,8 +195,9 @@ def route(vv: VirtualVehicle, vvm: VVM) -> bool:
     shape = _fleet_shape()
     if host is not None and host.status == VehicleStatus.ACTIVE:
         # The common case needs no look at the rest of the fleet: the RV aboard can go on, and
-        # no other RV's area overlaps its own.
-        caps = vehicle_caps(host)
+        # no other RV's area overlaps its own. (Its area, altitudes and sensors are the
+        # shape's, of the version just read.)
+        caps = shape.caps.get(host.pk) or vehicle_caps(host)
         mine = [t for t in open_tasks if caps.can_serve(request_of(t))]
         if mine and not shape.overlaps.get(host.pk):
             assign(mine, host, vvm)
@@ -266,12 +254,6 @@ def _stays(
     ours = sum(own.cost_s(r) for r in requests)
     theirs = sum(best.cost_s(r) for r in requests)
     return theirs + HANDOVER_MARGIN_S >= ours
-
-
-def overlapping_vehicles(vehicle_id: int) -> frozenset[int]:
-    """The RVs in service or maintenance whose operation areas overlap this RV's (sharing more
-    than a border). Remembered per version of the fleet: one light query when nothing changed."""
-    return _fleet_shape().overlaps.get(vehicle_id, frozenset())
 
 
 def _partly_answered(vv: VirtualVehicle, pending: PendingRequest) -> bool:
