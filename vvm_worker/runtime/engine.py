@@ -1,4 +1,5 @@
-"""Running the steps of virtual vehicles in V8 (mini-racer), by deterministic replay.
+"""Running the steps of virtual vehicles in V8 (mini-racer): resumed where they wait, or
+replayed.
 
 A step runs the program from its first line, answers each VVM-API call from the journal and
 stops at the first call without an answer (DESIGN.md section 2). A ``VVContext`` is one VV's
@@ -8,13 +9,20 @@ each step only the journal entries the context does not have yet, in the same ca
 isolate as the step (which returns the outcome too). ``run_step`` runs one step in a context
 made for it.
 
-A warm context re-runs the program too, rather than keeping it suspended at its pending call:
-with mini-racer the only way a synchronous program can wait for the host is a loop around
-``Atomics.wait`` with a timeout, polling a SharedArrayBuffer (the host cannot wake it). Measured
-for issue 13, that costs each idle VV about 1 % of a core at a 1 ms poll and 0.3 % at 5 ms (for
-a resume up to 5 ms late), more than replaying even a 5,000-task journal when answers come
-seconds apart; and while the program waits, the isolate answers nothing else (not even its heap
-size), so quotas and large answers would need machinery of their own.
+In a warm context the program does not re-run: where it can, the platform compiles it as a
+generator whose waiting calls yield (instrument.py), so between steps it stays suspended at its
+pending call and the next step resumes it there, reading only the new answer; a step then
+costs the same at a VV's 5,000th task as at its 5th. Replay from the journal remains how a
+program resumes in a new context (after a move or a crash) and whenever resuming would not be
+exact (see prelude.js); ``StepResult.answers_read`` says which a step did. A program that waits
+somewhere the platform cannot turn into a ``yield`` (in a callback, in a function of its own)
+is replayed at each step, as before.
+
+Suspending a blocking program without the rewrite is not possible with mini-racer: the only
+way a synchronous program can wait for the host is a loop around ``Atomics.wait`` with a
+timeout, polling a SharedArrayBuffer (the host cannot wake it). Measured for issue 13, that
+costs each idle VV about 1 % of a core at a 1 ms poll and 0.3 % at 5 ms, and while the program
+waits, the isolate answers nothing else (not even its heap size).
 
 Isolates are created inside the calling process when a step runs, never at import time: an
 isolate made before ``fork()`` hangs in the child.
@@ -49,7 +57,7 @@ from py_mini_racer import (
     init_mini_racer,
 )
 
-from vvm_worker.runtime.instrument import ReservedNameError, instrument
+from vvm_worker.runtime.instrument import ReservedNameError, instrument_program
 from vvm_worker.runtime.types import (
     Effect,
     ErrorKind,
@@ -331,7 +339,8 @@ class VVContext:
     """
 
     def __init__(self, *, vv_id: str, source: str, catalog: Sequence[Mapping[str, Any]]) -> None:
-        program = instrument(source)
+        program = instrument_program(source)
+        self._program = program
         self.vv_id = vv_id
         self.source = source
         self.usable = True
@@ -340,10 +349,13 @@ class VVContext:
         prepared = POOL.take()
         self._mr = prepared.mr
         self._key = prepared.key
-        self._program_prefix = f"__cpcc_host.setProgram({self._key}, function () {{"
+        function = "function*" if program.generator else "function"
+        self._program_prefix = f"__cpcc_host.setProgram({self._key}, {function} () {{"
         try:
             self._host("setCatalog", json.dumps(list(catalog)))
-            self._mr.eval(f"{self._program_prefix}{program}\n}});\n//# sourceURL={PROGRAM_NAME}")
+            self._mr.eval(
+                f"{self._program_prefix}{program.code}\n}});\n//# sourceURL={PROGRAM_NAME}"
+            )
         except BaseException:
             self.close()
             raise
@@ -469,6 +481,15 @@ class VVContext:
         mb = step.limits.heap_bytes // (1024 * 1024)
         return f"the VV used more than {mb} MB of heap (quota: V8 heap)"
 
+    def _place(self, thrown: str) -> tuple[str, int | None, int | None]:
+        """The message of a V8 exception and its line and column in the user's program."""
+        message, line, column = _parse_v8_message(
+            thrown, first_line_offset=len(self._program_prefix)
+        )
+        if line is not None and column is not None:
+            column = self._program.user_column(line, column)
+        return message, line, column
+
     def _interpret(self, state: Any, thrown: str | None, duration: float) -> StepResult:
         if not isinstance(state, dict) or "status" not in state:
             return StepResult(
@@ -485,21 +506,21 @@ class VVContext:
             "duration_s": duration,
             "requests": int(state.get("requests", 0)),
             "storage_bytes": int(state.get("storageBytes", 0)),
+            "answers_read": int(state.get("answersRead", 0)),
         }
-        offset = len(self._program_prefix)
         status = state["status"]
         fatal = state.get("fatal")
         if status in ("killed", "failed") and isinstance(fatal, dict):
             kind = ErrorKind.QUOTA if status == "killed" else ErrorKind.NONDETERMINISM
             line = column = None
             if thrown is not None:
-                _, line, column = _parse_v8_message(thrown, first_line_offset=offset)
+                _, line, column = self._place(thrown)
             error = VVError(kind, str(fatal.get("message")), line, column, quota=fatal.get("quota"))
             return StepResult(Outcome(status), error=error, **common)
         if status == "suspended":
             return StepResult(Outcome.SUSPENDED, pending=_pending(state["pending"]), **common)
         if thrown is not None:
-            message, line, column = _parse_v8_message(thrown, first_line_offset=offset)
+            message, line, column = self._place(thrown)
             if message.startswith("Uncaught "):
                 message = message[len("Uncaught ") :]
             error = VVError(ErrorKind.RUNTIME, message, line, column)

@@ -10,8 +10,21 @@ loaded (tree-sitter-javascript gives exact positions):
     catch ({a, b}) { .. } ->  catch (__cpcc_e) { __cpcc_rethrow(__cpcc_e); let {a, b} = __cpcc_e; .. }
     finally { BODY }      ->  finally { if (!__cpcc_suspended()) { BODY } }
 
-Insertions never contain a newline, so line numbers in error messages stay the user's.
-Identifiers starting with ``__cpcc`` are reserved for these hooks.
+Insertions never contain a newline, so line numbers in error messages stay the user's;
+``Instrumented.user_column`` takes a column back to the user's. Identifiers starting with
+``__cpcc`` are reserved for these hooks.
+
+A program is also made *suspendable* when it can be (``instrument_program``): compiled as a
+generator function, with each call of ``VV.task.execute`` / ``VV.task.executeAll`` in its own
+body (not inside a function of its own) waiting by ``yield*``:
+
+    VV.task.execute(ARGS)     ->  (yield* __cpcc_execute(ARGS))
+
+so that between steps the program stays suspended at the call (engine.py and prelude.js
+resume it there). A call anywhere else, inside a callback or a function of the program, still
+ends the step the replay way. The rewrite changes nothing a program can observe, which is why
+it is only made when ``VV`` is the platform's (the program never binds the name, nor uses
+``with``) and the program does not use ``yield`` (a keyword in a generator).
 """
 
 from __future__ import annotations
@@ -105,9 +118,133 @@ def _finally_inserts(clause: Node) -> list[_Insert]:
     ]
 
 
+@dataclass(frozen=True, slots=True)
+class Instrumented:
+    """A program as the platform runs it."""
+
+    code: str
+    generator: bool  # compile as ``function*``: the program waits at its call sites by yielding
+    # Per line (1-based), the inserts made in it, by column: (first and one-past-last column
+    # of the inserted text in ``code``, characters it added, characters it replaced).
+    shifts: tuple[tuple[int, tuple[tuple[int, int, int, int], ...]], ...] = ()
+
+    def user_column(self, line: int, column: int) -> int:
+        """The user's column for ``column`` (1-based) of ``line`` in ``code``: a place in an
+        inserted text is the same place in the text it replaced (or where it was inserted)."""
+        for shifted_line, inserts in self.shifts:
+            if shifted_line != line:
+                continue
+            added = 0
+            for start, end, grew, replaced in inserts:
+                if column >= end:
+                    added += grew
+                elif column >= start:
+                    return start - added + min(column - start, max(replaced - 1, 0))
+                else:
+                    break
+            return max(1, column - added)
+        return column
+
+
+# Where a call site is inside a function of the program's own, `yield` would not be allowed.
+_NESTED = frozenset(
+    {
+        "function_declaration",
+        "function_expression",
+        "generator_function_declaration",
+        "generator_function",
+        "arrow_function",
+        "method_definition",
+        "class_declaration",
+        "class",
+    }
+)
+_SUSPENDING = {b"VV.task.execute": b"__cpcc_execute", b"VV.task.executeAll": b"__cpcc_executeAll"}
+_NAMES = frozenset(
+    {
+        "identifier",
+        "shorthand_property_identifier",
+        "shorthand_property_identifier_pattern",
+        "statement_identifier",
+    }
+)
+
+
+def _call_sites(root: Node) -> list[_Insert] | None:
+    """The inserts turning the program's own calls of execute/executeAll into ``yield*``, or
+    None when the program cannot be made a generator unnoticed (see the module docstring)."""
+    if root.has_error:
+        return None
+    inserts: list[_Insert] = []
+    stack: list[tuple[Node, bool]] = [(root, False)]
+    while stack:
+        node, nested = stack.pop()
+        kind = node.type
+        if kind in _NAMES:
+            if node.text == b"yield":
+                return None
+            if node.text == b"VV":
+                parent = node.parent
+                if (
+                    kind != "identifier"
+                    or parent is None
+                    or parent.type != "member_expression"
+                    or parent.child_by_field_name("object") != node
+                ):
+                    return None
+        elif kind == "with_statement":
+            return None
+        elif kind == "call_expression" and not nested:
+            callee = node.child_by_field_name("function")
+            arguments = node.child_by_field_name("arguments")
+            hook = _SUSPENDING.get(callee.text or b"") if callee is not None else None
+            if (
+                hook is not None
+                and callee is not None
+                and arguments is not None
+                and arguments.type == "arguments"
+                and not any(c.type == "optional_chain" for c in node.children)
+            ):
+                inserts.append(
+                    _Insert(callee.start_byte, b"(yield* " + hook, replace_to=callee.end_byte)
+                )
+                inserts.append(_Insert(node.end_byte, b")"))
+        nested_below = nested or kind in _NESTED
+        stack.extend((child, nested_below) for child in node.children)
+    return inserts
+
+
+def _apply(data: bytes, inserts: list[_Insert]) -> Instrumented:
+    """``data`` with ``inserts`` made, and where they moved the columns."""
+    out = data
+    # Apply from the end so earlier offsets stay valid; at one offset, the insert listed first
+    # must end up first, so it is applied last.
+    ordered = sorted(enumerate(inserts), key=lambda pair: (pair[1].offset, pair[0]))
+    for _, ins in reversed(ordered):
+        end = ins.replace_to if ins.replace_to is not None else ins.offset
+        out = out[: ins.offset] + ins.text + out[end:]
+    code = out.decode("utf-8")
+    shifts: dict[int, list[tuple[int, int, int, int]]] = {}
+    moved = 0  # bytes added before the current insert, in the output
+    for _, ins in ordered:
+        end = ins.replace_to if ins.replace_to is not None else ins.offset
+        start_out = ins.offset + moved
+        moved += len(ins.text) - (end - ins.offset)
+        line_start = out.rfind(b"\n", 0, start_out) + 1
+        line = out.count(b"\n", 0, start_out) + 1
+        column = len(out[line_start:start_out].decode("utf-8")) + 1
+        text = len(ins.text.decode("utf-8"))
+        replaced = len(data[ins.offset : end].decode("utf-8"))
+        shifts.setdefault(line, []).append((column, column + text, text - replaced, replaced))
+    return Instrumented(
+        code, False, tuple((line, tuple(inserts)) for line, inserts in sorted(shifts.items()))
+    )
+
+
 @lru_cache(maxsize=256)
-def instrument(source: str) -> str:
-    """The program with its catch and finally clauses instrumented (see the module docstring).
+def instrument_program(source: str) -> Instrumented:
+    """The program with its catch and finally clauses instrumented and, when it can be, made
+    suspendable (see the module docstring).
 
     Raises ReservedNameError when the program uses a reserved identifier. Syntax is checked by
     V8 before this is called; a clause tree-sitter cannot parse is left as it is.
@@ -123,13 +260,15 @@ def instrument(source: str) -> str:
             inserts.extend(_catch_inserts(clause))
         else:
             inserts.extend(_finally_inserts(clause))
+    sites = _call_sites(tree.root_node)
+    if sites:
+        inserts.extend(sites)
     if not inserts:
-        return source
-    # Apply from the end so earlier offsets stay valid; at one offset, the insert listed first
-    # must end up first, so it is applied last.
-    out = data
-    ordered = sorted(enumerate(inserts), key=lambda pair: (pair[1].offset, pair[0]))
-    for _, ins in reversed(ordered):
-        end = ins.replace_to if ins.replace_to is not None else ins.offset
-        out = out[: ins.offset] + ins.text + out[end:]
-    return out.decode("utf-8")
+        return Instrumented(source, False)
+    done = _apply(data, inserts)
+    return Instrumented(done.code, bool(sites), done.shifts)
+
+
+def instrument(source: str) -> str:
+    """The program as ``instrument_program`` makes it, as text."""
+    return instrument_program(source).code

@@ -5,19 +5,23 @@
 // that did it, and everything that could observe the host (timers, console, WebAssembly,
 // Atomics, WeakRef, Intl, Temporal, code generation from strings) is removed or disabled.
 //
-// Every step re-runs the program from its first line (deterministic replay): each VVM-API call
-// that needs the outside world is answered from the journal; the first one without an answer
-// becomes the pending request and the step ends: the call throws SUSPEND, and every later
-// VVM-API call throws it again. The program is instrumented when it is loaded so that its own
-// `catch` clauses rethrow SUSPEND and its `finally` clauses are skipped while suspended.
+// A run starts the program at its first line (deterministic replay): each VVM-API call that
+// needs the outside world is answered from the journal; the first one without an answer
+// becomes the pending request. Where the program calls it in its own body and the platform
+// compiled the program as a generator (instrument.py), the call yields and the program stays
+// suspended there: the next step of this context resumes it with the new answer (see
+// `canResume`). Anywhere else the step ends by SUSPEND: the call throws it, and every later
+// VVM-API call throws it again, and the next step replays. The program is instrumented when it
+// is loaded so that its own `catch` clauses rethrow SUSPEND and its `finally` clauses are
+// skipped while suspended.
 //
 // Effects (storage writes, log lines) are numbered from the program's start; only those at or
 // after `effectsApplied` are reported to the host, so replaying never applies an effect twice.
 // Storage itself is rebuilt by the replay, which makes `load` deterministic.
 //
-// In a warm context every step replays what the last one did, so what a program cannot tell
-// apart is kept from one run to the next: the journal's readings and requests, parsed
-// (JournalEntry), and the strings of the last run's storage.
+// In a warm context a step that replays re-does what the last run did, so what a program
+// cannot tell apart is kept from one run to the next: the journal's readings and requests,
+// parsed (JournalEntry), and the strings of the last run's storage.
 //
 // The host talks to this file only through `__cpcc_host`, whose functions refuse to run while
 // the program runs, and reads results as strings made with functions captured here first.
@@ -347,6 +351,8 @@
 
   // --- one run of the program -----------------------------------------------------------------
   const SUSPEND = freeze({ cpccSuspend: true });
+  // What a VVM-API call yields while it waits for an answer (see executeSteps).
+  const PARK = freeze({ cpccPark: true });
   const TASK_ANSWERS = freeze(['done', 'reject']);
   const FIRST_PART_ANSWERS = freeze(['part', 'reject']);
   const PART_ANSWERS = freeze(['part']);
@@ -417,14 +423,16 @@
       clockMs: input.startMs,
       random: null,
     };
-    const effectsApplied = input.effectsApplied;
+    let effectsApplied = input.effectsApplied;
     const limits = input.limits;
+    const signature = runSignature(input);
     let suspended = false;
     let pending = null;
     let fatal = null;
     const effects = [];
     let effectSeq = 0;
     let cursor = 0;
+    let startCursor = 0; // where this step's reading of the journal began
     let requestSeq = 0;
     let tasksRequested = 0;
     let storageChars = 0;
@@ -537,7 +545,12 @@
       return entry;
     }
 
-    function execute(task, callback) {
+    // The two calls that wait for the outside world, as generators: where the call has no
+    // answer yet they set the pending request, mark the run suspended and yield. Called from
+    // the program as written (`execute`, `executeAll`), the yield becomes SUSPEND, which ends
+    // the run (replay mode); at a call site the platform turned into `yield*` (see
+    // instrument.py), the program itself stays suspended there until the next step resumes it.
+    function* executeSteps(task, callback) {
       allowed('task.execute');
       const request = normalizeTask(task, 'VV.task.execute(task): task');
       if (callback !== undefined && callback !== null && typeof callback !== 'function') {
@@ -545,10 +558,10 @@
       }
       countTasks(1);
       const q = requestSeq++;
-      if (cursor >= journal.length) {
+      while (cursor >= journal.length) {
         pending = { kind: 'task', q: q, r: jsonStringify(request), tasks: [request] };
         suspended = true;
-        halt();
+        yield PARK;
       }
       const entry = expect(q, request, TASK_ANSWERS);
       if (entry.k === 'reject') throw new TaskRejectedError(entry.message);
@@ -557,7 +570,7 @@
       return data;
     }
 
-    function executeAll(tasks, callback) {
+    function* executeAllSteps(tasks, callback) {
       allowed('task.executeAll');
       if (!isArray(tasks)) throw new TypeError('VV.task.executeAll(tasks): tasks must be an array');
       if (callback !== undefined && callback !== null && typeof callback !== 'function') {
@@ -573,12 +586,12 @@
       let first = true;
       let remaining = requests.length;
       while (remaining > 0) {
-        if (cursor >= journal.length) {
+        while (cursor >= journal.length) {
           const open = [];
           for (let i = 0; i < requests.length; i++) if (results[i] === undefined) push(open, i);
           pending = { kind: 'batch', q: q, r: first ? jsonStringify(requests) : null, tasks: requests, open: open };
           suspended = true;
-          halt();
+          yield PARK;
         }
         const entry = expect(q, first ? requests : undefined, first ? FIRST_PART_ANSWERS : PART_ANSWERS);
         first = false;
@@ -593,6 +606,20 @@
         if (typeof callback === 'function') callback(data, i);
       }
       return results;
+    }
+
+    function settle(steps) {
+      const r = steps.next();
+      if (!r.done) halt(); // suspended at the call
+      return r.value;
+    }
+
+    function execute(task, callback) {
+      return settle(executeSteps(task, callback));
+    }
+
+    function executeAll(tasks, callback) {
+      return settle(executeAllSteps(tasks, callback));
     }
 
     function checkKey(key, where) {
@@ -721,6 +748,8 @@
       logInfo: function logInfo(msg) { allowed('log'); logLine([msg]); },
       getStdOut: function getStdOut() { return stdOut; },
     };
+    state.executeSteps = executeSteps;
+    state.executeAllSteps = executeAllSteps;
     state.rethrow = function (e) { if (e === SUSPEND || suspended) throw SUSPEND; };
     state.isSuspended = function () { return suspended; };
     state.storage = storage;
@@ -738,13 +767,53 @@
         effects: effects,
         effectsTotal: effectSeq,
         consumed: cursor,
+        answersRead: cursor - startCursor,
         journalLength: journal.length,
         requests: requestSeq,
         storageBytes: storageChars,
         tainted: tainted,
       });
     };
+
+    // A program the platform compiled as a generator runs as one: it stays suspended (parked)
+    // at a `yield*` call site between steps, and the next step resumes it there instead of
+    // replaying, when nothing the replay would see has changed: the same VV and limits, and
+    // every effect of the run applied by the host (else the host lost some, and a new run
+    // reports them again).
+    let steps = null;
+    let parked = false;
+    state.isParked = function () { return parked; };
+    state.canResume = function (next) {
+      return parked && fatal === null && next.effectsApplied === effectSeq && runSignature(next) === signature;
+    };
+    state.resume = function (next) {
+      effects.length = 0;
+      effectsApplied = next.effectsApplied;
+      pending = null;
+      suspended = false;
+      startCursor = cursor;
+    };
+    // Runs the program (or resumes it); true when it returned.
+    state.drive = function (fn) {
+      if (steps === null && getPrototypeOf(fn) !== GeneratorFunction) {
+        reflectApply(fn, undefined, []);
+        return true;
+      }
+      if (steps === null) steps = reflectApply(fn, undefined, []);
+      parked = false;
+      const r = steps.next();
+      if (r.done) return true;
+      if (r.value !== PARK || pending === null) stop('failed', 'the program yielded outside a VVM-API call');
+      parked = true;
+      return false;
+    };
     return state;
+  }
+
+  const GeneratorFunction = getPrototypeOf(function* () {});
+
+  function runSignature(input) {
+    return jsonStringify([input.vvId, input.vvName, input.seed, input.startMs, input.limits]);
   }
 
   // --- what the host calls ----------------------------------------------------------------------
@@ -754,7 +823,8 @@
   }
 
   function finish() {
-    if (!resetGlobals()) tainted = true;
+    // A parked program keeps what it put on the global object until it runs again.
+    if (!(run !== null && run.isParked()) && !resetGlobals()) tainted = true;
     return run === null ? 'null' : run.outcome();
   }
 
@@ -771,6 +841,13 @@
   // Hooks of the instrumented program: they act on the current run.
   constant('__cpcc_rethrow', function (e) { if (run !== null) run.rethrow(e); });
   constant('__cpcc_suspended', function () { return run !== null && run.isSuspended(); });
+  // The call sites instrument.py turned into `yield*`: the same calls, waiting by yielding.
+  function hook(fn) {
+    freeze(fn.prototype);
+    return freeze(fn);
+  }
+  constant('__cpcc_execute', hook(function* execute(task, callback) { return yield* run.executeSteps(task, callback); }));
+  constant('__cpcc_executeAll', hook(function* executeAll(tasks, callback) { return yield* run.executeAllSteps(tasks, callback); }));
 
   constant('__cpcc_host', freeze({
     // The VV's SDC entries: part of its checkpoint, the same for every run.
@@ -790,19 +867,23 @@
     step: function (key, json, entries) {
       host(key, 'step');
       if (entries !== undefined) appendEntries(entries);
-      const previousStorage = run === null ? null : run.storage;
-      run = null;
-      if (!resetGlobals()) tainted = true;
-      run = newRun(jsonParse(json), previousStorage);
-      for (let i = 0; i < RUN_GLOBALS.length; i++) {
-        const name = RUN_GLOBALS[i];
-        defineProperty(global, name, { value: run.globals[name], writable: false, enumerable: false, configurable: true });
+      const input = jsonParse(json);
+      if (run !== null && run.canResume(input)) {
+        run.resume(input);
+      } else {
+        const previousStorage = run === null ? null : run.storage;
+        run = null;
+        if (!resetGlobals()) tainted = true;
+        run = newRun(input, previousStorage);
+        for (let i = 0; i < RUN_GLOBALS.length; i++) {
+          const name = RUN_GLOBALS[i];
+          defineProperty(global, name, { value: run.globals[name], writable: false, enumerable: false, configurable: true });
+        }
       }
       let returned = false;
       running = true;
       try {
-        reflectApply(program, undefined, []);
-        returned = true;
+        returned = run.drive(program);
       } finally {
         running = false;
         // A `return` here ends the propagation of SUSPEND; anything else keeps propagating.

@@ -160,3 +160,6 @@ class StepResult:
     duration_s: float = 0.0
     requests: int = 0
     storage_bytes: int = 0
+    # Journal answers the program read in this step: all it has had when the step re-ran it
+    # from its first line (replay), only the new ones when it resumed where it waited.
+    answers_read: int = 0
