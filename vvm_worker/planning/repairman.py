@@ -309,29 +309,33 @@ def exact_path(
         members[groups[node]] = members.get(groups[node], 0) | (1 << (node - 1))
         group_weight[groups[node]] = weights[node]
     full = (1 << n) - 1
+    masks = np.arange(full + 1)
     # Weight still waiting once the tasks in `mask` are done.
     waiting = np.zeros(full + 1, dtype=np.float64)
     for group, bits in members.items():
-        incomplete = np.array([(mask & bits) != bits for mask in range(full + 1)], dtype=bool)
-        waiting += group_weight[group] * incomplete
+        waiting += group_weight[group] * ((masks & bits) != bits)
     best = np.full((full + 1, n), np.inf)
     parent = np.full((full + 1, n), -1, dtype=np.intp)
-    best[1 << np.arange(n), np.arange(n)] = values[0, 1:] * waiting[0]
+    columns = np.arange(n)
+    bit = 1 << columns
+    best[bit, columns] = values[0, 1:] * waiting[0]
     tasks = values[1:, 1:]
-    for mask in range(1, full + 1):
-        row = best[mask]
-        if not np.isfinite(row).any():
-            continue
-        for j in range(n):
-            if mask & (1 << j):
-                continue
-            through = row + tasks[:, j] * waiting[mask]
-            i = int(np.argmin(through))
-            value = float(through[i])
-            target = mask | (1 << j)
-            if value < best[target, j]:
-                best[target, j] = value
-                parent[target, j] = i
+    # Every entry of best[S] comes from S less one task, so a whole layer of sets of k tasks
+    # can go at once, from every last task i to every next task j (the lowest i among equals):
+    # each (S + j, j) has the one source S.
+    size = np.zeros(full + 1, dtype=np.intp)
+    for j in range(n):
+        size += (masks >> j) & 1
+    for k in range(1, n):
+        layer = masks[size == k]
+        through = best[layer][:, :, None] + tasks[None, :, :] * waiting[layer][:, None, None]
+        via = through.argmin(axis=1)
+        value = np.take_along_axis(through, via[:, None, :], axis=1)[:, 0, :]
+        targets = layer[:, None] | bit[None, :]
+        js = np.broadcast_to(columns, targets.shape)
+        better = ((layer[:, None] & bit[None, :]) == 0) & (value < best[targets, js])
+        best[targets[better], js[better]] = value[better]
+        parent[targets[better], js[better]] = via[better]
     last = int(np.argmin(best[full]))
     value = float(best[full, last])
     path = []
