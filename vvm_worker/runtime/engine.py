@@ -328,7 +328,8 @@ def _entry_text(entry: Mapping[str, Any] | str) -> str:
 
 
 class StaleContext(Exception):
-    """The context's journal is not a prefix of the VV's journal (it was rolled back)."""
+    """The context cannot run the step: its journal is not a prefix of the VV's journal (it
+    was rolled back), or a program it kept suspended left what a new run would see."""
 
 
 class VVContext:
@@ -456,6 +457,9 @@ class VVContext:
             state = json.loads(raw) if isinstance(raw, str) else None
         except ValueError:
             state = None
+        if isinstance(state, dict) and state.get("status") == "stale":
+            self.usable = False
+            raise StaleContext(self.vv_id)
         # A context whose isolate lacks an entry this side counts would replay wrongly.
         if (
             not isinstance(state, dict)

@@ -872,8 +872,14 @@
         run.resume(input);
       } else {
         const previousStorage = run === null ? null : run.storage;
+        const wasParked = run !== null && run.isParked();
         run = null;
-        if (!resetGlobals()) tainted = true;
+        if (!resetGlobals()) {
+          tainted = true;
+          // What the parked program left on the global object cannot be cleared: a run here
+          // would see it. The host makes a new context.
+          if (wasParked) return jsonStringify({ status: 'stale', tainted: true });
+        }
         run = newRun(input, previousStorage);
         for (let i = 0; i < RUN_GLOBALS.length; i++) {
           const name = RUN_GLOBALS[i];

@@ -271,3 +271,23 @@ def test_a_moved_call_keeps_its_users_column() -> None:
     assert done.user_column(1, done.code.index("y()") + 1) == 39
     assert done.user_column(1, done.code.index("__cpcc_execute") + 1) == 14  # at "execute"
     assert done.user_column(1, 3) == 3
+
+
+def test_a_replay_after_a_resumed_program_left_an_undeletable_global_runs_in_a_new_context() -> (
+    None
+):
+    source = f"""
+    VV.storage.store('start', typeof marker === 'undefined' ? 'clean' : 'seen before');
+    Object.defineProperty(globalThis, 'marker', {{value: 1, configurable: false}});
+    for (var k = 0; k < 3; k++) VV.task.execute({GPS_TASK});
+    """
+    host = Host(source)
+    host.step()
+    assert host.step().answers_read == 1  # resumed: the global stays, as in a blocking program
+    # The host lost the step's effects: the replay must not see the marker.
+    host.applied = 0
+    host.storage.clear()
+    again = host.step()
+    assert again.answers_read == 2
+    assert host.storage == {"start": "clean"}
+    assert host.run().outcome is Outcome.FINISHED
