@@ -330,11 +330,11 @@ def exact_path(
         layer = masks[size == k]
         through = best[layer][:, :, None] + tasks[None, :, :] * waiting[layer][:, None, None]
         via = through.argmin(axis=1)
-        value = np.take_along_axis(through, via[:, None, :], axis=1)[:, 0, :]
+        reached = np.take_along_axis(through, via[:, None, :], axis=1)[:, 0, :]
         targets = layer[:, None] | bit[None, :]
         js = np.broadcast_to(columns, targets.shape)
-        better = ((layer[:, None] & bit[None, :]) == 0) & (value < best[targets, js])
-        best[targets[better], js[better]] = value[better]
+        better = ((layer[:, None] & bit[None, :]) == 0) & (reached < best[targets, js])
+        best[targets[better], js[better]] = reached[better]
         parent[targets[better], js[better]] = via[better]
     last = int(np.argmin(best[full]))
     value = float(best[full, last])
