@@ -275,3 +275,26 @@ def test_an_rv_added_mid_mission_takes_over_work_in_its_area() -> None:
         for task in vv["tasks"]:
             if task["vehicle"] == "Heli Two":
                 assert task["position"][1] >= 12.864 and task["done_s"] > 60
+
+
+@pytest.mark.django_db
+def test_the_platform_resumes_programs_rather_than_replaying_them(monkeypatch) -> None:
+    """Figure 3 with its migrations: simulate's hosts share one runtime, so a VV keeps its
+    program suspended where it waits from its first task to its last, and every answer in a
+    journal is read once (a replay at each step would read the first one at every step)."""
+    from missions.models import JournalEntry
+    from vvm_worker.runtime import engine
+
+    reads: list[int] = []
+    step = engine.VVContext.step
+
+    def counting(self, given):
+        result = step(self, given)
+        reads.append(result.answers_read)
+        return result
+
+    monkeypatch.setattr(engine.VVContext, "step", counting)
+    summary = run(SCENARIOS / "paper-fig3.json")
+    assert summary["migrations"]
+    assert all(vv["status"] == "finished" for vv in summary["vvs"])
+    assert sum(reads) == JournalEntry.objects.count() > len(summary["vvs"])
