@@ -55,6 +55,7 @@ def main() -> None:
     parser.add_argument(
         "--sort", default="cumulative", help="order of the functions (cumulative, tottime)"
     )
+    parser.add_argument("--dump", help="also write the profile to this file (for pstats, snakeviz)")
     parser.add_argument(
         "--sites", action="store_true", help="also list where in the project the queries come from"
     )
@@ -117,6 +118,8 @@ def main() -> None:
         print("statements a task by kind, table and the project's calls that made them:")
         for site, n in sites.most_common(40):
             print(f"  {n / tasks:6.2f}  {site}")
+    if args.dump:
+        profile.dump_stats(args.dump)
     pstats.Stats(profile).sort_stats(args.sort).print_stats(args.top)
 
 
