@@ -609,7 +609,7 @@
     }
 
     function settle(steps) {
-      const r = steps.next();
+      const r = reflectApply(generatorNext, steps, []);
       if (!r.done) halt(); // suspended at the call
       return r.value;
     }
@@ -795,13 +795,14 @@
     };
     // Runs the program (or resumes it); true when it returned.
     state.drive = function (fn) {
-      if (steps === null && getPrototypeOf(fn) !== GeneratorFunction) {
+      if (steps === null && getPrototypeOf(fn) !== generatorFunctionPrototype) {
         reflectApply(fn, undefined, []);
         return true;
       }
       if (steps === null) steps = reflectApply(fn, undefined, []);
       parked = false;
-      const r = steps.next();
+      // Not steps.next(): the lookup would go through the program's own (unfrozen) prototype.
+      const r = reflectApply(generatorNext, steps, []);
       if (r.done) return true;
       if (r.value !== PARK || pending === null) stop('failed', 'the program yielded outside a VVM-API call');
       parked = true;
@@ -810,7 +811,8 @@
     return state;
   }
 
-  const GeneratorFunction = getPrototypeOf(function* () {});
+  const generatorFunctionPrototype = getPrototypeOf(function* () {});
+  const generatorNext = generatorFunctionPrototype.prototype.next;
 
   function runSignature(input) {
     return jsonStringify([input.vvId, input.vvName, input.seed, input.startMs, input.limits]);

@@ -291,3 +291,19 @@ def test_a_replay_after_a_resumed_program_left_an_undeletable_global_runs_in_a_n
     assert again.answers_read == 2
     assert host.storage == {"start": "clean"}
     assert host.run().outcome is Outcome.FINISHED
+
+
+def test_a_program_cannot_take_over_its_own_resumption() -> None:
+    # The program's own function is a generator: what it puts on its prototype is not used.
+    source = f"""
+    var me = arguments.callee;
+    Object.defineProperty(me.prototype, 'next', {{
+      value: function () {{ return {{done: true, value: undefined}}; }},
+    }});
+    for (var k = 0; k < 4; k++) VV.task.execute({GPS_TASK});
+    VV.storage.store('done', k);
+    """
+    host = Host(source)
+    assert host.run().outcome is Outcome.FINISHED
+    assert [r.answers_read for r in host.results] == [0, 1, 1, 1, 1]
+    assert host.storage == {"done": 4}
