@@ -854,7 +854,13 @@
   constant('__cpcc_host', freeze({
     // The VV's SDC entries: part of its checkpoint, the same for every run.
     setCatalog: function (key, json) { host(key, 'setCatalog'); catalog = jsonParse(json); },
-    setProgram: function (key, fn) { host(key, 'setProgram'); program = fn; },
+    // The program's function (and the prototype of its generator objects) is frozen: it
+    // outlives every run of the context, so nothing may be kept on it from one run to the next.
+    setProgram: function (key, fn) {
+      host(key, 'setProgram');
+      freeze(fn.prototype);
+      program = freeze(fn);
+    },
     // Journal entries as a JSON array (see JournalEntry).
     append: function (key, json) {
       host(key, 'append');

@@ -294,16 +294,33 @@ def test_a_replay_after_a_resumed_program_left_an_undeletable_global_runs_in_a_n
 
 
 def test_a_program_cannot_take_over_its_own_resumption() -> None:
-    # The program's own function is a generator: what it puts on its prototype is not used.
+    # The program's own function is a generator: what it could put on its prototype would be
+    # what the platform calls to resume it.
     source = f"""
-    var me = arguments.callee;
-    Object.defineProperty(me.prototype, 'next', {{
-      value: function () {{ return {{done: true, value: undefined}}; }},
-    }});
+    var me = arguments.callee, refused = [];
+    try {{
+      Object.defineProperty(me.prototype, 'next', {{
+        value: function () {{ return {{done: true, value: undefined}}; }},
+      }});
+    }} catch (e) {{ refused.push(e.name); }}
     for (var k = 0; k < 4; k++) VV.task.execute({GPS_TASK});
-    VV.storage.store('done', k);
+    VV.storage.store('done', [k, refused]);
     """
     host = Host(source)
     assert host.run().outcome is Outcome.FINISHED
     assert [r.answers_read for r in host.results] == [0, 1, 1, 1, 1]
-    assert host.storage == {"done": 4}
+    assert host.storage == {"done": [4, ["TypeError"]]}
+
+
+def test_nothing_is_kept_on_the_programs_function_from_one_run_to_the_next() -> None:
+    # Replayed at every step (the call is in a function): each run must start as the first.
+    source = f"""
+    var me = arguments.callee;
+    me.runs = (me.runs || 0) + 1;
+    function visit() {{ return VV.task.execute({GPS_TASK}); }}
+    for (var k = 0; k < 3; k++) {{ visit(); VV.storage.store('runs ' + k, me.runs || 0); }}
+    """
+    host = Host(source)
+    assert host.run().outcome is Outcome.FINISHED
+    assert [r.answers_read for r in host.results] == [0, 1, 2, 3]
+    assert host.storage == {"runs 0": 0, "runs 1": 0, "runs 2": 0}
