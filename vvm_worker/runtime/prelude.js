@@ -840,18 +840,19 @@
     defineProperty(global, name, { value: value, writable: false, enumerable: false, configurable: false });
   }
 
-  // Hooks of the instrumented program: they act on the current run.
-  constant('__cpcc_rethrow', function (e) { if (run !== null) run.rethrow(e); });
-  constant('__cpcc_suspended', function () { return run !== null && run.isSuspended(); });
-  // The call sites instrument.py turned into `yield*`: the same calls, waiting by yielding.
+  // Hooks of the instrumented program: they act on the current run. Frozen, as everything
+  // a program can reach that outlives a run.
   function hook(fn) {
-    freeze(fn.prototype);
+    if (fn.prototype !== undefined) freeze(fn.prototype);
     return freeze(fn);
   }
+  constant('__cpcc_rethrow', hook(function (e) { if (run !== null) run.rethrow(e); }));
+  constant('__cpcc_suspended', hook(function () { return run !== null && run.isSuspended(); }));
+  // The call sites instrument.py turned into `yield*`: the same calls, waiting by yielding.
   constant('__cpcc_execute', hook(function* execute(task, callback) { return yield* run.executeSteps(task, callback); }));
   constant('__cpcc_executeAll', hook(function* executeAll(tasks, callback) { return yield* run.executeAllSteps(tasks, callback); }));
 
-  constant('__cpcc_host', freeze({
+  const hostApi = {
     // The VV's SDC entries: part of its checkpoint, the same for every run.
     setCatalog: function (key, json) { host(key, 'setCatalog'); catalog = jsonParse(json); },
     // The program's function (and the prototype of its generator objects) is frozen: it
@@ -915,7 +916,9 @@
       host(key, 'outcome');
       return finish();
     },
-  }));
+  };
+  for (const name of objectKeys(hostApi)) hook(hostApi[name]);
+  constant('__cpcc_host', freeze(hostApi));
 
   baseline = new RealSet(ownKeys(global));
   for (let i = 0; i < RUN_GLOBALS.length; i++) reflectApply(setAdd, baseline, [RUN_GLOBALS[i]]);

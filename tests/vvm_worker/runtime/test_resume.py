@@ -324,3 +324,20 @@ def test_nothing_is_kept_on_the_programs_function_from_one_run_to_the_next() -> 
     assert host.run().outcome is Outcome.FINISHED
     assert [r.answers_read for r in host.results] == [0, 1, 2, 3]
     assert host.storage == {"runs 0": 0, "runs 1": 0, "runs 2": 0}
+
+
+def test_nothing_is_kept_on_the_platforms_hooks_from_one_run_to_the_next() -> None:
+    source = f"""
+    var kept = [];
+    ['rethrow', 'suspended', 'execute', 'executeAll', 'host'].forEach(function (name) {{
+      var hook = globalThis['__cp' + 'cc_' + name];
+      var o = name === 'host' ? hook.step : hook;
+      if (o.runs) kept.push(name);
+      try {{ o.runs = 1; }} catch (e) {{}}
+    }});
+    function visit() {{ return VV.task.execute({GPS_TASK}); }}
+    for (var k = 0; k < 2; k++) {{ visit(); VV.storage.store('kept ' + k, kept); }}
+    """
+    host = Host(source)
+    assert host.run().outcome is Outcome.FINISHED
+    assert host.storage == {"kept 0": [], "kept 1": []}
