@@ -341,3 +341,22 @@ def test_nothing_is_kept_on_the_platforms_hooks_from_one_run_to_the_next() -> No
     host = Host(source)
     assert host.run().outcome is Outcome.FINISHED
     assert host.storage == {"kept 0": [], "kept 1": []}
+
+
+def test_a_batch_resumes_at_each_of_its_parts() -> None:
+    source = f"""
+    for (var round = 0; round < 2; round++) {{
+      var got = VV.task.executeAll([{GPS_TASK}, {GPS_TASK}, {GPS_TASK}], function (d, i) {{
+        VV.storage.store(round + '.' + i, d[0].value);
+      }});
+      VV.storage.store('round ' + round, got.length);
+    }}
+    """
+    host = Host(source)
+    assert host.run().outcome is Outcome.FINISHED
+    assert [r.answers_read for r in host.results] == [0, 1, 1, 1, 1, 1, 1]
+    replayed = Run(source, seed=5)
+    assert replayed.run().outcome is Outcome.FINISHED
+    assert [r.answers_read for r in replayed.results] == [0, 1, 2, 3, 4, 5, 6]
+    assert host.storage == replayed.storage
+    assert host.storage["round 1"] == 3 and len(host.storage) == 8
