@@ -15,8 +15,8 @@ pending call and the next step resumes it there, reading only the new answer; a 
 costs the same at a VV's 5,000th task as at its 5th. Replay from the journal remains how a
 program resumes in a new context (after a move or a crash) and whenever resuming would not be
 exact (see prelude.js); ``StepResult.answers_read`` says which a step did. A program that waits
-somewhere the platform cannot turn into a ``yield`` (in a callback, in a function of its own)
-is replayed at each step, as before.
+somewhere the platform cannot turn into a ``yield`` (in a callback, in a function it uses as a
+value) is replayed at each step, as before.
 
 Suspending a blocking program without the rewrite is not possible with mini-racer: the only
 way a synchronous program can wait for the host is a loop around ``Atomics.wait`` with a

@@ -16,15 +16,18 @@ Insertions never contain a newline, so line numbers in error messages stay the u
 
 A program is also made *suspendable* when it can be (``instrument_program``): compiled as a
 generator function, with each call of ``VV.task.execute`` / ``VV.task.executeAll`` in its own
-body (not inside a function of its own) waiting by ``yield*``:
+body waiting by ``yield*``:
 
     VV.task.execute(ARGS)     ->  (yield* __cpcc_execute(ARGS))
 
-so that between steps the program stays suspended at the call (engine.py and prelude.js
-resume it there). A call anywhere else, inside a callback or a function of the program, still
-ends the step the replay way. The rewrite changes nothing a program can observe, which is why
-it is only made when ``VV`` is the platform's (the program never binds the name, nor uses
-``with``) and the program does not use ``yield`` (a keyword in a generator).
+and so is each such call in a *helper*, a function declared at the program's top level that is
+only ever called (never used as a value, never rebound, no ``arguments``) from the program's
+body or another helper: the helper becomes ``function*`` and its calls ``(yield* f(ARGS))``.
+Between steps the program then stays suspended at the call (engine.py and prelude.js resume it
+there). A call anywhere else, in a callback or a function used as a value, still ends the step
+the replay way. The rewrite changes nothing a program can observe, which is why it is only
+made when ``VV`` is the platform's (the program never binds the name, nor uses ``with``) and
+the program does not use ``yield`` (a keyword in a generator).
 """
 
 from __future__ import annotations
@@ -170,47 +173,123 @@ _NAMES = frozenset(
 )
 
 
+def _plain_call(node: Node) -> Node | None:
+    """The callee of ``node`` when it is a call ``f(...)`` (not ``f?.()``, not a tagged
+    template)."""
+    if node.type != "call_expression":
+        return None
+    arguments = node.child_by_field_name("arguments")
+    if arguments is None or arguments.type != "arguments":
+        return None
+    if any(c.type == "optional_chain" for c in node.children):
+        return None
+    return node.child_by_field_name("function")
+
+
+_TOP = b""  # where a call is: in the program's own body
+
+
 def _call_sites(root: Node) -> list[_Insert] | None:
-    """The inserts turning the program's own calls of execute/executeAll into ``yield*``, or
-    None when the program cannot be made a generator unnoticed (see the module docstring)."""
+    """The inserts turning the program's waiting calls into ``yield*``, or None when the
+    program cannot be made a generator unnoticed (see the module docstring).
+
+    The calls of execute/executeAll in the program's own body become ``yield*`` calls of the
+    hooks. So do those in the body of a *helper*, a function declared at the top level that is
+    only ever called (never used as a value nor given another binding, and not using
+    ``arguments``), which then becomes a generator, and so do the calls of such a helper where
+    they are in the program's body or in another one's.
+    """
     if root.has_error:
         return None
-    inserts: list[_Insert] = []
-    stack: list[tuple[Node, bool]] = [(root, False)]
+    helpers: dict[bytes, Node] = {}
+    unusable: set[bytes] = set()
+    for child in root.children:
+        declared = child.child_by_field_name("name")
+        if (
+            child.type == "function_declaration"
+            and not any(c.type == "async" for c in child.children)
+            and declared is not None
+            and declared.text
+        ):
+            if declared.text in helpers:
+                unusable.add(declared.text)  # declared twice
+            helpers[declared.text] = child
+    by_node = {node.id: name for name, node in helpers.items()}
+    # Where each waiting call and each call of a helper is: _TOP, the name of the helper in
+    # whose own body it is, or None (in a function or class of its own, or in parameters).
+    waits: list[tuple[Node, bytes | None]] = []
+    calls: list[tuple[Node, bytes, bytes | None]] = []
+    # (node, where it is, the helper whose declaration holds it at any depth)
+    stack: list[tuple[Node, bytes | None, bytes | None]] = [(root, _TOP, None)]
     while stack:
-        node, nested = stack.pop()
+        node, where, within = stack.pop()
         kind = node.type
         if kind in _NAMES:
-            if node.text == b"yield":
+            text = node.text or b""
+            parent = node.parent
+            if text == b"yield":
                 return None
-            if node.text == b"VV":
-                parent = node.parent
-                if (
-                    kind != "identifier"
-                    or parent is None
-                    or parent.type != "member_expression"
-                    or parent.child_by_field_name("object") != node
-                ):
-                    return None
+            if text == b"VV" and (
+                kind != "identifier"
+                or parent is None
+                or parent.type != "member_expression"
+                or parent.child_by_field_name("object") != node
+            ):
+                return None
+            if text == b"arguments" and within is not None:
+                unusable.add(within)  # an arrow function inside sees the helper's arguments
+            if text in helpers and node != helpers[text].child_by_field_name("name"):
+                if parent is not None and _plain_call(parent) == node:
+                    calls.append((parent, text, where))
+                else:
+                    unusable.add(text)
         elif kind == "with_statement":
             return None
-        elif kind == "call_expression" and not nested:
-            callee = node.child_by_field_name("function")
-            arguments = node.child_by_field_name("arguments")
-            hook = _SUSPENDING.get(callee.text or b"") if callee is not None else None
-            if (
-                hook is not None
-                and callee is not None
-                and arguments is not None
-                and arguments.type == "arguments"
-                and not any(c.type == "optional_chain" for c in node.children)
-            ):
-                inserts.append(
-                    _Insert(callee.start_byte, b"(yield* " + hook, replace_to=callee.end_byte)
-                )
-                inserts.append(_Insert(node.end_byte, b")"))
-        nested_below = nested or kind in _NESTED
-        stack.extend((child, nested_below) for child in node.children)
+        callee = _plain_call(node)
+        if callee is not None and callee.text in _SUSPENDING and where is not None:
+            waits.append((node, where))
+        helper = by_node.get(node.id) if where == _TOP else None
+        if helper is not None:
+            body = node.child_by_field_name("body")
+            for child in node.children:
+                stack.append((child, helper if child == body else None, helper))
+        else:
+            below = None if kind in _NESTED else where
+            stack.extend((child, below, within) for child in node.children)
+    # The helpers that become generators: those that wait (in their own body, or by calling
+    # one that does) and are called only where a `yield` can be.
+    chosen = set(helpers) - unusable
+    while True:
+        waiting: set[bytes] = set()
+        grown = True
+        while grown:
+            grown = False
+            for name in chosen - waiting:
+                if any(w == name for _, w in waits) or any(
+                    w == name and c in waiting for _, c, w in calls
+                ):
+                    waiting.add(name)
+                    grown = True
+        kept = {
+            name
+            for name in waiting
+            if all(w == _TOP or w in waiting for _, c, w in calls if c == name)
+        }
+        if kept == chosen:
+            break
+        chosen = kept
+    inserts: list[_Insert] = []
+    for name in chosen:
+        keyword = next(c for c in helpers[name].children if c.type == "function")
+        inserts.append(_Insert(keyword.end_byte, b"*"))
+    sites = [call for call, w in waits if w == _TOP or w in chosen]
+    sites += [call for call, name, _ in calls if name in chosen]
+    for call in sites:
+        callee = _plain_call(call)
+        assert callee is not None and callee.text is not None
+        target = _SUSPENDING.get(callee.text, callee.text)
+        inserts.append(_Insert(callee.start_byte, b"(yield* " + target, replace_to=callee.end_byte))
+        inserts.append(_Insert(call.end_byte, b")"))
     return inserts
 
 

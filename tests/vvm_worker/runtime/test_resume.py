@@ -218,8 +218,12 @@ def test_an_error_on_the_line_of_a_resumed_call_has_the_users_column() -> None:
 @pytest.mark.parametrize(
     "source",
     [
-        # A call in a function of the program's own cannot wait by yielding: replay.
+        # A call in a function the program uses as a value cannot wait by yielding: replay.
+        f"var visit = function () {{ return VV.task.execute({GPS_TASK}); }};\n"
+        "for (var k = 0; k < 6; k++) visit();",
         f"function visit() {{ return VV.task.execute({GPS_TASK}); }}\n"
+        "for (var k = 0; k < 6; k++) [k].forEach(visit);",
+        f"function visit() {{ return VV.task.execute({GPS_TASK}) + arguments.length; }}\n"
         "for (var k = 0; k < 6; k++) visit();",
         # VV is another object here (as far as the platform can tell): left as written.
         f"var VV2 = VV; for (var k = 0; k < 6; k++) VV2.task.execute({GPS_TASK});",
@@ -233,7 +237,7 @@ def test_calls_the_platform_cannot_suspend_still_work_by_replay(source: str) -> 
 
 def test_a_program_mixing_both_kinds_of_call_replays_only_after_the_other_kind() -> None:
     source = f"""
-    function inner() {{ return VV.task.execute({GPS_TASK}); }}
+    var inner = function () {{ return VV.task.execute({GPS_TASK}); }};
     for (var k = 0; k < 3; k++) {{ VV.task.execute({GPS_TASK}); inner(); }}
     """
     host = Host(source)
@@ -249,6 +253,13 @@ def test_a_program_mixing_both_kinds_of_call_replays_only_after_the_other_kind()
         ("VV.task.executeAll([t], function (d, i) {});", True),
         ("if (a) { while (b) { x = [VV.task.execute(t)]; } }", True),
         ("var f = function () { VV.task.execute(t); };", False),
+        ("function f() { VV.task.execute(t); } f();", True),
+        ("function f() { VV.task.execute(t); } [1].forEach(f);", False),
+        ("function f() { VV.task.execute(t); } var g = function () { f(); };", False),
+        ("function f() { return g(); } function g() { VV.task.execute(t); } f();", True),
+        ("function f() { VV.task.execute(t); } function f() {} f();", False),
+        ("function f() { VV.task.execute(t); return arguments; } f();", False),
+        ("async function f() { VV.task.execute(t); } f();", False),
         ("var f = () => VV.task.execute(t);", False),
         ("class A { m() { VV.task.execute(t); } }", False),
         ("var VV = {task: {execute: function () {}}}; VV.task.execute(t);", False),
@@ -317,7 +328,7 @@ def test_nothing_is_kept_on_the_programs_function_from_one_run_to_the_next() -> 
     source = f"""
     var me = arguments.callee;
     me.runs = (me.runs || 0) + 1;
-    function visit() {{ return VV.task.execute({GPS_TASK}); }}
+    var visit = function () {{ return VV.task.execute({GPS_TASK}); }};
     for (var k = 0; k < 3; k++) {{ visit(); VV.storage.store('runs ' + k, me.runs || 0); }}
     """
     host = Host(source)
@@ -335,7 +346,7 @@ def test_nothing_is_kept_on_the_platforms_hooks_from_one_run_to_the_next() -> No
       if (o.runs) kept.push(name);
       try {{ o.runs = 1; }} catch (e) {{}}
     }});
-    function visit() {{ return VV.task.execute({GPS_TASK}); }}
+    var visit = function () {{ return VV.task.execute({GPS_TASK}); }};
     for (var k = 0; k < 2; k++) {{ visit(); VV.storage.store('kept ' + k, kept); }}
     """
     host = Host(source)
@@ -360,3 +371,27 @@ def test_a_batch_resumes_at_each_of_its_parts() -> None:
     assert [r.answers_read for r in replayed.results] == [0, 1, 2, 3, 4, 5, 6]
     assert host.storage == replayed.storage
     assert host.storage["round 1"] == 3 and len(host.storage) == 8
+
+
+def test_a_function_of_the_program_that_waits_resumes_too() -> None:
+    source = f"""
+    function reading(k, seen) {{
+      var d = VV.task.execute({GPS_TASK});
+      return k === 0 ? d[0].value : reading(k - 1, seen + 1) + d[0].value;  // recursion too
+    }}
+    function survey(n) {{
+      var total = 0;
+      for (var i = 0; i < n; i++) total += reading(1, 0);
+      return total;
+    }}
+    VV.storage.store('total', survey(3));
+    VV.storage.store('single', reading(0, 0));
+    """
+    assert "function* survey" in instrument_program(source).code
+    host = Host(source)
+    assert host.run().outcome is Outcome.FINISHED
+    assert [r.answers_read for r in host.results] == [0] + [1] * 7
+    replayed = Run(source, seed=5)
+    assert replayed.run().outcome is Outcome.FINISHED
+    assert [r.answers_read for r in replayed.results] == list(range(8))
+    assert host.storage == replayed.storage == {"total": sum(range(6)), "single": 6}
