@@ -57,7 +57,7 @@ from py_mini_racer import (
     init_mini_racer,
 )
 
-from vvm_worker.runtime.instrument import ReservedNameError, instrument_program
+from vvm_worker.runtime.instrument import Instrumented, ReservedNameError, instrument_program
 from vvm_worker.runtime.types import (
     Effect,
     ErrorKind,
@@ -350,16 +350,26 @@ class VVContext:
         prepared = POOL.take()
         self._mr = prepared.mr
         self._key = prepared.key
-        function = "function*" if program.generator else "function"
-        self._program_prefix = f"__cpcc_host.setProgram({self._key}, {function} () {{"
+        self._program_prefix = ""
         try:
             self._host("setCatalog", json.dumps(list(catalog)))
-            self._mr.eval(
-                f"{self._program_prefix}{program.code}\n}});\n//# sourceURL={PROGRAM_NAME}"
-            )
+            try:
+                self._set_program(program)
+            except JSParseException:
+                if not program.generator:
+                    raise
+                # V8 refuses the generator form of a program it parses as written (a case the
+                # rewrite did not foresee): run it the replay way.
+                self._set_program(instrument_program(source, suspendable=False))
         except BaseException:
             self.close()
             raise
+
+    def _set_program(self, program: Instrumented) -> None:
+        function = "function*" if program.generator else "function"
+        self._program_prefix = f"__cpcc_host.setProgram({self._key}, {function} () {{"
+        self._mr.eval(f"{self._program_prefix}{program.code}\n}});\n//# sourceURL={PROGRAM_NAME}")
+        self._program = program
 
     def _host(self, call: str, *args: str, timeout: float = _HOST_TIMEOUT_S) -> Any:
         arguments = ", ".join([self._key, *(json.dumps(a) for a in args)])

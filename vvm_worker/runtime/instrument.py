@@ -321,9 +321,9 @@ def _apply(data: bytes, inserts: list[_Insert]) -> Instrumented:
 
 
 @lru_cache(maxsize=256)
-def instrument_program(source: str) -> Instrumented:
-    """The program with its catch and finally clauses instrumented and, when it can be, made
-    suspendable (see the module docstring).
+def instrument_program(source: str, *, suspendable: bool = True) -> Instrumented:
+    """The program with its catch and finally clauses instrumented and, when it can be and
+    ``suspendable``, made suspendable (see the module docstring).
 
     Raises ReservedNameError when the program uses a reserved identifier. Syntax is checked by
     V8 before this is called; a clause tree-sitter cannot parse is left as it is.
@@ -339,7 +339,7 @@ def instrument_program(source: str) -> Instrumented:
             inserts.extend(_catch_inserts(clause))
         else:
             inserts.extend(_finally_inserts(clause))
-    sites = _call_sites(tree.root_node)
+    sites = _call_sites(tree.root_node) if suspendable else None
     if sites:
         inserts.extend(sites)
     if not inserts:

@@ -11,6 +11,7 @@ platform could not turn into a suspension point).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -30,7 +31,7 @@ from vvm_worker.runtime import (
     StepInput,
     StepResult,
 )
-from vvm_worker.runtime.instrument import instrument_program
+from vvm_worker.runtime.instrument import Instrumented, instrument_program
 
 GPS_TASK = (
     "{type: 'point', position: new VV.types.LatLngAlt(1, 2, 3), tolerance: 1,"
@@ -395,3 +396,19 @@ def test_a_function_of_the_program_that_waits_resumes_too() -> None:
     assert replayed.run().outcome is Outcome.FINISHED
     assert [r.answers_read for r in replayed.results] == list(range(8))
     assert host.storage == replayed.storage == {"total": sum(range(6)), "single": 6}
+
+
+def test_a_program_v8_refuses_as_a_generator_runs_the_replay_way(monkeypatch) -> None:
+    from vvm_worker.runtime import engine
+
+    def broken(source: str, *, suspendable: bool = True) -> Instrumented:
+        done = instrument_program(source, suspendable=suspendable)
+        if done.generator:  # as if the rewrite had made code V8 cannot parse
+            return replace(done, code=done.code + "\n)")
+        return done
+
+    monkeypatch.setattr(engine, "instrument_program", broken)
+    host = Host(LOOP)
+    assert host.run().outcome is Outcome.FINISHED
+    assert [r.answers_read for r in host.results][:4] == [0, 1, 2, 3]
+    assert host.storage["seen"] == 60
