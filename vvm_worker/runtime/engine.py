@@ -341,7 +341,6 @@ class VVContext:
 
     def __init__(self, *, vv_id: str, source: str, catalog: Sequence[Mapping[str, Any]]) -> None:
         program = instrument_program(source)
-        self._program = program
         self.vv_id = vv_id
         self.source = source
         self.usable = True
@@ -350,7 +349,6 @@ class VVContext:
         prepared = POOL.take()
         self._mr = prepared.mr
         self._key = prepared.key
-        self._program_prefix = ""
         try:
             self._host("setCatalog", json.dumps(list(catalog)))
             try:

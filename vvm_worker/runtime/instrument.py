@@ -293,7 +293,7 @@ def _call_sites(root: Node) -> list[_Insert] | None:
     return inserts
 
 
-def _apply(data: bytes, inserts: list[_Insert]) -> Instrumented:
+def _apply(data: bytes, inserts: list[_Insert], *, generator: bool) -> Instrumented:
     """``data`` with ``inserts`` made, and where they moved the columns."""
     out = data
     # Apply from the end so earlier offsets stay valid; at one offset, the insert listed first
@@ -316,7 +316,7 @@ def _apply(data: bytes, inserts: list[_Insert]) -> Instrumented:
         replaced = len(data[ins.offset : end].decode("utf-8"))
         shifts.setdefault(line, []).append((column, column + text, text - replaced, replaced))
     return Instrumented(
-        code, False, tuple((line, tuple(inserts)) for line, inserts in sorted(shifts.items()))
+        code, generator, tuple((line, tuple(moves)) for line, moves in sorted(shifts.items()))
     )
 
 
@@ -344,8 +344,7 @@ def instrument_program(source: str, *, suspendable: bool = True) -> Instrumented
         inserts.extend(sites)
     if not inserts:
         return Instrumented(source, False)
-    done = _apply(data, inserts)
-    return Instrumented(done.code, bool(sites), done.shifts)
+    return _apply(data, inserts, generator=bool(sites))
 
 
 def instrument(source: str) -> str:

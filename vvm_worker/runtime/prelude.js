@@ -840,8 +840,8 @@
     defineProperty(global, name, { value: value, writable: false, enumerable: false, configurable: false });
   }
 
-  // Hooks of the instrumented program: they act on the current run. Frozen, as everything
-  // a program can reach that outlives a run.
+  // Hooks of the instrumented program: they act on the current run. Frozen (with the
+  // prototype of what they make), as everything a program can reach that outlives a run.
   function hook(fn) {
     if (fn.prototype !== undefined) freeze(fn.prototype);
     return freeze(fn);
@@ -859,8 +859,7 @@
     // outlives every run of the context, so nothing may be kept on it from one run to the next.
     setProgram: function (key, fn) {
       host(key, 'setProgram');
-      freeze(fn.prototype);
-      program = freeze(fn);
+      program = hook(fn);
     },
     // Journal entries as a JSON array (see JournalEntry).
     append: function (key, json) {
