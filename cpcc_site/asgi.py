@@ -13,7 +13,10 @@ os.environ.setdefault("DJANGO_SETTINGS_MODULE", "cpcc_site.settings")
 os.environ.setdefault("CPCC_DB_CONN_MAX_AGE", "0")
 django_asgi_app = get_asgi_application()
 
+from cpcc_site.serving import drain_before_shutdown  # noqa: E402
 from missions.routing import websocket_urlpatterns  # noqa: E402 - needs the apps loaded
+
+drain_before_shutdown()
 
 application = ProtocolTypeRouter(
     {

@@ -50,6 +50,8 @@ INSTALLED_APPS = [
 ]
 
 MIDDLEWARE = [
+    # Requests in progress, so that a stopping server lets them end (cpcc_site.serving).
+    "cpcc_site.serving.InProgressMiddleware",
     # 503, not 500, while the database is unavailable (listed first, asked last).
     "cpcc_site.errors.DatabaseOutageMiddleware",
     "django.middleware.security.SecurityMiddleware",

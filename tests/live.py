@@ -62,6 +62,7 @@ class Workers:
             "CPCC_RV_LEASE_S": "3",
             "CPCC_VAR_DIR": str(tmp / "var"),
             "CPCC_MEDIA_ROOT": str(settings.MEDIA_ROOT),
+            "PYTHONFAULTHANDLER": "1",  # a crash leaves its Python stack in the log
         }
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
 
@@ -94,6 +95,13 @@ class Workers:
         process = self.processes.pop(name)
         os.killpg(process.pid, signal.SIGKILL)
         process.wait(timeout=10)
+
+    def terminate(self, name: str, timeout: float = 30) -> int:
+        """SIGTERM a worker, as systemd or an operator stops it; returns its exit status
+        (negative: the signal that ended it)."""
+        process = self.processes.pop(name)
+        os.killpg(process.pid, signal.SIGTERM)
+        return process.wait(timeout=timeout)
 
     def stop_all(self) -> None:
         for process in self.processes.values():
@@ -176,6 +184,7 @@ class Web:
             "REDIS_URL": redis_url,
             "CPCC_MEDIA_ROOT": str(settings.MEDIA_ROOT),
             "DATABASE_URL": database_url(),
+            "PYTHONFAULTHANDLER": "1",
         }
         self.process: subprocess.Popen[bytes] | None = None
         self.log = tmp / "web.log"
@@ -213,6 +222,14 @@ class Web:
         os.killpg(self.process.pid, signal.SIGKILL)
         self.process.wait(timeout=10)
         self.process = None
+
+    def terminate(self, timeout: float = 30) -> int:
+        """SIGTERM it, as systemd or an operator stops it; returns its exit status."""
+        assert self.process is not None
+        os.killpg(self.process.pid, signal.SIGTERM)
+        status = self.process.wait(timeout=timeout)
+        self.process = None
+        return status
 
     def stop(self) -> None:
         if self.process is not None and self.process.poll() is None:

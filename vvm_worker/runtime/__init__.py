@@ -5,15 +5,14 @@ Pure Python over mini-racer; no Django import (tests check this).
 
 from vvm_worker.runtime.engine import (
     Runtime,
-    SyntaxProblem,
     VVContext,
     answer_part,
     answer_reject,
     answer_task,
-    check_syntax,
     run_step,
 )
 from vvm_worker.runtime.instrument import ReservedNameError, instrument
+from vvm_worker.runtime.syntax import SyntaxProblem, check_syntax
 from vvm_worker.runtime.types import (
     VVM_API_CALLS,
     Effect,

@@ -30,34 +30,22 @@ isolate made before ``fork()`` hangs in the child.
 
 from __future__ import annotations
 
-import atexit
+import asyncio
 import contextlib
 import json
+import logging
 import os
-import queue
-import re
 import secrets
-import threading
 import time
-import weakref
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-from py_mini_racer import (
-    DEFAULT_V8_FLAGS,
-    JSEvalException,
-    JSOOMException,
-    JSParseException,
-    JSTimeoutException,
-    MiniRacer,
-    init_mini_racer,
-)
-
+from vvm_worker.runtime import v8
 from vvm_worker.runtime.instrument import Instrumented, ReservedNameError, instrument_program
+from vvm_worker.runtime.syntax import PROGRAM_NAME, check_syntax, parse_v8_message
 from vvm_worker.runtime.types import (
     Effect,
     ErrorKind,
@@ -68,11 +56,16 @@ from vvm_worker.runtime.types import (
     TaskRequest,
     VVError,
 )
+from vvm_worker.runtime.v8 import (
+    JSEvalException,
+    JSOOMException,
+    JSParseException,
+    JSTimeoutException,
+)
 
-PROGRAM_NAME = "vv.js"
+logger = logging.getLogger(__name__)
+
 _PRELUDE_SOURCE = (Path(__file__).with_name("prelude.js")).read_text(encoding="utf-8")
-# eval() and Function() inside a VV would run code the platform has not instrumented.
-V8_FLAGS = (*DEFAULT_V8_FLAGS, "--disallow-code-generation-from-strings")
 _HOST_TIMEOUT_S = 5.0
 # New journal entries up to this much JSON text go to the isolate with the step itself (one
 # call instead of two); more, as when a VV arrives with its journal, in a call of their own,
@@ -80,37 +73,6 @@ _HOST_TIMEOUT_S = 5.0
 _APPEND_WITH_STEP_CHARS = 64 * 1024
 # Fixed cost of re-running a program up to its last answer, on top of the previous step's time.
 _REPLAY_SLACK_S = 0.25
-
-_init_lock = threading.Lock()
-_initialised = False
-
-
-def _new_isolate() -> MiniRacer:
-    global _initialised
-    with _init_lock:
-        if not _initialised:
-            # V8 reads the time zone once; a VV must not observe the host's (Date is UTC here).
-            if os.environ.get("TZ") != "UTC":
-                os.environ["TZ"] = "UTC"
-                time.tzset()
-            init_mini_racer(flags=V8_FLAGS, ignore_duplicate_init=True)
-            atexit.register(_close_all)
-            _initialised = True
-    mr = MiniRacer()
-    _open.add(mr)
-    return mr
-
-
-# Every isolate this process made. An isolate still open when the interpreter finalises its
-# objects hangs the exit (its event-loop thread is gone by then): close them all first.
-_open: weakref.WeakSet[MiniRacer] = weakref.WeakSet()
-
-
-def _close_all() -> None:
-    for mr in list(_open):
-        with contextlib.suppress(Exception):
-            mr.close()
-
 
 _WARM_UP_CATALOG = json.dumps(
     json.dumps([{"name": "GPS", "kind": "gps", "unit": "", "params": {}}])
@@ -137,160 +99,70 @@ _WARM_UP_RUN = json.dumps(
 class _Prepared:
     """An isolate with the prelude installed (built-ins frozen), not yet given to a VV."""
 
-    mr: MiniRacer
+    isolate: v8.Isolate
     key: str  # the host key, as a JSON string literal
 
 
-def _prepare() -> _Prepared:
-    mr = _new_isolate()
+async def _prepare() -> _Prepared:
+    """A new isolate with the prelude; on the V8 thread."""
+    isolate = v8.adopt()
     key = json.dumps(secrets.token_hex(16))
+
+    async def run(code: str) -> Any:
+        return await isolate.eval_async(code, timeout_s=_HOST_TIMEOUT_S)
+
     try:
-        mr.eval(f"{_PRELUDE_SOURCE}({key});\n//# sourceURL=cpcc-prelude.js")
+        await run(f"{_PRELUDE_SOURCE}({key});\n//# sourceURL=cpcc-prelude.js")
         # One throw-away run compiles the prelude's functions now rather than in a VV's step.
-        mr.eval(f"__cpcc_host.setCatalog({key}, {_WARM_UP_CATALOG})")
-        mr.eval(f"__cpcc_host.setProgram({key}, function () {{ {_WARM_UP_PROGRAM} }})")
+        await run(f"__cpcc_host.setCatalog({key}, {_WARM_UP_CATALOG})")
+        await run(f"__cpcc_host.setProgram({key}, function () {{ {_WARM_UP_PROGRAM} }})")
         with contextlib.suppress(JSEvalException):
-            mr.eval(f"__cpcc_host.step({key}, {_WARM_UP_RUN})")
-        mr.eval(f"__cpcc_host.outcome({key})")
+            await run(f"__cpcc_host.step({key}, {_WARM_UP_RUN})")
+        await run(f"__cpcc_host.outcome({key})")
     except BaseException:
-        mr.close()
+        isolate.close()
         raise
-    return _Prepared(mr, key)
+    return _Prepared(isolate, key)
 
 
 class IsolatePool:
-    """Isolates with the prelude installed, made ahead of time by a background thread.
+    """Isolates with the prelude installed, made ahead of time on the V8 thread.
 
     A new isolate and the prelude's freezing of the built-ins cost about 5 ms; taking a
     prepared one makes a VV's first step on a host cost little more than its program.
-    ``size`` 0 prepares every isolate when it is needed.
+    ``size`` 0 prepares every isolate when it is needed. The pool's state lives on the V8
+    thread (no lock): ``take`` is a call to it.
     """
 
     def __init__(self, size: int) -> None:
         self.size = size
-        self._ready: queue.SimpleQueue[_Prepared] = queue.SimpleQueue()
-        self._count = 0
-        self._lock = threading.Lock()
-        self._filling = False
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._ready: list[_Prepared] = []
+        self._filling: asyncio.Task[None] | None = None
 
     def take(self) -> _Prepared:
-        try:
-            with self._lock:
-                prepared = self._ready.get_nowait()
-                self._count -= 1
-        except queue.Empty:
-            prepared = _prepare()
-        self._refill()
+        return v8.call(self._take)
+
+    async def _take(self) -> _Prepared:
+        loop = asyncio.get_running_loop()
+        if self._loop is not loop:  # first use, or a new owner (after a fork)
+            self._loop, self._ready, self._filling = loop, [], None
+        prepared = self._ready.pop() if self._ready else await _prepare()
+        if self._filling is None and len(self._ready) < self.size:
+            self._filling = loop.create_task(self._fill())
         return prepared
 
-    def _refill(self) -> None:
-        with self._lock:
-            if self._filling or self._count >= self.size:
-                return
-            self._filling = True
-        threading.Thread(target=self._fill, name="cpcc-isolate-pool", daemon=True).start()
-
-    def _fill(self) -> None:
+    async def _fill(self) -> None:
         try:
-            while True:
-                with self._lock:
-                    if self._count >= self.size:
-                        return
-                prepared = _prepare()
-                with self._lock:
-                    self._ready.put(prepared)
-                    self._count += 1
+            while len(self._ready) < self.size:
+                self._ready.append(await _prepare())
+        except Exception:
+            logger.exception("isolates could not be prepared ahead of time")
         finally:
-            with self._lock:
-                self._filling = False
+            self._filling = None
 
 
 POOL = IsolatePool(int(os.environ.get("CPCC_ISOLATE_POOL", "2")))
-
-
-@dataclass(frozen=True, slots=True)
-class SyntaxProblem:
-    """A program V8 cannot parse: the message and where (1-based line and column)."""
-
-    message: str
-    line: int
-    column: int
-
-    def __str__(self) -> str:
-        return f"line {self.line}, column {self.column}: {self.message}"
-
-
-_LOCATION = re.compile(r"^(?P<res>[^\n]*?):(?P<line>\d+): (?P<msg>[^\n]*)")
-_FRAME = re.compile(re.escape(PROGRAM_NAME) + r":(\d+):(\d+)")
-_USE_STRICT = re.compile(r"""^(?:\s|//[^\n]*\n|/\*.*?\*/)*(['"])use strict\1""", re.S)
-
-
-def _parse_v8_message(
-    text: str, *, parse_error: bool = False, first_line_offset: int = 0
-) -> tuple[str, int | None, int | None]:
-    """Split a mini-racer exception text into the message and the user's line and column.
-
-    The text is ``RESOURCE:LINE: MESSAGE`` then the source line, a caret under the column and,
-    for Error objects, the stack. The place in the program is the thrown-at location when it is
-    in the program, otherwise the first stack frame in the program (an API call that threw).
-    ``first_line_offset`` is what the platform put in front of the program's first line.
-    """
-    match = _LOCATION.match(text)
-    if match is None:
-        return text.strip(), None, None
-    message = match.group("msg")
-    line: int | None = None
-    column: int | None = None
-    # A script that does not parse has no name yet: its location is the program's.
-    if parse_error or match.group("res").endswith(PROGRAM_NAME):
-        lines = text.split("\n")
-        line = int(match.group("line"))
-        column = lines[2].index("^") + 1 if len(lines) > 2 and "^" in lines[2] else None
-    else:
-        frame = _FRAME.search(text)
-        if frame is not None:
-            line, column = int(frame.group(1)), int(frame.group(2))
-    if line == 1 and column is not None:
-        column = max(1, column - first_line_offset)
-    return message, line, column
-
-
-@lru_cache(maxsize=512)
-def check_syntax(source: str) -> SyntaxProblem | None:
-    """V8's verdict on the program's syntax, without running any of it.
-
-    The check evaluates ``throw 0;`` in front of the program on its first line: V8 parses the
-    whole script before running it, so a syntax error is reported, and otherwise the throw
-    stops it before the first statement. A leading "use strict" directive is kept in front.
-    """
-    prefix = "throw 0;"
-    strict = _USE_STRICT.match(source)
-    body = source
-    if strict is not None:
-        prefix = "'use strict';throw 0;"
-        body = (
-            source[: strict.start(1)]
-            + " " * (strict.end() - strict.start(1))
-            + source[strict.end() :]
-        )
-    mr = _new_isolate()
-    try:
-        mr.eval(prefix + body + "\n//# sourceURL=" + PROGRAM_NAME, timeout_sec=_HOST_TIMEOUT_S)
-    except JSParseException as exc:
-        message, line, column = _parse_v8_message(
-            str(exc), parse_error=True, first_line_offset=len(prefix)
-        )
-        line = line or 1
-        column = column or 1
-        lines = source.split("\n")
-        if line > len(lines):  # "Unexpected end of input" points past the program's end
-            line, column = len(lines), len(lines[-1]) + 1
-        return SyntaxProblem(message, line, column)
-    except JSEvalException:
-        return None
-    finally:
-        mr.close()
-    return None
 
 
 def _pending(data: Mapping[str, Any]) -> PendingRequest:
@@ -347,7 +219,7 @@ class VVContext:
         self.journal_length = 0
         self._last_entry: str | None = None
         prepared = POOL.take()
-        self._mr = prepared.mr
+        self._isolate = prepared.isolate
         self._key = prepared.key
         try:
             self._host("setCatalog", json.dumps(list(catalog)))
@@ -366,20 +238,29 @@ class VVContext:
     def _set_program(self, program: Instrumented) -> None:
         function = "function*" if program.generator else "function"
         self._program_prefix = f"__cpcc_host.setProgram({self._key}, {function} () {{"
-        self._mr.eval(f"{self._program_prefix}{program.code}\n}});\n//# sourceURL={PROGRAM_NAME}")
+        self._isolate.eval(
+            f"{self._program_prefix}{program.code}\n}});\n//# sourceURL={PROGRAM_NAME}",
+            timeout_s=_HOST_TIMEOUT_S,
+        )
         self._program = program
 
-    def _host(self, call: str, *args: str, timeout: float = _HOST_TIMEOUT_S) -> Any:
+    def _host_script(self, call: str, *args: str) -> str:
         arguments = ", ".join([self._key, *(json.dumps(a) for a in args)])
-        return self._mr.eval(f"__cpcc_host.{call}({arguments})", timeout_sec=timeout)
+        return f"__cpcc_host.{call}({arguments})"
+
+    def _host(self, call: str, *args: str) -> Any:
+        return self._isolate.eval(self._host_script(call, *args), timeout_s=_HOST_TIMEOUT_S)
+
+    async def _host_async(self, call: str, *args: str, timeout: float = _HOST_TIMEOUT_S) -> Any:
+        return await self._isolate.eval_async(self._host_script(call, *args), timeout_s=timeout)
 
     def heap_bytes(self) -> int:
         """Bytes of V8 heap this context uses now."""
-        return int(self._mr.heap_stats()["used_heap_size"])
+        return int(self._isolate.heap_stats()["used_heap_size"])
 
     def close(self) -> None:
         self.usable = False
-        self._mr.close()
+        self._isolate.close()
 
     def _new_entries(self, journal: Sequence[Mapping[str, Any] | str]) -> list[str]:
         """The entries of ``journal`` this context does not have yet, as JSON text."""
@@ -427,40 +308,25 @@ class VVContext:
                 else None,
             },
         }
-        self._mr.set_hard_memory_limit(limits.heap_bytes)
         run_json = json.dumps(run, separators=(",", ":"))
-        raw: Any = None  # the outcome, when the step returns it
-        thrown: str | None = None
+        arguments = (run_json, entries) if texts else (run_json,)
+        raw, thrown, killed_by, duration = v8.call(
+            lambda: self._run(arguments, heap_bytes=limits.heap_bytes, timeout=timeout)
+        )
+        self._appended(texts)
         killed: tuple[str, str] | None = None
-        started = time.perf_counter()
-        try:
-            arguments = (run_json, entries) if texts else (run_json,)
-            raw = self._host("step", *arguments, timeout=timeout)
-        except JSTimeoutException:
+        if killed_by == "cpu":
             killed = (
                 f"the VV used more than {limits.cpu_s:g} s of CPU time in one step "
                 "(quota: CPU time per step)",
                 "cpu",
             )
-        except JSOOMException:
+        elif killed_by == "heap":
             killed = (self._heap_message(step), "heap")
-        except JSEvalException as exc:
-            if self._mr.was_hard_memory_limit_reached():
-                killed = (self._heap_message(step), "heap")
-            else:
-                thrown = str(exc)
-        duration = time.perf_counter() - started
-        self._appended(texts)
         if killed is not None:
             # V8 stopped the program where it was; what it did before (a callback's storage
             # writes, say) still counts. The isolate is not used again.
             self.usable = False
-            self._mr.set_hard_memory_limit(0)
-            with contextlib.suppress(JSEvalException):
-                self._host("abort")
-        if not isinstance(raw, str):
-            with contextlib.suppress(JSEvalException):
-                raw = self._host("outcome")
         try:
             state = json.loads(raw) if isinstance(raw, str) else None
         except ValueError:
@@ -488,6 +354,39 @@ class VVContext:
             )
         return self._interpret(state, thrown, duration)
 
+    async def _run(
+        self, arguments: tuple[str, ...], *, heap_bytes: int, timeout: float
+    ) -> tuple[Any, str | None, str | None, float]:
+        """The step's work in V8, on the V8 thread: the outcome's text (when there is one), the
+        text of what the program threw, what stopped it (``cpu``, ``heap``) and how long it
+        ran."""
+        isolate = self._isolate
+        isolate.set_hard_memory_limit(heap_bytes)
+        raw: Any = None  # the outcome, when the step returns it
+        thrown: str | None = None
+        killed_by: str | None = None
+        started = time.perf_counter()
+        try:
+            raw = await self._host_async("step", *arguments, timeout=timeout)
+        except JSTimeoutException:
+            killed_by = "cpu"
+        except JSOOMException:
+            killed_by = "heap"
+        except JSEvalException as exc:
+            if isolate.hard_memory_limit_reached():
+                killed_by = "heap"
+            else:
+                thrown = str(exc)
+        duration = time.perf_counter() - started
+        if killed_by is not None:
+            isolate.set_hard_memory_limit(0)
+            with contextlib.suppress(JSEvalException):
+                await self._host_async("abort")
+        if not isinstance(raw, str):
+            with contextlib.suppress(JSEvalException):
+                raw = await self._host_async("outcome")
+        return raw, thrown, killed_by, duration
+
     @staticmethod
     def _heap_message(step: StepInput) -> str:
         mb = step.limits.heap_bytes // (1024 * 1024)
@@ -495,7 +394,7 @@ class VVContext:
 
     def _place(self, thrown: str) -> tuple[str, int | None, int | None]:
         """The message of a V8 exception and its line and column in the user's program."""
-        message, line, column = _parse_v8_message(
+        message, line, column = parse_v8_message(
             thrown, first_line_offset=len(self._program_prefix)
         )
         if line is not None and column is not None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+from types import FrameType
 from typing import Any
 
 from django.conf import settings
@@ -52,8 +54,16 @@ def host_named(model: type[Model], name: str, what: str) -> Any:
 def serve(
     command: BaseCommand, host: GSHost | RVHost, *, queues: list[str], node: str, loglevel: str
 ) -> None:
-    """Run a host's worker: take up its work, then serve its queues until told to stop."""
+    """Run a host's worker: take up its work, then serve its queues until told to stop.
+
+    SIGTERM or SIGINT stops it with exit status 0 at any time: before Celery runs (while the
+    host takes up its work) the signal ends the command at once; then Celery's warm shutdown
+    lets the task in progress finish. Either way the host stops before the process ends, and
+    V8 is shut down last (vvm_worker.runtime.v8, at exit).
+    """
     ensure_broker()
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(signum, _stop_now)
     set_host(host)
     host.start()
     command.stdout.write(f"{command_name(host)} {host.name}: queues {', '.join(queues)}")
@@ -63,6 +73,10 @@ def serve(
     finally:
         host.stop()
         set_host(None)
+
+
+def _stop_now(signum: int, frame: FrameType | None) -> None:
+    raise SystemExit(0)
 
 
 def command_name(host: GSHost | RVHost) -> str:

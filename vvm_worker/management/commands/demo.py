@@ -15,6 +15,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,8 @@ from vvm_worker.services.scenarios import (
 
 DEFAULT_SCENARIO = settings.BASE_DIR / "examples" / "scenarios" / "paper-fig3.json"
 START_TIMEOUT_S = 60.0
+# How long the stop waits for the processes (a worker lets its task in progress end first).
+STOP_S = 30.0
 
 
 def _demo_password(name: str) -> str:
@@ -79,18 +82,36 @@ class Processes:
             if process.poll() is not None:
                 raise CommandError(f"{label} exited with code {process.returncode}")
 
-    def stop(self) -> None:
+    def stop(self) -> list[str]:
+        """SIGTERM every child, then wait for each (STOP_S at most; a second Ctrl-C or SIGTERM
+        kills what is left at once). Returns a line for each child that did not exit 0."""
+        hurry = threading.Event()
+
+        def again(signum: int, frame: object) -> None:
+            hurry.set()
+
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, again)
         for process in self.children.values():
             if process.poll() is None:
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(process.pid, signal.SIGTERM)
-        for process in self.children.values():
-            try:
-                process.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
+        deadline = time.monotonic() + STOP_S
+        problems = []
+        for label, process in self.children.items():
+            while process.poll() is None:
+                if hurry.is_set() or time.monotonic() > deadline:
+                    with contextlib.suppress(ProcessLookupError):
+                        os.killpg(process.pid, signal.SIGKILL)
+                    process.wait()
+                    problems.append(f"{label}: killed (it had not stopped)")
+                    break
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    process.wait(timeout=0.1)
+            else:
+                if process.returncode != 0:
+                    problems.append(f"{label}: exit status {process.returncode}")
+        return problems
 
 
 def _wait_for_port(host: str, port: int, processes: Processes) -> None:
@@ -184,9 +205,10 @@ class Command(BaseCommand):
                 processes.check()
                 time.sleep(0.5)
         except KeyboardInterrupt:
-            self.stdout.write("\nStopping.")
+            self.stdout.write("\nStopping (Ctrl-C again stops at once).")
         finally:
-            processes.stop()
+            for problem in processes.stop():
+                self.stderr.write(problem)
             if redis is not None:
                 redis.stop()
 

@@ -1,0 +1,206 @@
+"""Processes that use V8 survive many customers at once and stop cleanly (issue 20).
+
+The web server (daphne, as in production, and the in-process server) answers every one of many
+concurrent submissions, each checked by V8; a worker or the web server stopped with SIGTERM in
+the middle of work exits with status 0 (never a segmentation fault in V8), and every VV
+finishes once the workers are back. Run on SQLite and on PostgreSQL (CI's second pass).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+import requests
+from rest_framework.authtoken.models import Token
+
+from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus
+from tests.factories import (
+    AREA_ONE,
+    CustomerFactory,
+    GroundStationFactory,
+    UserFactory,
+    VehicleFactory,
+)
+from tests.live import Web, Workers, collect_static, wait_for
+from tests.vvm_worker.test_distributed import all_ended, assert_paper_results, load
+from tests.vvm_worker.test_distributed_faults import counter_program, cut_step, ended
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import vv_submit
+
+pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
+
+CLIENTS = 16
+SUBMISSIONS = 200
+# Each client's programs differ (so no check is answered from a cache), and every fifth has a
+# syntax error, which V8 finds and the API reports with its place.
+PROGRAM = """
+var co2 = VV.sensor.get('CO2');
+var n = {n};
+VV.task.execute({{type: 'point', position: new VV.types.LatLngAlt(48.11, 12.86, 50),
+                  tolerance: 2, sensors: [co2]}}, function (d) {{ VV.storage.store('n', n); }});
+"""
+BROKEN = "var n = {n};\nvar = ;\n"
+
+
+def body(n: int) -> dict[str, str]:
+    source = BROKEN if n % 5 == 0 else PROGRAM
+    return {"name": f"Burst {n}", "program": source.format(n=n)}
+
+
+def burst(url: str, tokens: list[str]) -> list[tuple[int, int, dict]]:
+    """SUBMISSIONS submissions from CLIENTS concurrent clients (a session each, the customers'
+    tokens by turns): (n, status, answer) of each."""
+
+    def client(c: int) -> list[tuple[int, int, dict]]:
+        api = requests.Session()
+        api.headers["Authorization"] = f"Token {tokens[c % len(tokens)]}"
+        out = []
+        for n in range(c, SUBMISSIONS, CLIENTS):
+            response = api.post(f"{url}/api/v1/vvs/", json=body(n), timeout=60)
+            out.append((n, response.status_code, response.json()))
+        return out
+
+    with ThreadPoolExecutor(CLIENTS) as pool:
+        return [answer for answers in pool.map(client, range(CLIENTS)) for answer in answers]
+
+
+def assert_every_submission_answered(answers: list[tuple[int, int, dict]]) -> None:
+    assert len(answers) == SUBMISSIONS
+    for n, status, answer in answers:
+        if n % 5 == 0:
+            assert status == 400, (n, status, answer)
+            assert "line 2" in json.dumps(answer), answer
+        else:
+            assert status in (201, 429), (n, status, answer)
+    created = {a["name"] for n, status, a in answers if status == 201}
+    assert created, "every submission was throttled: the burst tested nothing"
+    assert set(VirtualVehicle.objects.values_list("name", flat=True)) == created
+
+
+@pytest.fixture
+def tokens(transactional_db: None) -> list[str]:
+    customers = [CustomerFactory(name=f"Customer {c}") for c in "ABCD"]
+    users = [UserFactory(username=f"customer-{c.name[-1].lower()}", customer=c) for c in customers]
+    return [Token.objects.create(user=u).key for u in users]
+
+
+@pytest.fixture(scope="module")
+def web_var(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return collect_static(tmp_path_factory.mktemp("web-var"))
+
+
+@pytest.fixture
+def web(broker_url: str, tmp_path: Path, web_var: Path, transactional_db: None) -> Iterator[Web]:
+    server = Web(tmp_path, broker_url, web_var)
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+def test_daphne_answers_every_concurrent_submission_and_stops_cleanly(web, tokens) -> None:
+    web.start()
+    answers = burst(web.url(""), tokens)
+    assert_every_submission_answered(answers)
+    listing = requests.get(
+        web.url("/api/v1/vvs/"), headers={"Authorization": f"Token {tokens[0]}"}, timeout=30
+    )
+    assert listing.status_code == 200, "the server did not survive the burst"
+    # Stopped while customers still submit: no crash, status 0.
+    with ThreadPoolExecutor(4) as pool:
+        pending = [pool.submit(burst_one, web.url(""), tokens[k], k) for k in range(4)]
+        status = web.terminate()
+        for future in pending:
+            future.result()
+    assert status == 0, web.log.read_text()[-3000:]
+    assert "Fatal Python error" not in web.log.read_text()
+
+
+def burst_one(url: str, token: str, k: int) -> None:
+    """Submissions until the server is gone (its stop may cut one short)."""
+    api = requests.Session()
+    api.headers["Authorization"] = f"Token {token}"
+    for n in range(50):
+        try:
+            api.post(f"{url}/api/v1/vvs/", json=body(1000 + 50 * k + n + 1), timeout=30)
+        except requests.ConnectionError:
+            return
+
+
+def test_the_in_process_server_answers_every_concurrent_submission(
+    live_server, tokens, broker_url
+) -> None:
+    answers = burst(live_server.url, tokens)
+    assert_every_submission_answered(answers)
+
+
+def test_workers_stopped_with_sigterm_mid_mission_exit_0_and_the_vvs_finish_after_a_restart(
+    workers, tmp_path, monkeypatch
+) -> None:
+    load("paper-fig3.json", tmp_path, monkeypatch)
+    workers.start("rvworker", "Heli One")
+    workers.start("rvworker", "Heli Two")
+    workers.start("gsworker", "GS Base")
+    wait_for(
+        lambda: (
+            Task.objects.filter(status=TaskStatus.DONE).count() >= 2
+            and VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
+        ),
+        timeout=120,
+        what="VVs aboard the RVs, tasks done",
+        details=workers.logs,
+    )
+    statuses = {name: workers.terminate(name) for name in ("Heli One", "Heli Two", "GS Base")}
+    logs = workers.logs()
+    assert statuses == {"Heli One": 0, "Heli Two": 0, "GS Base": 0}, logs
+    assert "Fatal Python error" not in logs
+    assert not all_ended(), "the mission ended before the stop: it tested nothing"
+    assert VirtualVehicle.objects.filter(status=VVStatus.FINISHED).count() < 3
+    workers.start("rvworker", "Heli One")
+    workers.start("rvworker", "Heli Two")
+    workers.start("gsworker", "GS Base")
+    wait_for(all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs)
+    assert_paper_results()
+
+
+def test_an_rv_worker_stopped_with_sigterm_in_the_middle_of_steps_exits_0(
+    broker_url, tmp_path
+) -> None:
+    """Instant flights and steps that compute for a while: the stop comes while V8 runs."""
+    GroundStationFactory(name="GS Base")
+    heli_one = VehicleFactory(name="Heli One", area=AREA_ONE)
+    customers = [CustomerFactory(name="Customer A"), CustomerFactory(name="Customer B")]
+    vvm = platform_vvm()
+    vvs = [
+        vv_submit(customer=c, name=f"Counter {k}", program=counter_program(), vvm=vvm, seed=k)
+        for c in customers
+        for k in range(2)
+    ]
+    pool = Workers(tmp_path, broker_url, speed=0)
+    try:
+        pool.start("gsworker", "GS Base")
+        for stop in range(3):
+            pool.start("rvworker", "Heli One")
+            wait_for(
+                lambda: cut_step(vvs, heli_one) is not None or ended(*vvs),
+                timeout=60,
+                what="a step under way on Heli One",
+                details=pool.logs,
+            )
+            status = pool.terminate("Heli One")
+            assert status == 0, (stop, pool.logs())
+        pool.start("rvworker", "Heli One")
+        wait_for(lambda: ended(*vvs), timeout=180, what="the VVs to end", details=pool.logs)
+        assert pool.terminate("GS Base") == 0
+        assert pool.terminate("Heli One") == 0
+        logs = pool.logs()
+    finally:
+        pool.stop_all()
+    assert "Fatal Python error" not in logs
+    for vv in vvs:
+        vv.refresh_from_db()
+        assert vv.status == VVStatus.FINISHED, vv.error

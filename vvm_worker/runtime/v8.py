@@ -1,0 +1,359 @@
+"""The one owner of V8 in this process: a thread that creates, uses and closes every isolate.
+
+V8 is a native engine with process-wide state, and mini-racer does not make every use of it
+safe from any thread (issue 20, measured with mini-racer 0.14.1):
+
+- the first isolates made at the same time from several threads crash the process (V8's
+  process-wide set-up runs twice: ``Check failed: !IsConfigurablePoolInitialized()``, or a
+  segmentation fault), as 16 request threads checking programs did to the web server;
+- an isolate closed while the interpreter stops, from another thread than the one using it or
+  after its event loop is gone, crashes the process in ``MiniRacer.close`` (every RV worker
+  that had run a VV died with a segmentation fault when stopped).
+
+So nothing else in the process touches mini-racer: one thread, started at the first use, runs
+an asyncio event loop on which every isolate is made (``mini_racer(event_loop=...)``, so no
+isolate has a thread of its own on the Python side), every script is evaluated (with a
+timeout, cancelled by V8's termination) and every isolate is closed. Other threads reach it
+through the loop's queue and wait for their answer; the loop serves many isolates at once (V8
+runs each on its own native thread, the loop only hands work to them), so one slow program
+does not hold up the others. ``shutdown`` (run at interpreter exit, or by a server that stops)
+refuses new work, waits for the work in progress (each call has a timeout), closes every
+isolate on the owner thread, and stops it: the process then exits with its own status.
+
+Isolates are made inside the process that uses them, never at import time: an isolate made
+before ``fork()`` hangs in the child, so a child forgets its parent's owner and makes its own.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import atexit
+import contextlib
+import logging
+import os
+import threading
+import time
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
+
+from py_mini_racer import (
+    DEFAULT_V8_FLAGS,
+    JSEvalException,
+    JSOOMException,
+    JSParseException,
+    JSTimeoutException,
+    MiniRacer,
+    init_mini_racer,
+    mini_racer,
+)
+
+__all__ = [
+    "Isolate",
+    "JSEvalException",
+    "JSOOMException",
+    "JSParseException",
+    "JSTimeoutException",
+    "V8Closed",
+    "adopt",
+    "busy",
+    "call",
+    "new_isolate",
+    "open_isolates",
+    "shutdown",
+]
+
+logger = logging.getLogger(__name__)
+
+# eval() and Function() inside a VV would run code the platform has not instrumented.
+V8_FLAGS = (*DEFAULT_V8_FLAGS, "--disallow-code-generation-from-strings")
+# How long a stopping process waits for the V8 work in progress: longer than any one call's
+# timeout (a step's CPU quota and its replay allowance).
+SHUTDOWN_WAIT_S = 60.0
+
+T = TypeVar("T")
+
+
+class V8Closed(RuntimeError):
+    """V8 was shut down in this process (it is stopping): no isolate can be made or used."""
+
+    def __init__(self) -> None:
+        super().__init__("V8 is shut down in this process (it is stopping)")
+
+
+class Isolate:
+    """One V8 isolate. Its methods may be called from any thread; each runs on the owner's.
+
+    One caller at a time: the isolate runs one script after the other, and a caller that
+    shares an isolate between threads must order its calls itself.
+    """
+
+    def __init__(self, owner: _Owner, manager: contextlib.AbstractContextManager[MiniRacer]):
+        self._owner = owner
+        self._manager: contextlib.AbstractContextManager[MiniRacer] | None = manager
+        self._mr: MiniRacer | None = None
+
+    # --- on the owner's loop ------------------------------------------------------------------
+
+    def _enter(self) -> None:
+        assert self._manager is not None
+        self._mr = self._manager.__enter__()
+
+    def _exit(self) -> None:
+        manager, self._manager, self._mr = self._manager, None, None
+        if manager is not None:
+            manager.__exit__(None, None, None)
+
+    def _racer(self) -> MiniRacer:
+        if self._mr is None:
+            raise V8Closed()
+        return self._mr
+
+    async def eval_async(self, code: str, *, timeout_s: float) -> Any:
+        """Evaluate ``code``; on the owner's loop only. JSTimeoutException after ``timeout_s``
+        (V8 terminates the script)."""
+        try:
+            return await asyncio.wait_for(self._racer().eval_cancelable(code), timeout_s)
+        except TimeoutError:
+            raise JSTimeoutException() from None
+
+    # --- from any thread ------------------------------------------------------------------------
+
+    @property
+    def closed(self) -> bool:
+        return self._mr is None
+
+    def eval(self, code: str, *, timeout_s: float) -> Any:
+        """Evaluate ``code`` and return its value (a primitive); raises mini-racer's
+        exceptions (JSParseException, JSEvalException, JSTimeoutException, JSOOMException)."""
+        return self._owner.call(lambda: self.eval_async(code, timeout_s=timeout_s))
+
+    def set_hard_memory_limit(self, limit: int) -> None:
+        """V8 terminates a script when the heap passes ``limit`` bytes (0: no limit)."""
+        self._owner.call_sync(lambda: self._racer().set_hard_memory_limit(limit))
+
+    def hard_memory_limit_reached(self) -> bool:
+        return self._owner.call_sync(lambda: self._racer().was_hard_memory_limit_reached())
+
+    def heap_stats(self) -> dict[str, Any]:
+        return dict(self._owner.call_sync(lambda: self._racer().heap_stats()))
+
+    def close(self) -> None:
+        """Free the isolate (idempotent; after shutdown the owner has freed it already)."""
+        if self._mr is None:
+            return
+        if self._owner.on_owner_thread():
+            self._owner.forget(self)
+            return
+        with contextlib.suppress(V8Closed):
+            self._owner.call_sync(lambda: self._owner.forget(self))
+
+
+class _Owner:
+    """The owner thread and its event loop, started at the first use."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._closed = False
+        self._isolates: set[Isolate] = set()
+        self._busy = 0  # calls running on the loop (only the loop's thread changes it)
+        self._idle: asyncio.Event | None = None
+        self._exit_hook = False
+
+    def _start(self) -> asyncio.AbstractEventLoop:
+        # Under self._lock.
+        if self._closed:
+            raise V8Closed()
+        if self._loop is not None:
+            return self._loop
+        loop = asyncio.new_event_loop()
+        started = threading.Event()
+        failure: list[BaseException] = []
+        thread = threading.Thread(
+            target=self._serve, args=(loop, started, failure), name="cpcc-v8", daemon=True
+        )
+        thread.start()
+        started.wait()
+        if failure:
+            raise failure[0]
+        self._loop, self._thread = loop, thread
+        if not self._exit_hook:
+            atexit.register(shutdown)
+            self._exit_hook = True
+        return loop
+
+    def _serve(
+        self,
+        loop: asyncio.AbstractEventLoop,
+        started: threading.Event,
+        failure: list[BaseException],
+    ) -> None:
+        asyncio.set_event_loop(loop)
+        try:
+            # V8 reads the time zone once; a VV must not observe the host's (Date is UTC here).
+            if os.environ.get("TZ") != "UTC":
+                os.environ["TZ"] = "UTC"
+                time.tzset()
+            init_mini_racer(flags=V8_FLAGS, ignore_duplicate_init=True)
+            self._idle = asyncio.Event()
+            self._idle.set()
+        except BaseException as exc:
+            failure.append(exc)
+            started.set()
+            loop.close()
+            return
+        started.set()
+        try:
+            loop.run_forever()
+        finally:
+            loop.close()
+
+    def on_owner_thread(self) -> bool:
+        return threading.current_thread() is self._thread
+
+    async def _tracked(self, work: Callable[[], Awaitable[T]]) -> T:
+        assert self._idle is not None
+        self._busy += 1
+        self._idle.clear()
+        try:
+            return await work()
+        finally:
+            self._busy -= 1
+            if self._busy == 0:
+                self._idle.set()
+
+    def call(self, work: Callable[[], Awaitable[T]]) -> T:
+        """Run the coroutine ``work()`` on the owner's loop and wait for its result."""
+        if self.on_owner_thread():
+            raise RuntimeError("a V8 call from the owner's own loop would wait for itself")
+        with self._lock:
+            # Scheduled under the lock: nothing is accepted after shutdown's own work.
+            loop = self._start()
+            future = asyncio.run_coroutine_threadsafe(self._tracked(work), loop)
+        return future.result()
+
+    def call_sync(self, work: Callable[[], T]) -> T:
+        """Run the quick function ``work()`` on the owner's loop and wait for its result."""
+        if self.on_owner_thread():
+            return work()
+
+        async def run() -> T:
+            return work()
+
+        return self.call(run)
+
+    # --- isolates -----------------------------------------------------------------------------
+
+    def new_isolate(self) -> Isolate:
+        """A new isolate (mini-racer's setTimeout installed, nothing else)."""
+
+        async def make() -> Isolate:
+            return self.adopt()
+
+        return self.call(make)
+
+    def adopt(self) -> Isolate:
+        """A new isolate, made on the owner's loop (for work already running there)."""
+        assert self.on_owner_thread()
+        loop = self._loop
+        assert loop is not None
+        isolate = Isolate(self, mini_racer(event_loop=loop))
+        isolate._enter()
+        self._isolates.add(isolate)
+        return isolate
+
+    def forget(self, isolate: Isolate) -> None:
+        """Close an isolate; on the owner's loop."""
+        self._isolates.discard(isolate)
+        isolate._exit()
+
+    def open_isolates(self) -> int:
+        return len(self._isolates)
+
+    def busy(self) -> int:
+        return self._busy
+
+    # --- the end ------------------------------------------------------------------------------
+
+    def shutdown(self, *, wait_s: float = SHUTDOWN_WAIT_S) -> None:
+        """Refuse new work, let the work in progress end, close every isolate on the owner's
+        thread and stop it. Idempotent; a later call to V8 raises V8Closed."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            loop, thread = self._loop, self._thread
+            if loop is None or thread is None:
+                return
+            if self.on_owner_thread():
+                raise RuntimeError("V8's owner cannot shut itself down")
+            future = asyncio.run_coroutine_threadsafe(self._close_all(wait_s), loop)
+        try:
+            future.result(wait_s + 10)
+        except Exception:
+            logger.exception("V8 did not stop cleanly")
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(10)
+
+    async def _close_all(self, wait_s: float) -> None:
+        assert self._idle is not None
+        try:
+            await asyncio.wait_for(self._idle.wait(), wait_s)
+        except TimeoutError:
+            # A script still runs: closing its isolate under it would crash the process.
+            logger.error("V8 work still running after %.0f s: isolates left open", wait_s)
+            return
+        # What is left is the owner's own background work (isolates made ahead of time).
+        background = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+        for task in background:
+            task.cancel()
+        await asyncio.gather(*background, return_exceptions=True)
+        for isolate in list(self._isolates):
+            self.forget(isolate)
+
+    def reset_after_fork(self) -> None:
+        """In a forked child: the parent's thread and isolates do not exist here."""
+        self._lock = threading.Lock()
+        self._loop = None
+        self._thread = None
+        self._closed = False
+        self._isolates = set()
+        self._busy = 0
+        self._idle = None
+
+
+_OWNER = _Owner()
+os.register_at_fork(after_in_child=_OWNER.reset_after_fork)
+
+
+def new_isolate() -> Isolate:
+    """A new V8 isolate owned by this process's V8 thread."""
+    return _OWNER.new_isolate()
+
+
+def call(work: Callable[[], Awaitable[T]]) -> T:
+    """Run a coroutine on the V8 thread (to use isolates there without a round trip per
+    call) and wait for its result."""
+    return _OWNER.call(work)
+
+
+def adopt() -> Isolate:
+    """A new isolate, from work already running on the V8 thread."""
+    return _OWNER.adopt()
+
+
+def open_isolates() -> int:
+    """How many isolates this process has open now."""
+    return _OWNER.open_isolates()
+
+
+def busy() -> int:
+    """How many calls to V8 are in progress in this process now."""
+    return _OWNER.busy()
+
+
+def shutdown(*, wait_s: float = SHUTDOWN_WAIT_S) -> None:
+    """Close every isolate of this process and stop the V8 thread (see the module's text).
+    Runs at interpreter exit; a server calls it when it stops. Idempotent."""
+    _OWNER.shutdown(wait_s=wait_s)
