@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 SCENARIO ?= examples/scenarios/paper-fig3.json
 
-.PHONY: demo test lint check bench bench-simulate bench-planner bench-load screenshots simulate-fig2 simulate-fig3 vendor clean
+.PHONY: demo test lint check bench bench-simulate bench-planner bench-load bench-burst screenshots simulate-fig2 simulate-fig3 vendor clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
@@ -49,6 +49,7 @@ bench: $(STAMP)
 	$(PY) -m bench.map_browser
 	$(MAKE) bench-planner
 	$(MAKE) bench-load
+	$(MAKE) bench-burst
 
 # simulate on growing fleets (10 and 100 RVs, 10 VVs an RV, 10 tasks a VV; bench/simulate.py,
 # ~15 minutes; BENCH_SIMULATE="--large" adds 1,000 RVs and 100,000 tasks, hours).
@@ -67,6 +68,12 @@ bench-planner: $(STAMP)
 bench-load: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[dev,bench]'
 	$(PY) -m bench.load
+
+# Many customers submitting at once: 20 bursts of 200 submissions from 16 clients to one daphne
+# (DEBUG off) on the machine's PostgreSQL (database cpcc_bench_burst, dropped and created anew)
+# and Redis (db 13, flushed), then SIGTERM under load: bench/submit_burst.py, ~2 minutes.
+bench-burst: $(STAMP)
+	$(PY) -m bench.submit_burst
 
 # The README's pictures of the web front end, from the real pages of a demo run (Playwright
 # driving /usr/bin/chromium): bench/screenshots.py, into docs/screenshots/.
