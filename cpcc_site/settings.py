@@ -293,7 +293,7 @@ SPECTACULAR_SETTINGS = {
 # Simulation: time acceleration of simulated vehicles (0 = discrete-event, no sleeping).
 CPCC_SIM_SPEED = env_float("CPCC_SIM_SPEED", 1.0, minimum=0.0)
 # Journal limits in the spirit of Temporal: a warning in the VV's log, then the VV is stopped
-# (every step replays the whole journal).
+# (a VV that moves to another host, or whose worker restarts, replays the whole journal).
 CPCC_JOURNAL_WARN_ENTRIES = int(env_float("CPCC_JOURNAL_WARN_ENTRIES", 10_000, minimum=1))
 CPCC_JOURNAL_MAX_ENTRIES = int(env_float("CPCC_JOURNAL_MAX_ENTRIES", 50_000, minimum=1))
 CPCC_JOURNAL_MAX_BYTES = int(env_float("CPCC_JOURNAL_MAX_BYTES", 50_000_000, minimum=1))

@@ -97,7 +97,7 @@ class VirtualVehicle(models.Model):
 class JournalEntry(models.Model):
     """One answer the VVM-API gave a VV (a task's readings or a rejection), in order.
 
-    Append-only: the journal and the program are the VV's checkpoint; a step replays them.
+    Append-only: the journal and the program are the VV's checkpoint, which a new context replays.
     """
 
     vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="journal")

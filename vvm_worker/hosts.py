@@ -25,7 +25,7 @@ from typing import Any
 
 from django.conf import settings
 from django.db import close_old_connections, connection
-from django.db.models import Q
+from django.db.models import Q, QuerySet
 
 from cpcc_site import database
 from fleet.mavlink.driver import MavlinkDriver
@@ -272,8 +272,7 @@ class RVHost:
         aboard = VirtualVehicle.objects.filter(
             host_rv_id=self.vehicle_id, status__in=ACTIVE_STATUSES
         )
-        for vv_id in aboard.order_by("submitted_s", "id").values_list("pk", flat=True):
-            vv_advance(vv_id=vv_id, vvm=self.vvm)
+        advance_each(aboard, vvm=self.vvm, vehicle=self.name)
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
         vehicle_register(vehicle=vehicle, vvm=self.vvm)
         self.loop.wake()
@@ -293,8 +292,7 @@ class RVHost:
 
     def _sweep(self) -> None:
         """Messages are hints: now and then, look for VVs aboard that wait for this host."""
-        for vv_id in stalled(host_rv_id=self.vehicle_id):
-            vv_advance(vv_id=vv_id, vvm=self.vvm)
+        advance_each(stalled(host_rv_id=self.vehicle_id), vvm=self.vvm, vehicle=self.name)
         self.loop.wake()
         self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
 
@@ -309,6 +307,11 @@ class GSHost:
         self.vvm = platform_vvm()
         self._stopping = threading.Event()
         self._watch = threading.Thread(target=self._watch_leases, name="lease-watch", daemon=True)
+        # The sweep's memory (its thread's own). No RV's worker can renew its lease while the
+        # database is down: after an outage, each gets a full lease's time to do so before
+        # its VVs are moved off it.
+        self._leases_from = 0.0  # time.monotonic() from which leases are checked
+        self._online: set[int] = set()  # the RVs whose lease was valid at the last sweep
 
     def advance(self, vv_id: uuid.UUID) -> None:
         vv_advance(vv_id=vv_id, vvm=self.vvm)
@@ -321,8 +324,7 @@ class GSHost:
 
     def start(self) -> None:
         here = VirtualVehicle.objects.filter(host_gs_id=self.station_id, status__in=ACTIVE_STATUSES)
-        for vv_id in here.order_by("submitted_s", "id").values_list("pk", flat=True):
-            vv_advance(vv_id=vv_id, vvm=self.vvm)
+        advance_each(here, vvm=self.vvm, ground_station=self.name)
         _admit_all(self.vvm)
         self._watch.start()
         logger.info("gs worker started", extra={"ground_station": self.name})
@@ -333,49 +335,74 @@ class GSHost:
 
     def _watch_leases(self) -> None:
         vvm = platform_vvm()  # a runtime of this thread's own
-        # No RV's worker can renew its lease while the database is down: after an outage,
-        # each gets a full lease's time to do so before its VVs are moved off it.
-        leases_from = 0.0
-        online: set[int] = set()
         try:
             while not self._stopping.wait(min(SWEEP_S, settings.CPCC_RV_LEASE_S / 4)):
                 close_old_connections()
                 try:
-                    if time.monotonic() >= leases_from:
-                        try:
-                            vehicles_check_leases(vvm=vvm)
-                        except LeasesUnsure:
-                            leases_from = time.monotonic() + settings.CPCC_RV_LEASE_S
-                    # An RV whose lease came back (its worker stalled, or the database was
-                    # down) may serve VVs that were sent to wait meanwhile.
-                    now_online = set(online_vehicles(vvm).values_list("pk", flat=True))
-                    if now_online - online:
-                        vvs_reroute_waiting(vvm=vvm)
-                    online = now_online
-                    # Messages are hints: pick up what a lost one would have started, and
-                    # look again at VVs that have waited here for an RV for a while.
-                    for vv_id in stalled(host_gs_id=self.station_id, waiting_s=WAITING_LOOK_S):
-                        vv_advance(vv_id=vv_id, vvm=vvm)
-                    _admit_all(vvm)
+                    self.sweep_once(vvm)
                 except Exception as exc:
                     if not database.is_outage(exc):
-                        logger.exception("sweep failed")
+                        logger.exception("sweep failed", extra={"ground_station": self.name})
                         continue
                     logger.warning("database unavailable: the sweep waits")
                     if database.wait_until_available(self._stopping):
-                        leases_from = time.monotonic() + settings.CPCC_RV_LEASE_S
+                        self._leases_from = time.monotonic() + settings.CPCC_RV_LEASE_S
         finally:
             connection.close()
 
+    def sweep_once(self, vvm: VVM) -> None:
+        """One look at what needs this station: the RVs' leases, the VVs that can go to an
+        RV come back, the VVs here that a lost message left waiting, and queued VVs. A VV (or
+        a customer's admission) whose work fails is logged and the others go on; a database
+        outage is raised."""
+        if time.monotonic() >= self._leases_from:
+            try:
+                vehicles_check_leases(vvm=vvm)
+            except LeasesUnsure:
+                self._leases_from = time.monotonic() + settings.CPCC_RV_LEASE_S
+        # An RV whose lease came back (its worker stalled, or the database was down) may
+        # serve VVs that were sent to wait meanwhile.
+        now_online = set(online_vehicles(vvm).values_list("pk", flat=True))
+        if now_online - self._online:
+            vvs_reroute_waiting(vvm=vvm)
+        self._online = now_online
+        # Messages are hints: pick up what a lost one would have started, and look again at
+        # VVs that have waited here for an RV for a while.
+        waiting = stalled(host_gs_id=self.station_id, waiting_s=WAITING_LOOK_S)
+        advance_each(waiting, vvm=vvm, ground_station=self.name)
+        _admit_all(vvm)
+
+
+def advance_each(vvs: QuerySet[VirtualVehicle], *, vvm: VVM, **host: str) -> None:
+    """Advance these VVs, oldest first. One whose advance fails for another reason than a
+    database outage (a platform bug) is logged, naming it, its customer and ``host``, and the
+    others go on; an outage is raised, for the caller to wait out and do all again."""
+    rows = list(vvs.order_by("submitted_s", "id").values_list("pk", "customer__slug"))
+    for vv_id, customer in rows:
+        try:
+            vv_advance(vv_id=vv_id, vvm=vvm)
+        except Exception as exc:
+            if database.is_outage(exc):
+                raise
+            logger.exception(
+                "vv advance failed", extra={"vv": str(vv_id), "customer": customer, **host}
+            )
+
 
 def _admit_all(vvm: VVM) -> None:
-    """Start queued VVs of every customer as far as its quota allows."""
-    queued = VirtualVehicle.objects.filter(status=VVStatus.QUEUED)
-    for customer_id in queued.values_list("customer_id", flat=True).distinct():
-        vv_admit_queued(customer_id=customer_id, vvm=vvm)
+    """Start queued VVs of every customer as far as its quota allows. A customer whose
+    admission fails (not for a database outage, which is raised) is logged; the others go on."""
+    queued = VirtualVehicle.objects.filter(status=VVStatus.QUEUED).order_by("customer_id")
+    for customer_id, customer in queued.values_list("customer_id", "customer__slug").distinct():
+        try:
+            vv_admit_queued(customer_id=customer_id, vvm=vvm)
+        except Exception as exc:
+            if database.is_outage(exc):
+                raise
+            logger.exception("admission failed", extra={"customer": customer})
 
 
-def stalled(*, waiting_s: float | None = None, **host: int) -> list[uuid.UUID]:
+def stalled(*, waiting_s: float | None = None, **host: int) -> QuerySet[VirtualVehicle]:
     """VVs on a host that have not moved for a while although they could: answered but not
     resumed, or arrived but not taken up (their message was lost); with ``waiting_s``, also
     those that have waited that long for an RV (routed again, they wait ``waiting_s`` more)."""
@@ -385,8 +412,7 @@ def stalled(*, waiting_s: float | None = None, **host: int) -> list[uuid.UUID]:
         look |= Q(
             status=VVStatus.RUNNING, pending__isnull=False, updated__lt=db_time_ago(waiting_s)
         )
-    vvs = VirtualVehicle.objects.filter(look, **host)
-    return list(vvs.order_by("submitted_s", "id").values_list("pk", flat=True))
+    return VirtualVehicle.objects.filter(look, **host)
 
 
 _host: RVHost | GSHost | None = None

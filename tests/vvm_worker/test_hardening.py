@@ -144,8 +144,8 @@ for (var n = 0; n < 3; n++) {
 """
 
 
-class Crash(Exception):
-    pass
+class Crash(BaseException):
+    """A worker killed mid-step: no Exception (the platform fails a VV whose step raises one)."""
 
 
 def run_until_task(platform, vv, q: int) -> Task:

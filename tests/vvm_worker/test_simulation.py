@@ -283,18 +283,70 @@ def test_the_platform_resumes_programs_rather_than_replaying_them(monkeypatch) -
     program suspended where it waits from its first task to its last, and every answer in a
     journal is read once (a replay at each step would read the first one at every step)."""
     from missions.models import JournalEntry
-    from vvm_worker.runtime import engine
+    from vvm_worker.runtime import context
 
     reads: list[int] = []
-    step = engine.VVContext.step
+    step = context.VVContext.step
 
     def counting(self, given):
         result = step(self, given)
         reads.append(result.answers_read)
         return result
 
-    monkeypatch.setattr(engine.VVContext, "step", counting)
+    monkeypatch.setattr(context.VVContext, "step", counting)
     summary = run(SCENARIOS / "paper-fig3.json")
     assert summary["migrations"]
     assert all(vv["status"] == "finished" for vv in summary["vvs"])
     assert sum(reads) == JournalEntry.objects.count() > len(summary["vvs"])
+
+
+# In Heli One's area of Figure 3: a task there, then what each program does to the platform.
+HOSTILE_TASK = (
+    "VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(48.1111, 12.8619, 20),"
+    " tolerance: 2, sensors: [VV.sensor.get('CO2')]});\n"
+)
+HOSTILE = {
+    "Surrogate key": HOSTILE_TASK + "VV.storage.store('bad\\uD800key', 1);\n",
+    "Emoji log": HOSTILE_TASK
+    + "VV.log('\\uD83D\\uDE00'.repeat(2500)); VV.storage.store('ok', 1);\n",
+    "Deep value": HOSTILE_TASK
+    + "var v = 0; for (var i = 0; i < 5000; i++) v = [v]; VV.storage.store('deep', v);\n",
+    "Catch pattern": HOSTILE_TASK
+    + "try { throw {code: 7}; } catch ({code, // the code\n message = 'none'}) {"
+    " VV.storage.store('code', code); }\n" + HOSTILE_TASK,
+    "No semicolons": "var count = 0\n" + HOSTILE_TASK.rstrip(";\n") + "\ncount++\n"
+    "VV.storage.store('count', count)\n",
+    "Async": "async function f() { await 1; }\nf();\n" + HOSTILE_TASK,
+    "Megabytes of log": HOSTILE_TASK
+    + "for (var i = 0; i < 20000; i++) VV.log(i + 'x'.repeat(3990));\n"
+    + HOSTILE_TASK,
+}
+
+
+@pytest.mark.django_db
+def test_hostile_programs_end_as_javascript_says_and_the_rest_runs_on() -> None:
+    """Issue 21's red-team programs through `simulate`: none crashes the run, each ends with
+    what JavaScript says or a clear error, and the paper's VVs finish as ever."""
+    data = scenario_with()
+    for name, source in HOSTILE.items():
+        data["vvs"].append({"customer": "Customer A", "name": name, "source": source})
+    summary = Simulation(parse(data)).run()
+    by_name = {v["name"]: v for v in summary["vvs"]}
+    assert by_name["Surrogate key"]["status"] == "failed"
+    assert "RangeError" in by_name["Surrogate key"]["error"]
+    assert "lone surrogate" in by_name["Surrogate key"]["error"]
+    assert by_name["Emoji log"]["status"] == "finished"
+    assert by_name["Emoji log"]["storage"] == {"ok": 1}
+    assert by_name["Deep value"]["status"] == "failed"
+    assert "more than 100 levels deep" in by_name["Deep value"]["error"]
+    assert by_name["Catch pattern"]["status"] == "finished"
+    assert by_name["Catch pattern"]["storage"] == {"code": 7}
+    assert by_name["No semicolons"]["status"] == "finished"
+    assert by_name["No semicolons"]["storage"] == {"count": 1}
+    assert by_name["Async"]["status"] == "failed"
+    assert "async functions are not supported" in by_name["Async"]["error"]
+    assert by_name["Megabytes of log"]["status"] == "killed"
+    assert "quota: V8 heap" in by_name["Megabytes of log"]["error"]
+    for name in ("VV 1", "VV 2", "VV 3"):
+        assert by_name[name]["status"] == "finished"
+        assert set(by_name[name]["storage"]) == KEYS

@@ -60,6 +60,16 @@
   const setHas = Set.prototype.has;
   const setAdd = Set.prototype.add;
   const stringSlice = String.prototype.slice;
+  const stringIsWellFormed = String.prototype.isWellFormed;
+  const stringToWellFormed = String.prototype.toWellFormed;
+  const stringIndexOf = String.prototype.indexOf;
+  const stringReplaceAll = String.prototype.replaceAll;
+  const regExpExec = RegExp.prototype.exec;
+  const objectIsExtensible = Object.isExtensible;
+  const mathFloor = Math.floor;
+  const mathMin = Math.min;
+  const reflectConstruct = Reflect.construct;
+  const symbolIterator = Symbol.iterator;
 
   function push(list, item) {
     list[list.length] = item;
@@ -74,6 +84,12 @@
     'FinalizationRegistry', 'Intl', 'Temporal']) {
     delete global[name];
   }
+  // Promise jobs run when V8's microtask queue is drained: after a step has returned, so at
+  // other points warm and replayed (and async functions stopped at their first await). A VV
+  // waits by blocking calls: Promise goes (async functions, await and import() are refused
+  // when the program is submitted; Array.fromAsync is the one other way to a promise).
+  delete global.Promise;
+  delete Array.fromAsync;
 
   // --- the state of the current run ------------------------------------------------------------
   let run = null; // set by step(); the API objects of a run close over their own state
@@ -99,6 +115,66 @@
   VVDate.UTC = RealDate.UTC;
   defineProperty(RealDate.prototype, 'constructor', { value: VVDate, writable: true, configurable: true });
   defineProperty(global, 'Date', { value: VVDate, writable: true, configurable: true });
+
+  // --- memory outside the heap: ArrayBuffers and typed arrays --------------------------------
+  // Their bytes live outside V8's heap, where the heap quota does not see them. Every
+  // allocation goes through these constructors and counts against the same quota, added up
+  // over the run (the same sum warm and replayed: see run.allocate).
+  const RealArrayBuffer = ArrayBuffer;
+  function toLength(value) {
+    const n = +value;
+    if (!(n > 0)) return 0;
+    return mathMin(mathFloor(n), 9007199254740991);
+  }
+  function allocate(bytes, what) {
+    if (run !== null && bytes > 0) run.allocate(bytes, what);
+  }
+  function replaceConstructor(name, Original, bytesOf) {
+    function Checked(...args) {
+      if (new.target === undefined) return reflectApply(Original, this, args);
+      allocate(bytesOf(args), name);
+      return reflectConstruct(Original, args, new.target === Checked ? Original : new.target);
+    }
+    defineProperty(Checked, 'name', { value: name });
+    defineProperty(Checked, 'length', { value: Original.length });
+    for (const key of ownKeys(Original)) {
+      if (key === 'prototype' || key === 'length' || key === 'name') continue;
+      defineProperty(Checked, key, getOwnPropertyDescriptor(Original, key));
+    }
+    Object.setPrototypeOf(Checked, getPrototypeOf(Original));
+    defineProperty(Checked, 'prototype', { value: Original.prototype, writable: false });
+    defineProperty(Original.prototype, 'constructor', { value: Checked, writable: true, configurable: true });
+    defineProperty(global, name, { value: Checked, writable: true, configurable: true });
+  }
+  replaceConstructor('ArrayBuffer', RealArrayBuffer, function (args) {
+    const options = args[1];
+    const most = options !== null && typeof options === 'object' ? toLength(options.maxByteLength) : 0;
+    return toLength(args[0]) > most ? toLength(args[0]) : most;
+  });
+  const arrayBufferTransfer = RealArrayBuffer.prototype.transfer;
+  const arrayBufferTransferFixed = RealArrayBuffer.prototype.transferToFixedLength;
+  defineProperty(RealArrayBuffer.prototype, 'transfer', { value: function transfer(length) {
+    allocate(toLength(length), 'ArrayBuffer.prototype.transfer');
+    return reflectApply(arrayBufferTransfer, this, arguments);
+  }, writable: true, configurable: true });
+  defineProperty(RealArrayBuffer.prototype, 'transferToFixedLength', { value: function transferToFixedLength(length) {
+    allocate(toLength(length), 'ArrayBuffer.prototype.transferToFixedLength');
+    return reflectApply(arrayBufferTransferFixed, this, arguments);
+  }, writable: true, configurable: true });
+  for (const name of ['Int8Array', 'Uint8Array', 'Uint8ClampedArray', 'Int16Array', 'Uint16Array',
+    'Int32Array', 'Uint32Array', 'Float16Array', 'Float32Array', 'Float64Array', 'BigInt64Array',
+    'BigUint64Array']) {
+    const Original = global[name];
+    if (typeof Original !== 'function') continue;
+    const size = Original.BYTES_PER_ELEMENT;
+    replaceConstructor(name, Original, function (args) {
+      const a = args[0];
+      if (a === null || a === undefined) return 0;
+      if (typeof a !== 'object') return toLength(a) * size;
+      if (a instanceof RealArrayBuffer) return 0; // a view of a buffer that exists
+      return typeof a.length === 'number' ? toLength(a.length) * size : 0;
+    });
+  }
 
   // --- freezing the built-ins ---------------------------------------------------------------------
   // Assigning a property that a frozen prototype also has fails (the "override mistake"), which
@@ -180,6 +256,9 @@
     if ('value' in desc) push(roots, desc.value);
   }
   for (let i = 0; i < hidden.length; i++) push(roots, hidden[i]);
+  // The global object's own prototype (an object of its own in V8, not Object.prototype):
+  // what a run put on it would outlive the run.
+  push(roots, getPrototypeOf(global));
   harden(roots);
 
   const RUN_GLOBALS = ['VV', 'TaskRejectedError', 'logInfo', 'getStdOut'];
@@ -189,7 +268,7 @@
   // Deletes what the last run added to the global object. False when it cannot, and the
   // context must not be reused.
   function resetGlobals() {
-    if (getPrototypeOf(global) !== baselineProto) return false;
+    if (getPrototypeOf(global) !== baselineProto || !objectIsExtensible(global)) return false;
     const keys = ownKeys(global);
     for (let i = 0; i < keys.length; i++) {
       if (!reflectApply(setHas, baseline, [keys[i]]) && !reflectDeleteProperty(global, keys[i])) return false;
@@ -359,6 +438,47 @@
   const MAX_ALT_M = 20000;
   const MAX_KEY = 128;
   const MAX_LINE = 4000;
+  // Deeper values could not be read back by the platform (nor by most JSON readers).
+  const MAX_DEPTH = 100;
+  // In a JSON text: an escape of U+0000 or of a lone surrogate (JSON.stringify writes a lone
+  // surrogate as an escape and a whole pair as it is), after an even run of backslashes.
+  const UNSTORABLE_ESCAPE = /(?:^|[^\\])(?:\\\\)*\\u(?:0000|d[89a-f])/;
+  const RESET_MATCH = /(?:)/;
+
+  // Bytes of `s` in UTF-8 (what the storage quota counts). `s` is well-formed.
+  function utf8Bytes(s) {
+    let n = s.length;
+    for (let i = 0; i < s.length; i++) {
+      const c = s.charCodeAt(i);
+      if (c < 0x80) continue;
+      if (c < 0x800) n += 1;
+      else if (c >= 0xd800 && c <= 0xdbff) { n += 2; i++; } // a pair: 2 units, 4 bytes
+      else n += 2;
+    }
+    return n;
+  }
+
+  // How deep arrays and objects nest in a JSON text (strings skipped).
+  function jsonDepth(text) {
+    let depth = 0;
+    let most = 0;
+    for (let i = 0; i < text.length; i++) {
+      const c = text.charCodeAt(i);
+      if (c === 34) { // a string: to its closing quote
+        for (i++; i < text.length; i++) {
+          const d = text.charCodeAt(i);
+          if (d === 92) i++;
+          else if (d === 34) break;
+        }
+      } else if (c === 91 || c === 123) {
+        depth++;
+        if (depth > most) most = depth;
+      } else if (c === 93 || c === 125) {
+        depth--;
+      }
+    }
+    return most;
+  }
 
   function describe(value) {
     if (typeof value === 'string') return jsonStringify(value);
@@ -433,9 +553,11 @@
     let effectSeq = 0;
     let cursor = 0;
     let startCursor = 0; // where this step's reading of the journal began
+    let resumed = false; // this step resumed the program where it waited (no replay)
     let requestSeq = 0;
     let tasksRequested = 0;
-    let storageChars = 0;
+    let storageChars = 0; // UTF-8 bytes of the keys and JSON texts stored
+    let allocated = 0; // bytes of ArrayBuffers and typed arrays made by this run
     const storage = new RealMap();
     const sdc = new RealMap();
     for (let i = 0; i < catalog.length; i++) reflectApply(mapSet, sdc, [catalog[i].name, catalog[i]]);
@@ -626,6 +748,12 @@
       if (typeof key !== 'string' || key.length === 0 || key.length > MAX_KEY) {
         throw new TypeError(where + ': the key must be a string of 1 to ' + MAX_KEY + ' characters, got ' + describe(key));
       }
+      if (!reflectApply(stringIsWellFormed, key, [])) {
+        throw new RangeError(where + ': the key ' + jsonStringify(key) + ' holds a lone surrogate (half of a UTF-16 pair): a key must be valid Unicode');
+      }
+      if (reflectApply(stringIndexOf, key, ['\u0000']) >= 0) {
+        throw new RangeError(where + ': the key ' + jsonStringify(key) + ' holds the character U+0000, which cannot be stored');
+      }
     }
 
     function store(key, value) {
@@ -640,8 +768,15 @@
       if (text === undefined) {
         throw new TypeError('VV.storage.store(' + jsonStringify(key) + ', value): the value must be JSON (not undefined or a function)');
       }
+      if (reflectApply(regExpTest, UNSTORABLE_ESCAPE, [text])) {
+        throw new RangeError('VV.storage.store(' + jsonStringify(key) + ', value): the value holds a string with a lone surrogate (half of a UTF-16 pair) or the character U+0000, which cannot be stored');
+      }
+      if (jsonDepth(text) > MAX_DEPTH) {
+        throw new RangeError('VV.storage.store(' + jsonStringify(key) + ', value): the value nests arrays and objects more than ' + MAX_DEPTH + ' levels deep');
+      }
       const old = reflectApply(mapGet, storage, [key]);
-      const used = storageChars - (old === undefined ? 0 : key.length + old.length) + key.length + text.length;
+      const bytes = utf8Bytes(key) + utf8Bytes(text);
+      const used = storageChars - (old === undefined ? 0 : utf8Bytes(key) + utf8Bytes(old)) + bytes;
       if (effectSeq >= effectsApplied && used > limits.storageBytes) {
         stop('killed', 'storing ' + jsonStringify(key) + ' would use ' + used + ' bytes of storage, more than the ' +
           limits.storageBytes + ' allowed (quota: storage bytes)', 'storage');
@@ -686,7 +821,7 @@
       checkKey(key, 'VV.storage.remove(key)');
       const old = reflectApply(mapGet, storage, [key]);
       if (old === undefined) return false;
-      storageChars -= key.length + old.length;
+      storageChars -= utf8Bytes(key) + utf8Bytes(old);
       reflectApply(mapDelete, storage, [key]);
       effect('remove', key, null, null);
       return true;
@@ -703,10 +838,18 @@
       return stringOf(value);
     }
 
+    // A line as the platform can store it: cut at a code point, a lone surrogate or U+0000
+    // shown as U+FFFD.
     function logLine(args) {
       let line = '';
       for (let i = 0; i < args.length; i++) line += (i > 0 ? ' ' : '') + text(args[i]);
-      if (line.length > MAX_LINE) line = reflectApply(stringSlice, line, [0, MAX_LINE]) + '…';
+      if (line.length > MAX_LINE) {
+        const c = line.charCodeAt(MAX_LINE - 1);
+        const end = c >= 0xd800 && c <= 0xdbff ? MAX_LINE - 1 : MAX_LINE;
+        line = reflectApply(stringSlice, line, [0, end]) + '…';
+      }
+      line = reflectApply(stringToWellFormed, line, []);
+      if (reflectApply(stringIndexOf, line, ['\u0000']) >= 0) line = reflectApply(stringReplaceAll, line, ['\u0000', '\ufffd']);
       effect('log', null, null, line);
     }
 
@@ -748,6 +891,13 @@
       logInfo: function logInfo(msg) { allowed('log'); logLine([msg]); },
       getStdOut: function getStdOut() { return stdOut; },
     };
+    state.allocate = function (bytes, what) {
+      allocated += bytes;
+      if (limits.heapBytes !== undefined && allocated > limits.heapBytes) {
+        stop('killed', 'the VV made more than ' + mathFloor(limits.heapBytes / 1048576) +
+          ' MB of ArrayBuffers and typed arrays (' + what + '; quota: V8 heap)', 'heap');
+      }
+    };
     state.executeSteps = executeSteps;
     state.executeAllSteps = executeAllSteps;
     state.rethrow = function (e) { if (e === SUSPEND || suspended) throw SUSPEND; };
@@ -768,6 +918,7 @@
         effectsTotal: effectSeq,
         consumed: cursor,
         answersRead: cursor - startCursor,
+        replayed: !resumed,
         journalLength: journal.length,
         requests: requestSeq,
         storageBytes: storageChars,
@@ -792,6 +943,7 @@
       pending = null;
       suspended = false;
       startCursor = cursor;
+      resumed = true;
     };
     // Runs the program (or resumes it); true when it returned.
     state.drive = function (fn) {
@@ -861,6 +1013,12 @@
       host(key, 'setProgram');
       program = hook(fn);
     },
+    // Whether a step with the run input `json` would resume where the program waits (and
+    // so only run new work) rather than run it from its first line.
+    willResume: function (key, json) {
+      host(key, 'willResume');
+      return run !== null && run.canResume(jsonParse(json));
+    },
     // Journal entries as a JSON array (see JournalEntry).
     append: function (key, json) {
       host(key, 'append');
@@ -880,15 +1038,18 @@
         run.resume(input);
       } else {
         const previousStorage = run === null ? null : run.storage;
-        const wasParked = run !== null && run.isParked();
         run = null;
         if (!resetGlobals()) {
+          // What the last run left on the global object (a global it made undeletable, the
+          // global object frozen) cannot be cleared: a run here would see it. The host makes
+          // a new context and replays there.
           tainted = true;
-          // What the parked program left on the global object cannot be cleared: a run here
-          // would see it. The host makes a new context.
-          if (wasParked) return jsonStringify({ status: 'stale', tainted: true });
+          return jsonStringify({ status: 'stale', tainted: true });
         }
         run = newRun(input, previousStorage);
+        // RegExp's legacy statics (RegExp.input, $1, lastMatch...) outlive a run; a new run
+        // starts them as a new context does.
+        reflectApply(regExpExec, RESET_MATCH, ['']);
         for (let i = 0; i < RUN_GLOBALS.length; i++) {
           const name = RUN_GLOBALS[i];
           defineProperty(global, name, { value: run.globals[name], writable: false, enumerable: false, configurable: true });

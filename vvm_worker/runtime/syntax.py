@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from vvm_worker.runtime import v8
+from vvm_worker.runtime.instrument import unsupported
 from vvm_worker.runtime.v8 import (
     JSEvalException,
     JSOOMException,
@@ -24,7 +25,8 @@ CHECKS_PER_ISOLATE = 500
 
 @dataclass(frozen=True, slots=True)
 class SyntaxProblem:
-    """A program V8 cannot parse: the message and where (1-based line and column)."""
+    """A program V8 cannot parse, or one that uses what a VV program may not (``async``,
+    ``await``, ``import()``): the message and where (1-based line and column)."""
 
     message: str
     line: int
@@ -115,7 +117,9 @@ _CHECKER = _Checker()
 
 @lru_cache(maxsize=512)
 def check_syntax(source: str) -> SyntaxProblem | None:
-    """V8's verdict on the program's syntax, without running any of it.
+    """V8's verdict on the program's syntax, without running any of it, then what a VV program
+    may not use although V8 parses it (``instrument.unsupported``: async functions and
+    ``await``, whose continuations would never run, and ``import()``).
 
     The check evaluates ``throw 0;`` in front of the program on its first line (see
     ``_Checker``). A leading "use strict" directive is kept in front. Safe from any thread.
@@ -133,7 +137,8 @@ def check_syntax(source: str) -> SyntaxProblem | None:
     script = prefix + body + "\n//# sourceURL=" + PROGRAM_NAME
     text = v8.call(lambda: _CHECKER.parse_error(script))
     if text is None:
-        return None
+        refused = unsupported(source)
+        return None if refused is None else SyntaxProblem(*refused)
     message, line, column = parse_v8_message(text, parse_error=True, first_line_offset=len(prefix))
     line = line or 1
     column = column or 1

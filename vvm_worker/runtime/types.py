@@ -64,8 +64,10 @@ class StepInput:
     ``journal`` holds the answers the VVM-API gave so far, in order (as objects or as JSON
     text, as a database keeps them); ``effects_applied`` is how
     many of the program's effects (storage writes, log lines) the platform has already applied.
-    ``start_ms`` is the VV's logical time before its first answer; ``previous_step_s`` the
-    duration of the last step, which bounds how long the replay part of this one may take.
+    ``start_ms`` is the VV's logical time before its first answer; ``replay_s`` how long
+    running the program from its first line to where it waits takes (``StepResult.replay_time``
+    of the last step): a step that has to replay gets that long again, twice, on top of its
+    CPU quota; a step that resumes where the program waits gets the quota alone.
     """
 
     vv_id: str
@@ -77,7 +79,7 @@ class StepInput:
     journal: Sequence[Mapping[str, JSON] | str] = ()  # entries, or their JSON text
     effects_applied: int = 0
     limits: Limits = field(default_factory=Limits)
-    previous_step_s: float = 0.0
+    replay_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -117,6 +119,34 @@ class PendingRequest:
     fingerprint: str | None
     tasks: tuple[TaskRequest, ...]
     open: tuple[int, ...]
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> PendingRequest:
+        """The request as the prelude reports it and the VV's row keeps it (``to_json``)."""
+        tasks = tuple(TaskRequest.from_json(t) for t in data["tasks"])
+        return cls(
+            kind=str(data["kind"]),
+            q=int(data["q"]),
+            fingerprint=data.get("r"),
+            tasks=tasks,
+            open=tuple(int(i) for i in data.get("open", range(len(tasks)))),
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "kind": self.kind,
+            "q": self.q,
+            "r": self.fingerprint,
+            "tasks": [
+                {
+                    "position": {"lat": t.lat, "lng": t.lng, "alt": t.alt},
+                    "tolerance": t.tolerance_m,
+                    "sensors": list(t.sensors),
+                }
+                for t in self.tasks
+            ],
+            "open": list(self.open),
+        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -163,3 +193,10 @@ class StepResult:
     # Journal answers the program read in this step: all it has had when the step re-ran it
     # from its first line (replay), only the new ones when it resumed where it waited.
     answers_read: int = 0
+    replayed: bool = True  # the program ran from its first line (not resumed where it waited)
+
+    def replay_time(self, replay_s: float) -> float:
+        """How long a replay of the program up to where it waits now takes, from the time
+        before this step (``StepInput.replay_s``): this step's, when it ran the program from
+        its first line, else that time and this step's own added."""
+        return self.duration_s if self.replayed else replay_s + self.duration_s

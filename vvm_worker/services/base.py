@@ -28,7 +28,6 @@ from vvm_worker.runtime import (
     PendingRequest,
     Runtime,
     SyntaxProblem,
-    TaskRequest,
 )
 
 logger = logging.getLogger("cpcc.vvm")
@@ -85,33 +84,11 @@ def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> Grou
 
 def pending_json(p: PendingRequest) -> dict[str, Any]:
     """A pending request as the VV row keeps it."""
-    return {
-        "kind": p.kind,
-        "q": p.q,
-        "r": p.fingerprint,
-        "tasks": [
-            {
-                "position": {"lat": t.lat, "lng": t.lng, "alt": t.alt},
-                "tolerance": t.tolerance_m,
-                "sensors": list(t.sensors),
-            }
-            for t in p.tasks
-        ],
-        "open": list(p.open),
-    }
+    return p.to_json()
 
 
 def pending_of(vv: VirtualVehicle) -> PendingRequest | None:
-    data = vv.pending
-    if not data:
-        return None
-    return PendingRequest(
-        kind=data["kind"],
-        q=int(data["q"]),
-        fingerprint=data.get("r"),
-        tasks=tuple(TaskRequest.from_json(t) for t in data["tasks"]),
-        open=tuple(data.get("open", ())),
-    )
+    return PendingRequest.from_json(vv.pending) if vv.pending else None
 
 
 def db_time_ago(seconds: float) -> ExpressionWrapper:

@@ -1,4 +1,4 @@
-"""A VV's journal: the append-only answers of the VVM-API that a step replays, and its limits."""
+"""A VV's journal: the append-only answers of the VVM-API, which a new context replays, and its limits."""
 
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ def journal_append(vv: VirtualVehicle, entry: dict[str, Any], vvm: VVM) -> None:
             level="warning",
             message=f"the journal holds {vv.journal_length:,} answers; a VV stops at "
             f"{settings.CPCC_JOURNAL_MAX_ENTRIES:,} answers or "
-            f"{settings.CPCC_JOURNAL_MAX_BYTES // 1_000_000} MB (every step replays it)",
+            f"{settings.CPCC_JOURNAL_MAX_BYTES // 1_000_000} MB (a VV that moves replays it)",
         )
 
 

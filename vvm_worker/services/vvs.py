@@ -14,6 +14,7 @@ from django.db.models import F
 
 from accounts.models import Customer, User
 from accounts.selectors import customer_catalog
+from cpcc_site import database
 from fleet.models import Vehicle
 from missions.events import task_event, vv_event
 from missions.models import (
@@ -38,6 +39,8 @@ from vvm_worker.runtime import (
     answer_task,
     check_syntax,
 )
+from vvm_worker.runtime.types import Effect
+from vvm_worker.runtime.v8 import V8Closed
 from vvm_worker.services.base import (
     VVM,
     ProgramRejected,
@@ -84,6 +87,24 @@ class VVNotQueued(RuntimeError):
 MAX_STEPS_PER_ADVANCE = 50
 # Copies of one program a user may submit at once (the web editor's "copies").
 MAX_COPIES = 50
+# How deeply a stored value may nest: far below Python's recursion limit, which parsing it
+# here and on every later read of the document must stay clear of.
+MAX_VALUE_DEPTH = 100
+_KEY_CHARS = StorageDocument._meta.get_field("key").max_length or 0
+_SHOWN_KEY_CHARS = 40  # of a key quoted in an error
+
+
+class _Unstorable(ValueError):
+    """An effect of a step that the database cannot store, with what is wrong and where."""
+
+
+class _StepBroke(Exception):
+    """The platform could not run a VV's step or apply its result: a bug of the platform (not
+    a database outage), which would happen again on every retry."""
+
+    def __init__(self, cause: Exception) -> None:
+        super().__init__(f"{type(cause).__name__}: {cause}")
+        self.cause = cause
 
 
 def vv_submit(
@@ -155,6 +176,18 @@ def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
 
 
 def _step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
+    """Run the VV's next step and apply what it did. Raises _StepBroke when that fails for any
+    other reason than a database outage or a process that stops (both leave the step to be
+    done again)."""
+    try:
+        return _run_step(vv, vvm)
+    except Exception as exc:
+        if isinstance(exc, V8Closed) or database.is_outage(exc):
+            raise
+        raise _StepBroke(exc) from exc
+
+
+def _run_step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
     full = journal_full(vv)
     if full is not None:
         return StepResult(Outcome.KILLED, error=VVError(ErrorKind.QUOTA, full, quota="journal"))
@@ -168,57 +201,133 @@ def _step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
         journal=JournalView(vv),
         effects_applied=vv.effects_applied,
         limits=customer_limits(customer=vv.customer),
-        previous_step_s=vv.last_step_s,
+        replay_s=vv.last_step_s,
     )
     result = vvm.runtime.step(step)
-    _apply_effects(vv, result, vvm)
+    refused = _apply_effects(vv, result, vvm)
+    if refused is not None:
+        logger.warning("vv step refused: %s", refused, extra=_about(vv))
+        # The VV ends: its warm context (kept while it waited) holds effects never applied.
+        vvm.runtime.forget(str(vv.id))
+        result = StepResult(Outcome.FAILED, error=refused, duration_s=result.duration_s)
     vv.steps += 1
-    vv.last_step_s = result.duration_s
+    vv.last_step_s = result.replay_time(vv.last_step_s)
     if result.outcome is Outcome.SUSPENDED and result.pending is not None:
         vv.pending = pending_json(result.pending)
         _create_tasks(vv, result.pending, vvm)
     return result
 
 
-def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
-    """Apply a step's storage writes and log lines: one upsert, one delete, one insert."""
-    if result.effects:
-        final: dict[str, tuple[str | None, float]] = {}  # key -> (value JSON or None, time)
-        lines = []
-        for effect in result.effects:
-            at_s = vvm.clock.from_epoch_ms(effect.time_ms)
-            if effect.op == "store" and effect.key is not None:
-                final[effect.key] = (effect.value_json, at_s)
-            elif effect.op == "remove" and effect.key is not None:
-                final[effect.key] = (None, at_s)
-            elif effect.op == "log" and effect.message is not None:
-                lines.append(LogEntry(vv=vv, seq=effect.seq, at_s=at_s, message=effect.message))
-        stored = [
-            StorageDocument(
-                vv=vv,
-                key=key,
-                value=json.loads(text),
-                size_bytes=len(key) + len(text),
-                updated_s=at_s,
-            )
-            for key, (text, at_s) in final.items()
-            if text is not None
-        ]
-        if stored:
-            StorageDocument.objects.bulk_create(
-                stored,
-                update_conflicts=True,
-                unique_fields=["vv", "key"],
-                update_fields=["value", "size_bytes", "updated_s"],
-            )
-        removed = [key for key, (text, _) in final.items() if text is None]
-        if removed:
-            StorageDocument.objects.filter(vv=vv, key__in=removed).delete()
-        if lines:
-            # A line is numbered by the program: applying it twice would be a duplicate.
-            LogEntry.objects.bulk_create(lines, ignore_conflicts=True)
+def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> VVError | None:
+    """Apply a step's storage writes and log lines: one upsert, one delete, one insert.
+
+    When the database cannot store one of them (the runtime should have refused it already),
+    nothing is applied and the VV's error is returned, saying which effect and why.
+    """
+    try:
+        final, lines = _storable(vv, result.effects, vvm)
+    except _Unstorable as exc:
+        message = f"the platform could not apply this step: {exc} (nothing of the step was applied)"
+        return VVError(ErrorKind.PLATFORM, message)
+    stored = [doc for doc in final.values() if doc is not None]
+    if stored:
+        StorageDocument.objects.bulk_create(
+            stored,
+            update_conflicts=True,
+            unique_fields=["vv", "key"],
+            update_fields=["value", "size_bytes", "updated_s"],
+        )
+    removed = [key for key, doc in final.items() if doc is None]
+    if removed:
+        StorageDocument.objects.filter(vv=vv, key__in=removed).delete()
+    if lines:
+        # A line is numbered by the program: applying it twice would be a duplicate.
+        LogEntry.objects.bulk_create(lines, ignore_conflicts=True)
     vv.effects_applied = max(vv.effects_applied, result.effects_total)
     vv.storage_bytes = result.storage_bytes
+    return None
+
+
+def _storable(
+    vv: VirtualVehicle, effects: tuple[Effect, ...], vvm: VVM
+) -> tuple[dict[str, StorageDocument | None], list[LogEntry]]:
+    """A step's effects as rows: the last write of each key (None: removed) and the log lines.
+    Raises _Unstorable for the first effect that the database cannot store."""
+    final: dict[str, StorageDocument | None] = {}
+    lines = []
+    for effect in effects:
+        at_s = vvm.clock.from_epoch_ms(effect.time_ms)
+        if effect.op in ("store", "remove") and effect.key is not None:
+            key = effect.key
+            where = f"storage key {_quoted(key)}"
+            _check_text(key, where=where)
+            if len(key) > _KEY_CHARS:
+                raise _Unstorable(f"{where} is longer than {_KEY_CHARS} characters")
+            text = effect.value_json if effect.op == "store" else None
+            if text is None:
+                final[key] = None
+                continue
+            final[key] = StorageDocument(
+                vv=vv,
+                key=key,
+                value=_json_value(text, where=f"the value stored under {where}"),
+                size_bytes=len(key.encode()) + len(text.encode()),  # in UTF-8, as stored
+                updated_s=at_s,
+            )
+        elif effect.op == "log" and effect.message is not None:
+            _check_text(effect.message, where=f"log line {effect.seq}")
+            lines.append(LogEntry(vv=vv, seq=effect.seq, at_s=at_s, message=effect.message))
+    return final, lines
+
+
+def _check_text(text: str, *, where: str) -> None:
+    """Raise _Unstorable for a string that no database column takes: PostgreSQL stores no
+    U+0000 (in text or in a JSON value), and no UTF-8 encodes a lone UTF-16 surrogate."""
+    nul = text.find("\x00")
+    if nul >= 0:
+        raise _Unstorable(f"{where} has the character U+0000 (character {nul + 1})")
+    try:
+        text.encode()
+    except UnicodeEncodeError as exc:
+        raise _Unstorable(
+            f"{where} has a lone UTF-16 surrogate (character {exc.start + 1})"
+        ) from None
+
+
+def _json_value(text: str, *, where: str) -> Any:
+    """The value of a JSON text, checked for what the database cannot store; _Unstorable if
+    it is not JSON, nests deeper than MAX_VALUE_DEPTH or holds a string _check_text refuses.
+    The check walks the value with a list, not by recursion, however deep it is."""
+    try:
+        value = json.loads(text)
+    except RecursionError:  # deeper than the parser's recursion goes
+        raise _Unstorable(f"{where} nests more than {MAX_VALUE_DEPTH} levels deep") from None
+    except ValueError as exc:
+        raise _Unstorable(f"{where} is not valid JSON ({exc})") from None
+    todo: list[tuple[Any, int]] = [(value, 0)]
+    while todo:
+        item, depth = todo.pop()
+        if isinstance(item, str):
+            _check_text(item, where=f"a string in {where}")
+        elif isinstance(item, list | dict):
+            if depth >= MAX_VALUE_DEPTH:
+                raise _Unstorable(f"{where} nests more than {MAX_VALUE_DEPTH} levels deep")
+            children = item if isinstance(item, list) else [*item, *item.values()]
+            todo.extend((child, depth + 1) for child in children)
+    return value
+
+
+def _quoted(key: str) -> str:
+    """A key as an error shows it: quoted, escaped to ASCII (it may hold what the database
+    refuses, and the error is stored too), and cut if long."""
+    shown = json.dumps(key[:_SHOWN_KEY_CHARS])
+    return shown + ("..." if len(key) > _SHOWN_KEY_CHARS else "")
+
+
+def _about(vv: VirtualVehicle) -> dict[str, str | None]:
+    """What a log line about a VV names: the VV, its customer and the RV it is on."""
+    rv = vv.host_rv
+    return {"vv": str(vv.id), "customer": vv.customer.slug, "vehicle": rv and rv.name}
 
 
 def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None:
@@ -253,15 +362,21 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
     """What the host holding a VV does with it: step it, then route its pending task.
 
     Safe to call twice: a VV that waits for an RV, has ended or is queued is left alone, and
-    one that no longer exists (a late message) is ignored.
+    one that no longer exists (a late message) is ignored. A step the platform cannot run or
+    apply (a bug of the platform, not of the program) is rolled back and the VV ends
+    ``failed`` saying so; a database outage is raised, for the caller to wait out and redo.
     """
+    try:
+        _advance(vv_id, vvm)
+    except _StepBroke as broke:
+        # Retried, the step would break again and again: end the VV, in a new transaction
+        # (the step's one is rolled back, so nothing of the step is half-applied).
+        _end_broken(vv_id=vv_id, cause=broke.cause, vvm=vvm)
+
+
+def _advance(vv_id: uuid.UUID, vvm: VVM) -> None:
     with transaction.atomic():
-        vv = (
-            VirtualVehicle.objects.select_for_update(of=("self",))
-            .select_related("customer", "host_gs", "host_rv")
-            .filter(pk=vv_id)
-            .first()
-        )
+        vv = _locked_vv(vv_id)
         if vv is None or vv.is_ended or vv.status == VVStatus.QUEUED:
             return
         if vv.status == VVStatus.MIGRATING:
@@ -278,6 +393,31 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
             # A program that keeps asking for tasks nobody can serve: let the host's other
             # work go first, then carry on (the tasks-per-VV quota bounds it).
             vvm.dispatcher.vv_arrived(vv.pk)
+        vv.save()
+        if announcing(vvm):
+            vvm.announcer.announce(vv_event(vv))
+
+
+def _locked_vv(vv_id: uuid.UUID) -> VirtualVehicle | None:
+    return (
+        VirtualVehicle.objects.select_for_update(of=("self",))
+        .select_related("customer", "host_gs", "host_rv")
+        .filter(pk=vv_id)
+        .first()
+    )
+
+
+def _end_broken(*, vv_id: uuid.UUID, cause: Exception, vvm: VVM) -> None:
+    """End a VV ``failed`` whose step the platform could not run or apply. The error names
+    the exception's type only; the traceback goes to the platform's log."""
+    with transaction.atomic():
+        vv = _locked_vv(vv_id)
+        if vv is None or vv.is_ended:
+            return
+        logger.error("vv step broke: the VV fails", exc_info=cause, extra=_about(vv))
+        vvm.runtime.forget(str(vv.id))  # the context may be in any state
+        message = f"the platform could not run or apply this VV's step ({type(cause).__name__})"
+        _end(vv, StepResult(Outcome.FAILED, error=VVError(ErrorKind.PLATFORM, message)), vvm)
         vv.save()
         if announcing(vvm):
             vvm.announcer.announce(vv_event(vv))

@@ -70,7 +70,7 @@ class Run:
     storage: dict[str, Any] = field(default_factory=dict)
     log: list[str] = field(default_factory=list)
     results: list[StepResult] = field(default_factory=list)
-    previous_step_s: float = 0.0
+    replay_s: float = 0.0
 
     def step(self) -> StepResult:
         result = run_step(
@@ -84,7 +84,7 @@ class Run:
                 journal=list(self.journal),
                 effects_applied=self.effects_applied,
                 limits=self.limits,
-                previous_step_s=self.previous_step_s,
+                replay_s=self.replay_s,
             )
         )
         for effect in result.effects:
@@ -96,7 +96,7 @@ class Run:
             else:
                 self.log.append(effect.message)
         self.effects_applied = max(self.effects_applied, result.effects_total)
-        self.previous_step_s = result.duration_s
+        self.replay_s = result.replay_time(self.replay_s)
         self.results.append(result)
         return result
 
@@ -138,5 +138,5 @@ def through_json(run: Run) -> Run:
         storage=run.storage,
         log=run.log,
         results=run.results,
-        previous_step_s=run.previous_step_s,
+        replay_s=run.replay_s,
     )

@@ -376,9 +376,13 @@ def test_a_batch_resumes_at_each_of_its_parts() -> None:
 
 def test_a_function_of_the_program_that_waits_resumes_too() -> None:
     source = f"""
+    function one() {{
+      return VV.task.execute({GPS_TASK})[0].value;
+    }}
     function reading(k, seen) {{
-      var d = VV.task.execute({GPS_TASK});
-      return k === 0 ? d[0].value : reading(k - 1, seen + 1) + d[0].value;  // recursion too
+      var total = one();
+      for (var j = 0; j < k; j++) total += one();  // a helper calling a helper
+      return total;
     }}
     function survey(n) {{
       var total = 0;
@@ -388,7 +392,8 @@ def test_a_function_of_the_program_that_waits_resumes_too() -> None:
     VV.storage.store('total', survey(3));
     VV.storage.store('single', reading(0, 0));
     """
-    assert "function* survey" in instrument_program(source).code
+    code = instrument_program(source).code
+    assert "function* survey" in code and "function* reading" in code and "function* one" in code
     host = Host(source)
     assert host.run().outcome is Outcome.FINISHED
     assert [r.answers_read for r in host.results] == [0] + [1] * 7
@@ -399,7 +404,7 @@ def test_a_function_of_the_program_that_waits_resumes_too() -> None:
 
 
 def test_a_program_v8_refuses_as_a_generator_runs_the_replay_way(monkeypatch) -> None:
-    from vvm_worker.runtime import engine
+    from vvm_worker.runtime import context
 
     def broken(source: str, *, suspendable: bool = True) -> Instrumented:
         done = instrument_program(source, suspendable=suspendable)
@@ -407,7 +412,7 @@ def test_a_program_v8_refuses_as_a_generator_runs_the_replay_way(monkeypatch) ->
             return replace(done, code=done.code + "\n)")
         return done
 
-    monkeypatch.setattr(engine, "instrument_program", broken)
+    monkeypatch.setattr(context, "instrument_program", broken)
     host = Host(LOOP)
     assert host.run().outcome is Outcome.FINISHED
     assert [r.answers_read for r in host.results][:4] == [0, 1, 2, 3]
