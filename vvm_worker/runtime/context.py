@@ -199,8 +199,9 @@ class VVContext:
         elif killed_by == "heap":
             killed = (self._heap_message(step), "heap")
         if killed is not None:
-            # V8 stopped the program where it was; what it did before (a callback's storage
-            # writes, say) still counts. The isolate is not used again.
+            # V8 stopped the program where it was; what it did before in the step (a
+            # callback's storage writes, say) still counts, except after a heap kill (below).
+            # The isolate is not used again.
             self.usable = False
         try:
             state = json.loads(raw) if isinstance(raw, str) else None
@@ -220,6 +221,11 @@ class VVContext:
             effects = _effects(state.get("effects") or ()) if isinstance(state, dict) else ()
             total = int(state.get("effectsTotal", 0)) if isinstance(state, dict) else 0
             message, quota = killed
+            if quota == "heap":
+                # Stopped for its heap, the program may have been stopped while the outcome
+                # was written, or the outcome may not be readable at all: which of its effects
+                # survive would depend on the garbage collector. None of this step's do.
+                effects, total = (), step.effects_applied
             return StepResult(
                 Outcome.KILLED,
                 error=VVError(ErrorKind.QUOTA, message, quota=quota),

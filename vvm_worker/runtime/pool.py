@@ -53,7 +53,7 @@ class Prepared:
 
 async def prepare() -> Prepared:
     """A new isolate with the prelude; on the V8 thread."""
-    isolate = v8.adopt()
+    isolate = await v8.adopt()
     key = json.dumps(secrets.token_hex(16))
 
     async def run(code: str) -> Any:

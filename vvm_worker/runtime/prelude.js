@@ -64,6 +64,7 @@
   const stringToWellFormed = String.prototype.toWellFormed;
   const stringIndexOf = String.prototype.indexOf;
   const stringReplaceAll = String.prototype.replaceAll;
+  const stringReplace = String.prototype.replace;
   const regExpExec = RegExp.prototype.exec;
   const objectIsExtensible = Object.isExtensible;
   const mathFloor = Math.floor;
@@ -445,8 +446,14 @@
   const UNSTORABLE_ESCAPE = /(?:^|[^\\])(?:\\\\)*\\u(?:0000|d[89a-f])/;
   const RESET_MATCH = /(?:)/;
 
+  // Fast paths in native code for what is common (a replay runs these loops in a new isolate,
+  // before V8 has compiled them): ASCII text, and text with few brackets.
+  const NON_ASCII = /[^\x00-\x7f]/;
+  const NOT_OPENING = /[^[{]+/g;
+
   // Bytes of `s` in UTF-8 (what the storage quota counts). `s` is well-formed.
   function utf8Bytes(s) {
+    if (!reflectApply(regExpTest, NON_ASCII, [s])) return s.length;
     let n = s.length;
     for (let i = 0; i < s.length; i++) {
       const c = s.charCodeAt(i);
@@ -458,8 +465,12 @@
     return n;
   }
 
-  // How deep arrays and objects nest in a JSON text (strings skipped).
+  // How deep arrays and objects nest in a JSON text (strings skipped); 0 when it has too few
+  // brackets to nest more than MAX_DEPTH.
   function jsonDepth(text) {
+    // Nesting deeper than MAX_DEPTH takes more opening brackets (and twice as many characters).
+    if (text.length <= 2 * MAX_DEPTH) return 0;
+    if (reflectApply(stringReplace, text, [NOT_OPENING, '']).length <= MAX_DEPTH) return 0;
     let depth = 0;
     let most = 0;
     for (let i = 0; i < text.length; i++) {

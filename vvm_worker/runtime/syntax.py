@@ -98,7 +98,7 @@ class _Checker:
             if self._isolate is None or self._uses >= CHECKS_PER_ISOLATE:
                 if self._isolate is not None:
                     self._isolate.close()
-                self._isolate, self._uses = v8.adopt(), 0
+                self._isolate, self._uses = await v8.adopt(), 0
             self._uses += 1
             try:
                 await self._isolate.eval_async(script, timeout_s=CHECK_TIMEOUT_S)

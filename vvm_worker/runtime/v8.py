@@ -31,6 +31,7 @@ import atexit
 import contextlib
 import logging
 import os
+import queue
 import threading
 import time
 from collections.abc import Awaitable, Callable
@@ -99,8 +100,9 @@ class Isolate:
         self._mr = self._manager.__enter__()
 
     def _exit(self) -> None:
-        manager, self._manager, self._mr = self._manager, None, None
-        if manager is not None:
+        manager, made = self._manager, self._mr is not None
+        self._manager, self._mr = None, None
+        if manager is not None and made:
             manager.__exit__(None, None, None)
 
     def _racer(self) -> MiniRacer:
@@ -148,6 +150,48 @@ class Isolate:
             self._owner.call_sync(lambda: self._owner.forget(self))
 
 
+class _Maker:
+    """The owner's thread that makes isolates, one at a time, for work on the owner's loop.
+
+    A daemon thread of its own (not a concurrent.futures executor, which the interpreter joins
+    and closes at exit before the owner's shutdown, while other threads may still need one)."""
+
+    def __init__(self) -> None:
+        self._jobs: queue.SimpleQueue[tuple[Callable[[], Any], asyncio.Future[Any]] | None] = (
+            queue.SimpleQueue()
+        )
+        threading.Thread(target=self._work, name="cpcc-v8-maker", daemon=True).start()
+
+    def run(self, work: Callable[[], T]) -> asyncio.Future[T]:
+        """``work()`` on the maker's thread; awaited on the owner's loop."""
+        future: asyncio.Future[T] = asyncio.get_running_loop().create_future()
+        self._jobs.put((work, future))
+        return future
+
+    def stop(self) -> None:
+        self._jobs.put(None)
+
+    def _work(self) -> None:
+        while (job := self._jobs.get()) is not None:
+            work, future = job
+            loop = future.get_loop()
+            try:
+                result = work()
+            except BaseException as exc:
+                loop.call_soon_threadsafe(_settle, future, None, exc)
+            else:
+                loop.call_soon_threadsafe(_settle, future, result, None)
+
+
+def _settle(future: asyncio.Future[Any], result: Any, exc: BaseException | None) -> None:
+    if future.cancelled():
+        return
+    if exc is not None:
+        future.set_exception(exc)
+    else:
+        future.set_result(result)
+
+
 class _Owner:
     """The owner thread and its event loop, started at the first use."""
 
@@ -159,6 +203,7 @@ class _Owner:
         self._isolates: set[Isolate] = set()
         self._busy = 0  # calls running on the loop (only the loop's thread changes it)
         self._idle: asyncio.Event | None = None
+        self._maker: _Maker | None = None
         self._exit_hook = False
 
     def _start(self) -> asyncio.AbstractEventLoop:
@@ -178,6 +223,7 @@ class _Owner:
         if failure:
             raise failure[0]
         self._loop, self._thread = loop, thread
+        self._maker = _Maker()
         if not self._exit_hook:
             atexit.register(shutdown)
             self._exit_hook = True
@@ -247,20 +293,23 @@ class _Owner:
 
     def new_isolate(self) -> Isolate:
         """A new isolate (mini-racer's setTimeout installed, nothing else)."""
+        return self.call(self.adopt)
 
-        async def make() -> Isolate:
-            return self.adopt()
-
-        return self.call(make)
-
-    def adopt(self) -> Isolate:
-        """A new isolate, made on the owner's loop (for work already running there)."""
-        assert self.on_owner_thread()
-        loop = self._loop
-        assert loop is not None
+    async def adopt(self) -> Isolate:
+        """A new isolate, for work running on the owner's loop. It is made by the owner's
+        maker thread, one at a time (V8's process-wide set-up must never run twice at once),
+        while the loop goes on serving the other isolates: making one takes milliseconds."""
+        assert self.on_owner_thread() and self._maker is not None
+        loop = asyncio.get_running_loop()
         isolate = Isolate(self, mini_racer(event_loop=loop))
-        isolate._enter()
+        # Known before it exists: a shutdown that cancels this still closes it.
         self._isolates.add(isolate)
+        try:
+            await self._maker.run(isolate._enter)
+        except BaseException:
+            if isolate.closed:  # never made
+                self._isolates.discard(isolate)
+            raise
         return isolate
 
     def forget(self, isolate: Isolate) -> None:
@@ -309,6 +358,9 @@ class _Owner:
         for task in background:
             task.cancel()
         await asyncio.gather(*background, return_exceptions=True)
+        if self._maker is not None:  # an isolate still being made is finished first
+            await self._maker.run(lambda: None)
+            self._maker.stop()
         for isolate in list(self._isolates):
             self.forget(isolate)
 
@@ -321,6 +373,7 @@ class _Owner:
         self._isolates = set()
         self._busy = 0
         self._idle = None
+        self._maker = None
 
 
 _OWNER = _Owner()
@@ -338,9 +391,9 @@ def call(work: Callable[[], Awaitable[T]]) -> T:
     return _OWNER.call(work)
 
 
-def adopt() -> Isolate:
+async def adopt() -> Isolate:
     """A new isolate, from work already running on the V8 thread."""
-    return _OWNER.adopt()
+    return await _OWNER.adopt()
 
 
 def open_isolates() -> int:

@@ -93,6 +93,7 @@ def drive(source: str, mode: str, *, limits: Limits | None = None, steps: int = 
 
 
 def same_everywhere(source: str, **kw: Any) -> Applied:
+    """The program's result, the same in every mode."""
     runs = {mode: drive(source, mode, **kw) for mode in MODES}
     assert runs["warm"] == runs["replay"] == runs["mixed"], runs
     return runs["warm"]
@@ -224,7 +225,9 @@ def test_megabytes_of_log_in_one_step_stop_that_step_not_the_next() -> None:
     )
     applied = same_everywhere(source, limits=Limits(heap_bytes=24 * 1024 * 1024))
     assert applied.outcome is Outcome.KILLED and applied.quota == "heap", applied.error
-    assert applied.storage == {"first": 1}
+    # Stopped for its heap, a step applies nothing (what survived would depend on the garbage
+    # collector); the steps before it stay.
+    assert applied.storage == {} and applied.log == []
 
 
 # --- one observable world, warm or replayed -------------------------------------------------------
@@ -302,14 +305,14 @@ def test_a_resumed_step_gets_its_quota_not_a_replays_allowance() -> None:
 
 
 def test_a_replay_after_a_migration_gets_the_time_the_earlier_steps_took() -> None:
-    """Steps of about 0.2 s under a quota of twice that: replayed in a new context after six
-    of them (a migration), the program re-runs 1.2 s of work, which is not its step's."""
+    """Steps of about 0.2 s under a quota of three times that: replayed in a new context after
+    seven of them (a migration), the program re-runs 1.4 s of work, which is not its step's."""
     source = "var n = 0; while (n < 8) {" + wait() + spin(25_000_000) + "n++; }"
     calibration = run_step(
         StepInput(vv_id="c", vv_name="c", source=spin(25_000_000) + wait(), seed=1,
                   start_ms=START_MS, catalog=CATALOG)
     )  # fmt: skip
-    limits = Limits(cpu_s=2 * calibration.duration_s)  # a step's own time: half its quota
+    limits = Limits(cpu_s=3 * calibration.duration_s)  # a step's own time: a third of its quota
     runtime = Runtime()
     journal: list[dict[str, Any]] = []
     applied = 0
