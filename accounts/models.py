@@ -8,6 +8,9 @@ from django.db import models
 from django.utils.text import slugify
 
 DEFAULT_MAX_PARALLEL_VVS = 5
+# Room for two editor submissions of the most copies (50) each, and for every VV of the example
+# scenarios at once; a scenario or a script that queues more sets its customer's quota higher.
+DEFAULT_MAX_QUEUED_VVS = 100
 DEFAULT_MAX_TASKS_PER_VV = 10_000
 DEFAULT_STORAGE_BYTES = 10 * 1024 * 1024
 DEFAULT_CPU_MS_PER_STEP = 2_000
@@ -20,6 +23,7 @@ class Customer(models.Model):
     # The numeric quotas, as the admin, the API and scenario files name them.
     QUOTA_FIELDS = (
         "max_parallel_vvs",
+        "max_queued_vvs",
         "max_tasks_per_vv",
         "storage_bytes",
         "cpu_ms_per_step",
@@ -35,6 +39,11 @@ class Customer(models.Model):
         default=DEFAULT_MAX_PARALLEL_VVS,
         validators=[MinValueValidator(1)],
         help_text="VVs running at once; further ones wait in a queue.",
+    )
+    max_queued_vvs = models.PositiveIntegerField(
+        default=DEFAULT_MAX_QUEUED_VVS,
+        validators=[MinValueValidator(1)],
+        help_text="VVs waiting in the queue at most; a submission beyond is refused.",
     )
     max_tasks_per_vv = models.PositiveIntegerField(
         default=DEFAULT_MAX_TASKS_PER_VV, validators=[MinValueValidator(1)]
@@ -72,6 +81,9 @@ class Customer(models.Model):
         constraints = [
             models.CheckConstraint(
                 condition=models.Q(max_parallel_vvs__gte=1), name="customer_parallel_vvs_positive"
+            ),
+            models.CheckConstraint(
+                condition=models.Q(max_queued_vvs__gte=1), name="customer_queued_vvs_positive"
             ),
         ]
 

@@ -117,7 +117,11 @@ async def _client(
     latencies, lost_frames, seen = results["latency"], results["lost"], results["seen"]
     async with websockets.connect(
         url,
-        additional_headers={"Cookie": f"sessionid={session}", "Origin": "http://127.0.0.1"},
+        # The page's origin, port included: the socket refuses any other.
+        additional_headers={
+            "Cookie": f"sessionid={session}",
+            "Origin": "http" + url.removeprefix("ws").split("/ws/", 1)[0],
+        },
         max_size=None,
     ) as ws:
         seq = None

@@ -561,7 +561,11 @@ def _subscribers(
         try:
             async with websockets.connect(
                 f"ws://127.0.0.1:{port}/ws/map/",
-                additional_headers={"Cookie": f"sessionid={session}", "Origin": "http://127.0.0.1"},
+                # The page's origin, port included: the socket refuses any other.
+                additional_headers={
+                    "Cookie": f"sessionid={session}",
+                    "Origin": f"http://127.0.0.1:{port}",
+                },
                 max_size=None,
                 open_timeout=30,
             ) as ws:

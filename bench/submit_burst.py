@@ -67,7 +67,10 @@ def _setup(database: str) -> list[str]:
     call_command("collectstatic", verbosity=0, interactive=False)
     tokens = []
     for c in "ABCD":
-        customer = Customer.objects.create(name=f"Burst Customer {c}", max_parallel_vvs=5)
+        # No worker admits them: every VV stays queued, far beyond the default queue quota.
+        customer = Customer.objects.create(
+            name=f"Burst Customer {c}", max_parallel_vvs=5, max_queued_vvs=1_000_000
+        )
         user = User.objects.create_user(username=f"burst-{c.lower()}", customer=customer)
         tokens.append(Token.objects.create(user=user).key)
     connections.close_all()

@@ -1,22 +1,27 @@
-"""REST API plumbing shared by the apps' ``api`` packages: the staff permission, the 409 error,
-the JSON error shape for the schema, content negotiation for endpoints that answer with a file,
-authentication that the audit log sees, and the per-address throttle."""
+"""REST API plumbing shared by the apps' ``api`` packages: the staff permission, the 409 and 429
+errors, the JSON error shape for the schema, the JSON parser, content negotiation for endpoints
+that answer with a file, authentication that the audit log sees, and the per-address
+throttle."""
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Mapping
+from typing import IO, Any
 
 from auditlog.context import auditlog_value
 from drf_spectacular.authentication import SessionScheme
 from rest_framework import serializers, status
 from rest_framework.authentication import SessionAuthentication, TokenAuthentication
-from rest_framework.exceptions import APIException, NotAcceptable, ValidationError
+from rest_framework.exceptions import APIException, NotAcceptable, ParseError, ValidationError
 from rest_framework.negotiation import DefaultContentNegotiation
 from rest_framework.pagination import PageNumberPagination
+from rest_framework.parsers import JSONParser
 from rest_framework.permissions import IsAdminUser
 from rest_framework.renderers import BaseRenderer
 from rest_framework.request import Request
 from rest_framework.throttling import SimpleRateThrottle
+
+from cpcc_site.json_depth import too_deep, too_deep_message
 
 
 class IsStaff(IsAdminUser):
@@ -34,6 +39,35 @@ class Conflict(APIException):
     status_code = status.HTTP_409_CONFLICT
     default_detail = "The request conflicts with the current state."
     default_code = "conflict"
+
+
+class QuotaReached(APIException):
+    """429: one of the customer's quotas allows no more of this now (not a request rate: waiting
+    alone does not help, the message says what does)."""
+
+    status_code = status.HTTP_429_TOO_MANY_REQUESTS
+    default_detail = "A quota of your account allows no more of this now."
+    default_code = "quota_reached"
+
+
+class DepthLimitedJSONParser(JSONParser):
+    """DRF's JSON parser (DEFAULT_PARSER_CLASSES), refusing with 400 a body nested more than
+    MAX_VALUE_DEPTH levels deep (cpcc_site/json_depth.py); DRF's own lets the parser's
+    RecursionError through, a server error."""
+
+    def parse(
+        self,
+        stream: IO[Any],
+        media_type: str | None = None,
+        parser_context: Mapping[str, Any] | None = None,
+    ) -> Any:
+        try:
+            value = super().parse(stream, media_type, parser_context)
+        except RecursionError:
+            raise ParseError(too_deep_message("The request body")) from None
+        if too_deep(value):
+            raise ParseError(too_deep_message("The request body"))
+        return value
 
 
 class DetailSerializer(serializers.Serializer):
@@ -110,7 +144,8 @@ _ERRORS = {
     "404": "No such object (another customer's answers the same), or no such page.",
     "413": "The request body is larger than the platform accepts (CPCC_MAX_REQUEST_BYTES).",
     "415": "The body's content type is not one the endpoint reads (send JSON).",
-    "429": "Too many requests from your token or address: wait as Retry-After says.",
+    "429": "Too many requests from your token or address (wait as Retry-After says), or a "
+    "quota of your account reached (the body says which and what to do).",
 }
 
 

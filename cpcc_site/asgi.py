@@ -4,7 +4,6 @@ import os
 
 from channels.auth import AuthMiddlewareStack
 from channels.routing import ProtocolTypeRouter, URLRouter
-from channels.security.websocket import AllowedHostsOriginValidator
 from django.core.asgi import get_asgi_application
 
 os.environ.setdefault("DJANGO_SETTINGS_MODULE", "cpcc_site.settings")
@@ -14,6 +13,7 @@ os.environ.setdefault("CPCC_DB_CONN_MAX_AGE", "0")
 django_asgi_app = get_asgi_application()
 
 from cpcc_site.serving import drain_before_shutdown  # noqa: E402
+from cpcc_site.websocket import SameOriginValidator  # noqa: E402
 from missions.routing import websocket_urlpatterns  # noqa: E402 - needs the apps loaded
 
 drain_before_shutdown()
@@ -21,9 +21,8 @@ drain_before_shutdown()
 application = ProtocolTypeRouter(
     {
         "http": django_asgi_app,
-        # Session login, as the pages; only pages of this site may open the socket.
-        "websocket": AllowedHostsOriginValidator(
-            AuthMiddlewareStack(URLRouter(websocket_urlpatterns))
-        ),
+        # Session login, as the pages; only pages of this site (its scheme, host and port) may
+        # open the socket.
+        "websocket": SameOriginValidator(AuthMiddlewareStack(URLRouter(websocket_urlpatterns))),
     }
 )

@@ -26,7 +26,10 @@ if not SECRET_KEY:
     if not DEBUG:
         raise ConfigError("SECRET_KEY must be set when DEBUG is off")
     SECRET_KEY = "cpcc-insecure-development-key-do-not-use-in-production"
-ALLOWED_HOSTS = env_list("ALLOWED_HOSTS", ["localhost", "127.0.0.1", "[::1]", "testserver"])
+# With DEBUG off only the environment names the hosts (none: every request is refused with 400);
+# in development this machine's names. Tests add Django's "testserver" themselves (Django's test
+# environment does), so no setting of production ever accepts it.
+ALLOWED_HOSTS = env_list("ALLOWED_HOSTS", ["localhost", "127.0.0.1", "[::1]"] if DEBUG else [])
 
 INSTALLED_APPS = [
     "daphne",
@@ -271,8 +274,9 @@ REST_FRAMEWORK = {
     "DEFAULT_SCHEMA_CLASS": "drf_spectacular.openapi.AutoSchema",
     "DEFAULT_PAGINATION_CLASS": "cpcc_site.api.StrictPageNumberPagination",
     "EXCEPTION_HANDLER": "cpcc_site.api.exception_handler",
-    # JSON in, JSON out (and files where an endpoint serves one).
-    "DEFAULT_PARSER_CLASSES": ["rest_framework.parsers.JSONParser"],
+    # JSON in (nested MAX_VALUE_DEPTH levels at most), JSON out (and files where an endpoint
+    # serves one).
+    "DEFAULT_PARSER_CLASSES": ["cpcc_site.api.DepthLimitedJSONParser"],
     "PAGE_SIZE": 50,
 }
 SPECTACULAR_SETTINGS = {

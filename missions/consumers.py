@@ -24,6 +24,7 @@ from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncJsonWebsocketConsumer
 from django.conf import settings
 
+from cpcc_site import json_depth
 from missions.events import (
     EVENTS_STREAM,
     POSITIONS_STREAM,
@@ -88,6 +89,23 @@ class MapConsumer(AsyncJsonWebsocketConsumer):  # type: ignore[misc]
                 await pump
         if hasattr(self, "redis"):
             await self.redis.aclose()
+
+    async def receive(
+        self, text_data: str | None = None, bytes_data: bytes | None = None, **kwargs: Any
+    ) -> None:
+        # What a browser sends is parsed with the platform's depth limit, and a message that
+        # is not JSON answers an error frame instead of ending the socket with a server error.
+        try:
+            content = json_depth.loads(text_data or "")
+        except ValueError as exc:
+            detail = (
+                str(exc)
+                if isinstance(exc, json_depth.TooDeep)
+                else 'The message is not JSON text: send {"type": "resync"} for the whole map.'
+            )
+            await self.send_json({"type": "error", "detail": detail})
+            return
+        await self.receive_json(content, **kwargs)
 
     async def receive_json(self, content: Any, **kwargs: Any) -> None:
         if isinstance(content, dict) and content.get("type") == "resync":

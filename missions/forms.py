@@ -8,22 +8,22 @@ from typing import Any
 from django import forms
 from django.core.files.uploadedfile import UploadedFile
 
-from missions.models import VirtualVehicle
+from missions.models import PROGRAM_MAX_CHARS, PROGRAM_TOO_LONG, VirtualVehicle, validate_vv_name
 from vvm_worker.services import MAX_COPIES
 
 NAME_MAX = VirtualVehicle._meta.get_field("name").max_length or 120
-PROGRAM_MAX_CHARS = 1_000_000  # as the REST API (missions/api/serializers.py)
 
 
 class ProgramForm(forms.Form):
     """A VV's name and program; a ``.js`` file is read when the program box is left empty (the
     page's script loads a chosen file into the editor instead)."""
 
-    name = forms.CharField(max_length=NAME_MAX, strip=True)
+    name = forms.CharField(max_length=NAME_MAX, strip=True, validators=[validate_vv_name])
     program = forms.CharField(
         required=False,
         strip=False,
         max_length=PROGRAM_MAX_CHARS,
+        error_messages={"max_length": PROGRAM_TOO_LONG},
         widget=forms.Textarea(attrs={"rows": 24, "spellcheck": "false", "class": "program"}),
     )
     program_file = forms.FileField(

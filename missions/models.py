@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import unicodedata
 import uuid
 
+from django.core.exceptions import ValidationError
 from django.db import models
 
 from accounts.models import Customer
@@ -24,6 +26,46 @@ class VVStatus(models.TextChoices):
 ACTIVE_STATUSES = (VVStatus.RUNNING, VVStatus.MIGRATING)
 ENDED_STATUSES = (VVStatus.FINISHED, VVStatus.FAILED, VVStatus.KILLED, VVStatus.CANCELLED)
 
+# The longest program a VV may have, however it comes (the REST API, the editor, its check).
+PROGRAM_MAX_CHARS = 1_000_000
+PROGRAM_TOO_LONG = (
+    f"A program has at most {PROGRAM_MAX_CHARS:,} characters: split the work into several VVs "
+    "or make the program shorter."
+)
+# Characters that reorder how the text around them is shown (bidirectional formatting: the
+# embeddings, overrides and isolates, and the invisible direction marks). In a name they make
+# one VV look like another on the pages, in the admin and in a terminal.
+BIDI_CONTROLS = frozenset(
+    "\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069"
+)
+
+
+def vv_name_problem(name: str) -> str | None:
+    """What is wrong with a VV's name, or None: a name has no control character (C0 and C1,
+    such as a terminal's escape ``\\x1b``, a tab or a line break) and no bidirectional
+    formatting character (BIDI_CONTROLS)."""
+    for position, char in enumerate(name, start=1):
+        if unicodedata.category(char) == "Cc":
+            what = "a control character"
+        elif char in BIDI_CONTROLS:
+            what = "a bidirectional formatting character"
+        else:
+            continue
+        label = unicodedata.name(char, "")
+        shown = f"U+{ord(char):04X}" + (f" {label}" if label else "")
+        return (
+            f"The name has {what} ({shown}) at character {position}: a name is plain text "
+            "shown on pages and in terminals; remove it."
+        )
+    return None
+
+
+def validate_vv_name(name: str) -> None:
+    """A validator of forms and serializers: ValidationError saying what vv_name_problem says."""
+    problem = vv_name_problem(name)
+    if problem is not None:
+        raise ValidationError(problem, code="invalid_name")
+
 
 class VirtualVehicle(models.Model):
     """A customer's VV: its program and its checkpoint (journal), where it runs, how it ended.
@@ -34,7 +76,7 @@ class VirtualVehicle(models.Model):
 
     id = models.UUIDField(primary_key=True, default=uuid.uuid4, editable=False)
     customer = models.ForeignKey(Customer, on_delete=models.CASCADE, related_name="vvs")
-    name = models.CharField(max_length=120)
+    name = models.CharField(max_length=120, validators=[validate_vv_name])
     program = models.TextField()
     status = models.CharField(max_length=10, choices=VVStatus.choices, default=VVStatus.QUEUED)
     host_gs = models.ForeignKey(

@@ -21,7 +21,7 @@ from typing import Any
 from django.conf import settings
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
-from django.core.exceptions import PermissionDenied
+from django.core.exceptions import PermissionDenied, ValidationError
 from django.core.paginator import Page, Paginator
 from django.db.models import Count, Q, QuerySet
 from django.http import Http404, HttpRequest, HttpResponse, JsonResponse
@@ -31,10 +31,13 @@ from django.utils.http import url_has_allowed_host_and_scheme
 from django.utils.text import slugify
 from django.views.decorators.http import require_POST
 
+from cpcc_site import json_depth
 from missions.forms import NewProgramForm, ProgramForm
 from missions.models import (
     ACTIVE_STATUSES,
     ENDED_STATUSES,
+    PROGRAM_MAX_CHARS,
+    PROGRAM_TOO_LONG,
     Task,
     TaskStatus,
     VirtualVehicle,
@@ -58,6 +61,7 @@ from vvm_worker.services import (
     VVAlreadyEnded,
     VVNotEnded,
     VVNotQueued,
+    VVQueueFull,
     vv_cancel_for_user,
     vv_create_copies_for_user,
     vv_restart_for_user,
@@ -311,10 +315,14 @@ def _problem_json(problem: SyntaxProblem | None) -> dict[str, Any]:
 def vv_check(request: HttpRequest) -> JsonResponse:
     """``POST /vvs/check/`` (session and CSRF): the API's syntax check of a program without
     submitting it. ``{"program": ...}`` as JSON or form data; answers ``{"ok": true}`` or
-    ``{"ok": false, "message", "line", "column", "error"}``."""
+    ``{"ok": false, "message", "line", "column", "error"}``. A program longer than a
+    submission may be is refused as the submission refuses it (400; a body above
+    CPCC_MAX_REQUEST_BYTES gets 413 before it is read)."""
     if request.content_type == "application/json":
         try:
-            body = json.loads(request.body or b"{}")
+            body = json_depth.loads(request.body or b"{}")
+        except json_depth.TooDeep as exc:
+            return JsonResponse({"detail": str(exc)}, status=400)
         except ValueError:
             return JsonResponse({"detail": "The body is not JSON."}, status=400)
         program = body.get("program") if isinstance(body, dict) else None
@@ -322,6 +330,10 @@ def vv_check(request: HttpRequest) -> JsonResponse:
         program = request.POST.get("program")
     if not isinstance(program, str):
         return JsonResponse({"detail": "Send the program as 'program'."}, status=400)
+    if len(program) > PROGRAM_MAX_CHARS:
+        return JsonResponse(
+            {"detail": f"program: {PROGRAM_TOO_LONG}", "program": [PROGRAM_TOO_LONG]}, status=400
+        )
     return JsonResponse(_problem_json(check_syntax(program)))
 
 
@@ -364,6 +376,12 @@ def vv_new(request: HttpRequest) -> HttpResponse:
         )
     except NotACustomer:
         raise PermissionDenied("Only a customer's users submit VVs.") from None
+    except ValidationError as exc:
+        form.add_error(None, exc)
+        return _editor(request, form, status=400)
+    except VVQueueFull as exc:
+        form.add_error(None, str(exc))
+        return _editor(request, form, status=429)
     if problem is not None:
         return _editor(request, form, problem=problem, status=400)
     if len(vvs) == 1:
@@ -397,6 +415,9 @@ def vv_edit(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
         )
     except ProgramRejected as exc:
         return _editor(request, form, vv=vv, problem=exc.problem, status=400)
+    except ValidationError as exc:
+        form.add_error(None, exc)
+        return _editor(request, form, vv=vv, status=400)
     except VVNotQueued:
         messages.warning(
             request, f"“{vv.name}” started before the change was saved: its program stays."
@@ -452,6 +473,12 @@ def vv_restart(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
             request, f"The program does not parse ({exc.problem}): fix it in a new VV first."
         )
         return redirect(f"{reverse('vv-new')}?from={vv_id}")
+    except ValidationError as exc:
+        messages.error(request, f"{' '.join(exc.messages)} Start it anew with another name.")
+        return redirect(f"{reverse('vv-new')}?from={vv_id}")
+    except VVQueueFull as exc:
+        messages.error(request, str(exc))
+        return _back(request, reverse("vv-detail", args=[vv_id]))
     messages.success(request, f"“{new.name}” is restarted as a new VV.")
     return _back(request, reverse("vv-detail", args=[new.pk]))
 

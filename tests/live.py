@@ -72,6 +72,7 @@ class Workers:
         """Start ``manage.py gsworker NAME`` or ``rvworker NAME``; returns once it runs.
         ``env``: more variables (a fault to inject: tests/inject/sitecustomize.py)."""
         log = (self.tmp / f"{kind}-{name}.log".replace(" ", "_")).open("ab")
+        logged = log.tell()
         process = subprocess.Popen(
             [sys.executable, "manage.py", kind, name],
             cwd=ROOT,
@@ -82,8 +83,12 @@ class Workers:
         )
         self.processes[name] = process
         path = Path(log.name)
+        # The log is appended to: only what this process wrote says that it runs.
         wait_for(
-            lambda: f"{kind} {name}:".encode() in path.read_bytes() or process.poll() is not None,
+            lambda: (
+                f"{kind} {name}:".encode() in path.read_bytes()[logged:]
+                or process.poll() is not None
+            ),
             timeout=60,
             what=f"{kind} {name} to start",
         )
@@ -250,6 +255,22 @@ def _quiet(log: str) -> str:
         if not line.startswith((" ", "-", "[", "absolutely", "Please", "User", "\x1b"))
         and line.strip()
     )
+
+
+@pytest.fixture(scope="module")
+def web_var(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The collected static files of the production web servers of a test module."""
+    return collect_static(tmp_path_factory.mktemp("web-var"))
+
+
+@pytest.fixture
+def web(broker_url: str, tmp_path: Path, web_var: Path, transactional_db: None) -> Iterator[Web]:
+    """The web server as in production (tests/live.py's Web), stopped at the test's end."""
+    server = Web(tmp_path, broker_url, web_var)
+    try:
+        yield server
+    finally:
+        server.stop()
 
 
 @pytest.fixture

@@ -65,6 +65,34 @@ def test_admin_change_pages_load(client, staff, populated, app, model, lookup) -
     assert client.get(url).status_code == 200
 
 
+def test_the_queued_vv_quota_is_set_in_the_admin_with_the_other_quotas(
+    client, staff, customer_a, customer_b
+) -> None:
+    client.force_login(staff)
+    url = reverse("admin:accounts_customer_change", args=[customer_a.pk])
+    page = client.get(url).text
+    quotas = page[page.index('class="fieldset-heading">Quotas</h2>') :]
+    assert 'name="max_parallel_vvs"' in quotas and 'name="max_queued_vvs"' in quotas
+    form = {
+        "name": customer_a.name,
+        "slug": customer_a.slug,
+        "max_parallel_vvs": 5,
+        "max_queued_vvs": 12,
+        "max_tasks_per_vv": 10_000,
+        "storage_bytes": 10_485_760,
+        "cpu_ms_per_step": 2000,
+        "heap_bytes": 67_108_864,
+        "allowed_api_calls": "[]",
+        "users-TOTAL_FORMS": 0,
+        "users-INITIAL_FORMS": 0,
+    }
+    response = client.post(url, form)
+    assert response.status_code == 302, response.content
+    customer_a.refresh_from_db()
+    customer_b.refresh_from_db()
+    assert (customer_a.max_queued_vvs, customer_b.max_queued_vvs) == (12, 100)
+
+
 def test_customers_cannot_open_the_admin(client, user_a) -> None:
     client.force_login(user_a)
     response = client.get(reverse("admin:missions_virtualvehicle_changelist"))

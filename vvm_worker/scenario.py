@@ -125,6 +125,7 @@ class CustomerSpec:
     name: str
     max_parallel_vvs: int
     privileged: bool = False
+    max_queued_vvs: int | None = None
     max_tasks_per_vv: int | None = None
     storage_bytes: int | None = None
     cpu_ms_per_step: int | None = None
@@ -282,7 +283,13 @@ _VEHICLE_REQUIRED = (
 )
 _VEHICLE_OPTIONAL = ("driver", "battery_s", "climb_rate_mps", "driver_url")
 _CUSTOMER_REQUIRED = ("name", "max_parallel_vvs")
-_CUSTOMER_QUOTAS = ("max_tasks_per_vv", "storage_bytes", "cpu_ms_per_step", "heap_bytes")
+_CUSTOMER_QUOTAS = (
+    "max_queued_vvs",
+    "max_tasks_per_vv",
+    "storage_bytes",
+    "cpu_ms_per_step",
+    "heap_bytes",
+)
 _CUSTOMER_OPTIONAL = ("privileged", *_CUSTOMER_QUOTAS)
 _VV_REQUIRED = ("customer", "name")
 _VV_OPTIONAL = ("program", "source", "submit_at_s", "copies")

@@ -21,6 +21,9 @@ class CustomerInSerializer(serializers.Serializer):
     )
     privileged = StrictBooleanField(required=False)
     max_parallel_vvs = StrictIntegerField(min_value=1, required=False)
+    max_queued_vvs = StrictIntegerField(
+        min_value=1, required=False, help_text="VVs waiting in the queue at most."
+    )
     max_tasks_per_vv = StrictIntegerField(min_value=1, required=False)
     storage_bytes = StrictIntegerField(min_value=0, required=False)
     cpu_ms_per_step = StrictIntegerField(min_value=1, required=False)

@@ -12,13 +12,30 @@ from drf_spectacular.utils import extend_schema_field
 from rest_framework import serializers
 
 from cpcc_site.api import StrictCharField
-from missions.models import LogEntry, StorageDocument, Task, TaskStatus, VirtualVehicle
+from missions.models import (
+    PROGRAM_MAX_CHARS,
+    PROGRAM_TOO_LONG,
+    LogEntry,
+    StorageDocument,
+    Task,
+    TaskStatus,
+    VirtualVehicle,
+    validate_vv_name,
+)
 from missions.readings import image_file, map_camera_readings
 
 
 class VVCreateSerializer(serializers.Serializer):
-    name = StrictCharField(max_length=120)
-    program = StrictCharField(trim_whitespace=False, max_length=1_000_000)
+    name = StrictCharField(
+        max_length=120,
+        validators=[validate_vv_name],
+        help_text="Plain text: no control or bidirectional formatting characters.",
+    )
+    program = StrictCharField(
+        trim_whitespace=False,
+        max_length=PROGRAM_MAX_CHARS,
+        error_messages={"max_length": PROGRAM_TOO_LONG},
+    )
 
 
 class VVSerializer(serializers.ModelSerializer):

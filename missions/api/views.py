@@ -8,6 +8,7 @@ from __future__ import annotations
 import mimetypes
 from typing import Any
 
+from django.core.exceptions import ValidationError as DjangoValidationError
 from django.core.files.storage import default_storage
 from django.db.models import QuerySet
 from django.http import FileResponse
@@ -18,9 +19,9 @@ from rest_framework.decorators import action
 from rest_framework.exceptions import NotFound, PermissionDenied, ValidationError
 from rest_framework.request import Request
 from rest_framework.response import Response
-from rest_framework.serializers import BaseSerializer
+from rest_framework.serializers import BaseSerializer, as_serializer_error
 
-from cpcc_site.api import Conflict, DetailSerializer, FileOrJSONNegotiation
+from cpcc_site.api import Conflict, DetailSerializer, FileOrJSONNegotiation, QuotaReached
 from missions.api.results import build_results_zip, results_filename
 from missions.api.serializers import (
     LogEntryOutSerializer,
@@ -49,6 +50,7 @@ from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     NotACustomer,
     VVAlreadyEnded,
+    VVQueueFull,
     vv_cancel_for_user,
     vv_create_for_user,
 )
@@ -64,7 +66,8 @@ IMAGE = {(200, "image/png"): OpenApiTypes.BINARY, (200, "image/jpeg"): OpenApiTy
 
 
 class VVErrorsMixin:
-    """Turns the domain's "not found" and "already ended" into JSON errors a person can act on."""
+    """Turns the domain's "not found", "already ended", "queue full" and refused values into
+    JSON errors a person can act on."""
 
     def handle_exception(self, exc: Exception) -> Response:
         if isinstance(exc, VVNotFound):
@@ -80,6 +83,10 @@ class VVErrorsMixin:
             exc = Conflict(
                 f"{exc.vv.name!r} has already ended ({exc.vv.status}): there is nothing to cancel."
             )
+        elif isinstance(exc, VVQueueFull):
+            exc = QuotaReached(str(exc))
+        elif isinstance(exc, DjangoValidationError):
+            exc = ValidationError(as_serializer_error(exc))
         return super().handle_exception(exc)  # type: ignore[misc, no-any-return]
 
 
@@ -127,7 +134,13 @@ class VirtualVehicleViewSet(
     def get_object(self) -> VirtualVehicle:
         return vv_get_for_user(user=self.request.user, vv_id=self.kwargs["pk"])  # type: ignore[arg-type]
 
-    @extend_schema(request=VVCreateSerializer, responses={201: VVSerializer})
+    @extend_schema(
+        request=VVCreateSerializer,
+        responses={201: VVSerializer, 429: DetailSerializer},
+        description="Queue a new VV. 400 for a program with a syntax error (with its line and "
+        "column) or a refused name; 429 when your queue of VVs waiting to start is full (the "
+        "customer's max_queued_vvs) or a request rate is passed.",
+    )
     def create(self, request: Request) -> Response:
         given = VVCreateSerializer(data=request.data)
         given.is_valid(raise_exception=True)

@@ -45,7 +45,11 @@
           return response.text();
         })
         .then(function (html) {
-          body.innerHTML = html;
+          // The server's rendering of the rows (templates/missions/_dashboard_rows.html, every
+          // name escaped by the template), parsed in a document of its own (inert: nothing in
+          // it loads or runs), then moved here.
+          var rows = new DOMParser().parseFromString(html, 'text/html').body;
+          body.replaceChildren.apply(body, Array.prototype.slice.call(rows.childNodes));
           var after = statuses();
           for (var id in after) {
             if (before[id] !== after[id]) {

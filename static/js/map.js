@@ -8,6 +8,10 @@
  *
  * Its state is on the map element for whoever looks (tests, the page): data-seq (last frame),
  * data-connected, data-vehicles, data-tasks-open, data-tasks-done, data-vvs, data-frames.
+ *
+ * Names (VVs, vehicles, areas, ground stations) are the customers' and operators' words, never
+ * markup: every tooltip is a DOM node whose text is set by text() (Leaflet would take a string
+ * as HTML).
  */
 (function () {
   'use strict';
@@ -24,6 +28,13 @@
     migration: '#d62828'
   };
   var LABELS_UP_TO = 60; // permanent vehicle labels only while they stay readable
+
+  /* Tooltip content from text: a node Leaflet shows as it is. */
+  function text(value) {
+    var span = document.createElement('span');
+    span.textContent = value;
+    return span;
+  }
 
   function CPCCMap(element, options) {
     options = options || {};
@@ -44,6 +55,7 @@
     this.vvs = {};        // id -> {id, name, status, host_kind, tasks: {id: task}, track, migrations}
     this.vehicles = {};   // id -> state
     this.vehicleMarkers = {};
+    this.vehicleLabels = {}; // id -> the text of its marker's label
     this.staff = false;
     this.seq = 0;
     this.frames = 0;
@@ -137,7 +149,7 @@
         renderer: this.renderer, color: COLOR.area, weight: 2, dashArray: '6 4',
         fillColor: COLOR.area, fillOpacity: 0.06
       });
-      if (areas[i].name) polygon.bindTooltip(areas[i].name + ' (' + areas[i].status + ')');
+      if (areas[i].name) polygon.bindTooltip(text(areas[i].name + ' (' + areas[i].status + ')'));
       polygon.addTo(this.layers.areas);
       bounds.extend(polygon.getBounds());
     }
@@ -147,7 +159,7 @@
         renderer: this.renderer, radius: 7, color: COLOR.station, weight: 2,
         fillColor: '#fff', fillOpacity: 1
       });
-      marker.bindTooltip(gs.name ? 'Ground station ' + gs.name : 'Ground station');
+      marker.bindTooltip(text(gs.name ? 'Ground station ' + gs.name : 'Ground station'));
       marker.addTo(this.layers.stations);
       bounds.extend([gs.lat, gs.lng]);
     }
@@ -182,7 +194,7 @@
       }
       if (path.length > 1) {
         L.polyline(path, { renderer: this.renderer, color: COLOR.carried, weight: 3 })
-          .bindTooltip(vv.name).addTo(L_.carried);
+          .bindTooltip(text(vv.name)).addTo(L_.carried);
       }
       var pending = [];
       for (var tid in vv.tasks) {
@@ -196,8 +208,8 @@
         L.circleMarker([task.lat, task.lng], {
           renderer: this.renderer, radius: 4, stroke: false, fillOpacity: 0.9,
           fillColor: isDone ? COLOR.done : COLOR.open
-        }).bindTooltip(vv.name + ': task ' + task.q + (task.index ? '.' + task.index : '') +
-                       (isDone ? ' (done)' : ' (open)'))
+        }).bindTooltip(text(vv.name + ': task ' + task.q + (task.index ? '.' + task.index : '') +
+                            (isDone ? ' (done)' : ' (open)')))
           .addTo(L_.tasks);
       }
       if (pending.length && path.length) {
@@ -213,7 +225,8 @@
         if (!move.from_pos || !move.to_pos || !this._seen(move.at_s)) continue;
         L.polyline([move.from_pos, move.to_pos], {
           renderer: this.renderer, color: COLOR.migration, weight: 2
-        }).bindTooltip(vv.name + ' migrated' + (move.from ? ': ' + move.from + ' → ' + move.to : ''))
+        }).bindTooltip(text(vv.name + ' migrated' +
+                            (move.from ? ': ' + move.from + ' → ' + move.to : '')))
           .addTo(L_.migrations);
       }
     }
@@ -242,13 +255,14 @@
           renderer: this.renderer, radius: 7, color: '#fff', weight: 2,
           fillColor: COLOR.vehicle, fillOpacity: 1
         }).addTo(this.layers.vehicles);
-        marker.bindTooltip(label, { permanent: labels, direction: 'right', offset: [8, 0],
-                                    className: 'vehicle-label' });
+        marker.bindTooltip(text(label), { permanent: labels, direction: 'right', offset: [8, 0],
+                                          className: 'vehicle-label' });
         this.vehicleMarkers[v.id] = marker;
       } else {
         marker.setLatLng([v.lat, v.lng]);
-        marker.setTooltipContent(label);
+        if (this.vehicleLabels[v.id] !== label) marker.setTooltipContent(text(label));
       }
+      this.vehicleLabels[v.id] = label;
       if (v.route && v.route.length > 1) {
         L.polyline(v.route, {
           renderer: this.renderer, color: COLOR.route, weight: 2, opacity: 0.8
@@ -259,6 +273,7 @@
       if (!live[id]) {
         this.layers.vehicles.removeLayer(this.vehicleMarkers[id]);
         delete this.vehicleMarkers[id];
+        delete this.vehicleLabels[id];
       }
     }
     this.element.dataset.vehicles = String(ids.length);

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from django.db import IntegrityError
 
-from accounts.models import Customer
+from accounts.models import DEFAULT_MAX_QUEUED_VVS, Customer
 from accounts.selectors import customer_catalog
 from fleet.models import SensorType
 from vvm_worker.services import customer_limits
@@ -27,6 +27,13 @@ def test_customer_names_are_unique() -> None:
 def test_parallel_vv_quota_must_be_positive() -> None:
     with pytest.raises(IntegrityError):
         Customer.objects.create(name="Zero", max_parallel_vvs=0)
+
+
+@pytest.mark.django_db
+def test_queued_vv_quota_has_a_default_and_must_be_positive() -> None:
+    assert Customer.objects.create(name="Default").max_queued_vvs == DEFAULT_MAX_QUEUED_VVS == 100
+    with pytest.raises(IntegrityError):
+        Customer.objects.create(name="Zero", max_queued_vvs=0)
 
 
 def test_a_user_belongs_to_one_customer(user_a, customer_a, customer_b) -> None:

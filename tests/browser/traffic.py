@@ -1,8 +1,9 @@
 """What a browser context asked the platform, and what went wrong: every response of 400 or
 more, every request that failed (styles, scripts, images, fonts, the socket), every request to
 anything but the platform (no page may load from the internet), every uncaught script error
-and console error, and every WebSocket that never got its first message (unless its page moved
-on first)."""
+and console error, every breach of the pages' Content Security Policy (a script, a style or a
+picture the policy refused: cpcc_site/security.py), and every WebSocket that never got its
+first message (unless its page moved on first)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,12 @@ document.addEventListener('DOMContentLoaded', function () {
   if (window.top !== window || !/^https?:/.test(location.href)) return;
   var link = document.querySelector('link[rel~="icon"]');
   window.__cpccTrafficIcon(link ? link.href : null);
+});
+document.addEventListener('securitypolicyviolation', function (e) {
+  window.__cpccTrafficPolicy({
+    directive: e.effectiveDirective || e.violatedDirective, blocked: e.blockedURI,
+    sample: e.sample, source: e.sourceFile, line: e.lineNumber
+  });
 });
 """
 
@@ -48,6 +55,7 @@ class Traffic:
         # declared) outside the page, where Playwright does not see the request.
         self.icons: list[tuple[str, str | None]] = []
         context.expose_binding("__cpccTrafficIcon", self._icon)
+        context.expose_binding("__cpccTrafficPolicy", self._policy)
         context.add_init_script(ICON_SCRIPT)
 
     def expect(self, status: int, path: str) -> None:
@@ -56,6 +64,14 @@ class Traffic:
 
     def _icon(self, source: dict, href: str | None) -> None:
         self.icons.append((source["frame"].url, href))
+
+    def _policy(self, source: dict, breach: dict) -> None:
+        where = f" at {breach['source']}:{breach['line']}" if breach.get("source") else ""
+        sample = f" ({breach['sample']!r})" if breach.get("sample") else ""
+        self.problems.append(
+            f"CSP on {source['frame'].url}: {breach['directive']} refused "
+            f"{breach.get('blocked') or 'inline'}{sample}{where}"
+        )
 
     def _page(self, page: Page) -> None:
         page.on("websocket", lambda socket: self._socket(page, socket))

@@ -1,1 +1,7 @@
-from tests.api_fixtures import fleet_one, mission  # noqa: F401 - fixtures
+from tests.api_fixtures import (  # noqa: F401 - fixtures
+    api_a,
+    api_b,
+    api_staff,
+    fleet_one,
+    mission,
+)

@@ -30,7 +30,6 @@ from urllib.parse import urlencode
 import pytest
 from channels.auth import AuthMiddleware
 from channels.routing import URLRouter
-from channels.security.websocket import OriginValidator
 from channels.testing import WebsocketCommunicator
 from django.apps import apps
 from django.conf import settings as django_settings
@@ -47,6 +46,7 @@ from rest_framework.test import APIClient
 
 from accounts.models import Customer, User
 from cpcc_site.asgi import application
+from cpcc_site.websocket import SameOriginValidator
 from fleet.models import GroundStation, SensorType, Vehicle
 from missions.api.views import UUID_PATTERN
 from missions.consumers import MapConsumer
@@ -628,7 +628,7 @@ def test_every_websocket_route_is_classified_and_guarded() -> None:
     )
     for route, _, stack in routes:
         # Only pages of this site may open a socket; the user comes from their session.
-        assert OriginValidator in stack, route
+        assert SameOriginValidator in stack, route
         assert AuthMiddleware in stack, route
 
 
@@ -822,7 +822,7 @@ def feed(broker):
 
 
 def _socket(client: Client, path: str = "/ws/map/", origin: bytes = b"http://testserver") -> Any:
-    headers = [(b"origin", origin)]
+    headers = [(b"host", b"testserver"), (b"origin", origin)]
     cookie = client.cookies.get("sessionid")
     if cookie is not None:
         headers.append((b"cookie", f"sessionid={cookie.value}".encode()))
@@ -857,7 +857,13 @@ class TestMapSocket:
         from asgiref.sync import sync_to_async
 
         await sync_to_async(client.force_login)(user_b)
-        for origin in (b"http://evil.example", b"https://testserver.evil.example", b"null"):
+        for origin in (
+            b"http://evil.example",
+            b"https://testserver.evil.example",
+            b"null",
+            b"http://testserver:9999",  # another program on the same host
+            b"https://testserver",  # the other scheme
+        ):
             connected, _ = await _socket(client, origin=origin).connect()
             assert not connected, origin
         socket = _socket(client)  # the same user from the site's own page is let in

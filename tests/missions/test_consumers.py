@@ -50,8 +50,17 @@ def announcing(vvm_factory):
     return vvm
 
 
-def _socket(client, path: str = "/ws/map/") -> WebsocketCommunicator:
-    headers = [(b"origin", b"http://testserver")]
+def _socket(
+    client,
+    path: str = "/ws/map/",
+    origin: bytes = b"http://testserver",
+    host: bytes = b"testserver",
+    **extra: bytes,
+) -> WebsocketCommunicator:
+    """A socket as a page of the site opens it: the Host header names the site, the Origin
+    header the page's origin; ``extra`` headers by name (``x_forwarded_proto``)."""
+    headers = [(b"host", host), (b"origin", origin)]
+    headers += [(name.replace("_", "-").encode(), value) for name, value in extra.items()]
     cookie = client.cookies.get("sessionid")
     if cookie is not None:
         headers.append((b"cookie", f"sessionid={cookie.value}".encode()))
@@ -206,12 +215,108 @@ async def test_a_socket_from_another_site_is_refused(client, user_a) -> None:
         application,
         "/ws/map/",
         headers=[
+            (b"host", b"testserver"),
             (b"origin", b"http://evil.example"),
             (b"cookie", f"sessionid={client.cookies['sessionid'].value}".encode()),
         ],
     )
     connected, _ = await socket.connect()
     assert not connected
+
+
+async def _opens(socket: WebsocketCommunicator) -> bool:
+    connected, _ = await socket.connect()
+    if connected:
+        await socket.receive_json_from(timeout=5)  # the snapshot
+        await socket.disconnect()
+    return connected
+
+
+async def test_only_the_sites_own_origin_opens_a_socket_scheme_host_and_port(
+    client, user_a, user_b
+) -> None:
+    """A page served by another program on the same host (another port) or over the other
+    scheme is another site: its sockets are refused for every user."""
+    from asgiref.sync import sync_to_async
+
+    for user in (user_a, user_b):
+        await sync_to_async(client.force_login)(user)
+        site = {"host": b"testserver:8000"}
+        assert await _opens(_socket(client, origin=b"http://testserver:8000", **site))
+        for origin in (
+            b"http://testserver:9999",
+            b"http://testserver",
+            b"https://testserver:8000",
+            b"http://testserver:8000.evil.example",
+            b"http://evil.example:8000",
+            b"null",
+            b"",
+        ):
+            assert not await _opens(_socket(client, origin=origin, **site)), origin
+        # A Host header that ALLOWED_HOSTS does not list is no site of ours, whatever the
+        # origin says.
+        forged = _socket(client, origin=b"http://evil.example", host=b"evil.example")
+        assert not await _opens(forged)
+        # No Origin header at all (not a browser's page): refused.
+        bare = WebsocketCommunicator(
+            application,
+            "/ws/map/",
+            headers=[
+                (b"host", b"testserver"),
+                (b"cookie", f"sessionid={client.cookies['sessionid'].value}".encode()),
+            ],
+        )
+        assert not (await bare.connect())[0]
+
+
+async def test_an_origin_behind_a_proxy_is_the_sites_when_trusted_or_forwarded_as_https(
+    client, user_a, user_b, settings
+) -> None:
+    from asgiref.sync import sync_to_async
+
+    await sync_to_async(client.force_login)(user_b)
+    site = {"host": b"testserver"}
+    public = b"https://cpcc.example.com"
+    assert not await _opens(_socket(client, origin=public, **site))
+    settings.CSRF_TRUSTED_ORIGINS = ["https://cpcc.example.com"]
+    assert await _opens(_socket(client, origin=public, **site))
+    assert not await _opens(_socket(client, origin=b"http://cpcc.example.com", **site))
+    assert not await _opens(_socket(client, origin=b"https://cpcc.example.com:8443", **site))
+    settings.CSRF_TRUSTED_ORIGINS = ["https://*.example.com"]
+    assert await _opens(_socket(client, origin=b"https://map.example.com", **site))
+    assert not await _opens(_socket(client, origin=b"https://example.org", **site))
+    # A proxy that ends TLS says so in the header SECURE_PROXY_SSL_HEADER names: the site's
+    # own origin is then https.
+    settings.CSRF_TRUSTED_ORIGINS = []
+    settings.SECURE_PROXY_SSL_HEADER = ("HTTP_X_FORWARDED_PROTO", "https")
+    await sync_to_async(client.force_login)(user_a)
+    forwarded = {"host": b"testserver", "x_forwarded_proto": b"https"}
+    assert await _opens(_socket(client, origin=b"https://testserver", **forwarded))
+    assert not await _opens(_socket(client, origin=b"http://testserver", **forwarded))
+    assert await _opens(_socket(client, origin=b"http://testserver", **site))
+
+
+async def test_a_message_nested_too_deep_or_not_json_answers_an_error_frame(
+    client, user_a, user_b
+) -> None:
+    from asgiref.sync import sync_to_async
+
+    for user in (user_a, user_b):
+        await sync_to_async(client.force_login)(user)
+        socket = _socket(client)
+        assert (await socket.connect())[0]
+        assert (await socket.receive_json_from(timeout=5))["type"] == "snapshot"
+        for text in ("[" * 5_000 + "]" * 5_000, '{"type": ' * 101 + "1" + "}" * 101):
+            await socket.send_to(text_data=text)
+            error = await socket.receive_json_from(timeout=5)
+            assert error["type"] == "error"
+            assert "nested more than 100 levels" in error["detail"]
+        await socket.send_to(text_data="resync, please")
+        assert "not JSON" in (await socket.receive_json_from(timeout=5))["detail"]
+        # The socket is still there and answers a proper message.
+        await socket.send_json_to({"type": "resync"})
+        assert (await socket.receive_json_from(timeout=5))["type"] == "snapshot"
+        await socket.disconnect()
 
 
 async def test_a_browser_that_asks_to_resync_gets_the_whole_state_again(

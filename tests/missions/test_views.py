@@ -624,3 +624,89 @@ def test_a_running_vv_is_not_restarted(client, user_a, vv_a, page_vvm) -> None:
     response = client.post(reverse("vv-restart", args=[vv_a.pk]))
     assert response.status_code == 302 and response["Location"] == f"/vvs/{vv_a.pk}/"
     assert VirtualVehicle.objects.count() == 1
+
+
+# --- what the editor refuses: long programs (in its check too), names, a full queue -----------
+
+TOO_LONG = "A program has at most 1,000,000 characters: split the work into several VVs or make the program shorter."
+
+
+def test_the_check_refuses_a_program_longer_than_a_submission_as_the_api_does(
+    client, user_a, user_b, settings
+) -> None:
+    from tests.api_fixtures import token_client
+
+    program = "var x = 1;\n" * 90_910  # 1,000,010 characters: a body of 1 MB, under the 2 MB
+    submission = token_client(user_a).post(
+        "/api/v1/vvs/", {"name": "long", "program": program}, format="json"
+    )
+    assert submission.status_code == 400
+    expected = {"detail": f"program: {TOO_LONG}", "program": [TOO_LONG]}
+    assert submission.json() == expected
+    for user in (user_a, user_b):
+        client.force_login(user)
+        url = reverse("vv-check")
+        as_json = client.post(url, {"program": program}, content_type="application/json")
+        assert (as_json.status_code, as_json.json()) == (400, expected)
+        as_form = client.post(url, {"program": program})
+        assert (as_form.status_code, as_form.json()) == (400, expected)
+        fits = client.post(url, {"program": program[:1_000_000]}, content_type="application/json")
+        assert fits.status_code == 200 and fits.json() == {"ok": True}
+    editor = client.post(reverse("vv-new"), {"name": "long", "copies": 1, "program": program})
+    assert editor.status_code == 400 and TOO_LONG in html.unescape(editor.text)
+    # Above the request limit both answer 413 before reading the body.
+    settings.CPCC_MAX_REQUEST_BYTES = 100_000
+    check = client.post(reverse("vv-check"), {"program": program}, content_type="application/json")
+    submission = token_client(user_a).post(
+        "/api/v1/vvs/", {"name": "big", "program": program}, format="json"
+    )
+    assert check.status_code == submission.status_code == 413
+    assert "at most 100,000" in check.json()["detail"]
+    assert not VirtualVehicle.objects.exists()
+
+
+def test_the_editor_refuses_a_name_with_control_or_bidi_characters(
+    client, user_a, queued_a, page_vvm
+) -> None:
+    client.force_login(user_a)
+    response = client.post(reverse("vv-new"), {"name": "\x1b[31mred", "copies": 1, "program": FINE})
+    assert response.status_code == 400
+    assert "The name has a control character (U+001B) at character 1" in html.unescape(
+        response.text
+    )
+    edit = client.post(
+        reverse("vv-edit", args=[queued_a.pk]), {"name": "Draft\u202e1v", "program": FINE}
+    )
+    assert edit.status_code == 400
+    assert "(U+202E RIGHT-TO-LEFT OVERRIDE) at character 6" in html.unescape(edit.text)
+    queued_a.refresh_from_db()
+    assert queued_a.name == "Draft"
+    assert VirtualVehicle.objects.count() == 1
+
+
+def test_the_editor_shows_why_a_full_queue_refuses_a_submission(
+    client, user_a, user_b, customer_a, vv_a, queued_a, page_vvm
+) -> None:
+    from vvm_worker.services import vv_cancel
+
+    vv_cancel(vv_id=vv_a.pk, vvm=page_vvm)  # ended: it may be restarted
+    customer_a.max_queued_vvs = 2  # queued_a waits in it already
+    customer_a.save()
+    client.force_login(user_a)
+    response = client.post(reverse("vv-new"), {"name": "Many", "copies": 2, "program": FINE})
+    assert response.status_code == 429
+    page = html.unescape(response.text)
+    assert "Customer A has 1 VV(s) waiting in the queue and may have at most 2" in page
+    assert "so 2 more cannot be submitted now" in page
+    assert FINE.strip() in page  # the program stays in the editor
+    assert not VirtualVehicle.objects.filter(name__startswith="Many").exists()
+    one = client.post(reverse("vv-new"), {"name": "One", "copies": 1, "program": FINE})
+    assert one.status_code == 302
+    # Full now: a restart is refused too, saying why.
+    restart = client.post(reverse("vv-restart", args=[vv_a.pk]), follow=True)
+    assert "may have at most 2" in html.unescape(restart.text)
+    assert VirtualVehicle.objects.filter(customer=customer_a).count() == 3
+    # Customer B's queue is its own.
+    client.force_login(user_b)
+    other = client.post(reverse("vv-new"), {"name": "B", "copies": 2, "program": FINE})
+    assert other.status_code == 302

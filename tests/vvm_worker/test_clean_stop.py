@@ -9,9 +9,7 @@ finishes once the workers are back. Run on SQLite and on PostgreSQL (CI's second
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import pytest
 import requests
@@ -25,7 +23,7 @@ from tests.factories import (
     UserFactory,
     VehicleFactory,
 )
-from tests.live import Web, Workers, collect_static, wait_for
+from tests.live import Workers, wait_for
 from tests.vvm_worker.test_distributed import all_ended, assert_paper_results, load
 from tests.vvm_worker.test_distributed_faults import counter_program, cut_step, ended
 from vvm_worker.platform import platform_vvm
@@ -86,20 +84,6 @@ def tokens(transactional_db: None) -> list[str]:
     customers = [CustomerFactory(name=f"Customer {c}") for c in "ABCD"]
     users = [UserFactory(username=f"customer-{c.name[-1].lower()}", customer=c) for c in customers]
     return [Token.objects.create(user=u).key for u in users]
-
-
-@pytest.fixture(scope="module")
-def web_var(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return collect_static(tmp_path_factory.mktemp("web-var"))
-
-
-@pytest.fixture
-def web(broker_url: str, tmp_path: Path, web_var: Path, transactional_db: None) -> Iterator[Web]:
-    server = Web(tmp_path, broker_url, web_var)
-    try:
-        yield server
-    finally:
-        server.stop()
 
 
 def test_daphne_answers_every_concurrent_submission_and_stops_cleanly(web, tokens) -> None:

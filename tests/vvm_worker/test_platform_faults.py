@@ -10,7 +10,6 @@ which also compares the outcome with an undisturbed run.)
 from __future__ import annotations
 
 import sqlite3
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -30,7 +29,7 @@ from tests.factories import (
     UserFactory,
     VehicleFactory,
 )
-from tests.live import Web, Workers, collect_static, wait_for
+from tests.live import Web, Workers, wait_for
 from tests.tcp_proxy import TcpProxy
 from vvm_worker.dispatch import VV_ADVANCE_TASK
 from vvm_worker.platform import platform_vvm
@@ -77,20 +76,6 @@ def fleet(transactional_db: None) -> dict[str, object]:
     users = [UserFactory(username=f"customer-{c.name[-1].lower()}", customer=c) for c in customers]
     tokens = [Token.objects.create(user=u).key for u in users]
     return {"gs": gs, "rvs": [heli_one, heli_two], "customers": customers, "tokens": tokens}
-
-
-@pytest.fixture(scope="module")
-def web_var(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return collect_static(tmp_path_factory.mktemp("web-var"))
-
-
-@pytest.fixture
-def web(broker_url: str, tmp_path: Path, web_var: Path, transactional_db: None) -> Iterator[Web]:
-    server = Web(tmp_path, broker_url, web_var)
-    try:
-        yield server
-    finally:
-        server.stop()
 
 
 def start_fleet(workers: Workers, **env: str) -> None:

@@ -140,6 +140,7 @@ def test_optional_fields_are_parsed(tmp_path: Path) -> None:
         ("customers.0.privileged", True),
         ("customers.0.max_tasks_per_vv", 100),
         ("customers.0.storage_bytes", 1_000_000),
+        ("customers.0.max_queued_vvs", 500),
         ("vvs.0", {"customer": "Customer A", "name": "F", "program": "vv/p.js"}),
         ("vvs.1.submit_at_s", 12.5),
         (
@@ -167,8 +168,10 @@ def test_optional_fields_are_parsed(tmp_path: Path) -> None:
         100,
         1_000_000,
     )
+    assert customer.max_queued_vvs == 500
     assert scenario.customers[1].privileged is False
     assert scenario.customers[1].max_tasks_per_vv is None
+    assert scenario.customers[1].max_queued_vvs is None
     assert scenario.vvs[0].source == "// é\nVV.log(1);\n"
     assert scenario.vvs[0].program_path == (tmp_path / "vv" / "p.js").resolve()
     assert scenario.vvs[1].submit_at_s == 12.5

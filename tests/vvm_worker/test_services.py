@@ -316,3 +316,127 @@ def test_the_mapper_sees_an_rv_added_or_an_area_changed_at_once(
     third = run_one("moved")
     assert third.status == VVStatus.FINISHED
     assert third.tasks.get().vehicle == fleet
+
+
+# --- what a submission may not be: names that are not plain text, a full queue -------------
+
+
+@pytest.mark.parametrize(
+    ("name", "what"),
+    [
+        ("\x1b[31mred", "a control character (U+001B) at character 1"),
+        ("two\nlines", "a control character (U+000A) at character 4"),
+        ("c1 \x85 next line", "a control character (U+0085) at character 4"),
+        ("abc\u202egpj.exe", "U+202E RIGHT-TO-LEFT OVERRIDE) at character 4"),
+        ("\u2066isolated\u2069", "U+2066 LEFT-TO-RIGHT ISOLATE) at character 1"),
+        ("mark\u200f", "U+200F RIGHT-TO-LEFT MARK) at character 5"),
+    ],
+)
+def test_a_name_with_a_control_or_bidi_character_is_refused(
+    customer_a, user_a, vvm_factory, name, what
+) -> None:
+    from django.core.exceptions import ValidationError
+
+    from vvm_worker.services import vv_create_copies_for_user
+
+    with pytest.raises(ValidationError) as refused:
+        vv_submit(customer=customer_a, name=name, program=program(), vvm=vvm_factory())
+    assert what in refused.value.message_dict["name"][0]
+    with pytest.raises(ValidationError):
+        vv_create_copies_for_user(
+            user=user_a, name=name, program=program(), copies=2, vvm=vvm_factory()
+        )
+    assert not VirtualVehicle.objects.exists()
+    # Letters of any script, and marks that are not controls, are fine.
+    fine = vv_submit(
+        customer=customer_a, name="Über 東京 — ok", program=program(), vvm=vvm_factory()
+    )
+    assert fine.name == "Über 東京 — ok"
+
+
+def test_a_queued_vv_cannot_be_renamed_to_a_name_with_a_bidi_override(
+    customer_a, user_a, vvm_factory
+) -> None:
+    from django.core.exceptions import ValidationError
+
+    from vvm_worker.services import vv_update_program_for_user
+
+    vv = vv_submit(customer=customer_a, name="plain", program=program(), vvm=vvm_factory())
+    assert vv.status == VVStatus.QUEUED  # no ground station: it waits
+    with pytest.raises(ValidationError, match="U\\+202D"):
+        vv_update_program_for_user(
+            user=user_a, vv_id=vv.pk, name="x\u202dy", program=program(), vvm=vvm_factory()
+        )
+    vv.refresh_from_db()
+    assert vv.name == "plain"
+
+
+def test_submissions_beyond_the_queue_quota_are_refused_for_that_customer_only(
+    customer_a, customer_b, user_a, vvm_factory
+) -> None:
+    from vvm_worker.services import (
+        VVQueueFull,
+        vv_cancel,
+        vv_create_copies_for_user,
+        vv_restart_for_user,
+    )
+
+    vvm = vvm_factory()
+    customer_a.max_queued_vvs = 3
+    customer_a.save()
+    # No ground station: every VV stays queued.
+    queued = [
+        vv_submit(customer=customer_a, name=f"A{n}", program=program(), vvm=vvm) for n in range(3)
+    ]
+    with pytest.raises(VVQueueFull) as full:
+        vv_submit(customer=customer_a, name="A3", program=program(), vvm=vvm)
+    message = str(full.value)
+    assert "Customer A has 3 VV(s) waiting in the queue and may have at most 3" in message
+    assert "max_queued_vvs" in message and "cancel some" in message
+    # Scenario submissions count the same.
+    from vvm_worker.scenario import VVSpec
+    from vvm_worker.services.scenarios import scenario_submit_vv
+
+    with pytest.raises(VVQueueFull):
+        scenario_submit_vv(
+            spec=VVSpec(customer="Customer A", name="S", source=program(), program_path=None),
+            instance_name="S",
+            customer=customer_a,
+            vvm=vvm,
+        )
+    # Customer B's queue is its own.
+    vv_submit(customer=customer_b, name="B0", program=program(), vvm=vvm)
+    assert VirtualVehicle.objects.filter(customer=customer_a).count() == 3
+    # Copies go in all together or not at all, and the message counts them.
+    vv_cancel(vv_id=queued[0].pk, vvm=vvm)
+    with pytest.raises(VVQueueFull, match="so 2 more cannot be submitted"):
+        vv_create_copies_for_user(user=user_a, name="C", program=program(), copies=2, vvm=vvm)
+    assert not VirtualVehicle.objects.filter(name__startswith="C").exists()
+    (copy,), problem = vv_create_copies_for_user(
+        user=user_a, name="C", program=program(), copies=1, vvm=vvm
+    )
+    assert problem is None and copy.status == VVStatus.QUEUED
+    # A restart queues a new VV: it counts too.
+    with pytest.raises(VVQueueFull):
+        vv_restart_for_user(user=user_a, vv_id=queued[0].pk, vvm=vvm)
+    # VVs that started or ended leave room: only those waiting count.
+    VirtualVehicle.objects.filter(pk=queued[1].pk).update(status=VVStatus.RUNNING)
+    assert vv_restart_for_user(user=user_a, vv_id=queued[0].pk, vvm=vvm).status == VVStatus.QUEUED
+
+
+def test_a_scenario_with_a_vv_name_the_submission_refuses_says_where_before_loading(
+    db,
+) -> None:
+    import json
+
+    from accounts.models import Customer
+    from tests.conftest import SCENARIOS
+    from vvm_worker.scenario import ScenarioError, parse_scenario
+    from vvm_worker.services.scenarios import scenario_apply
+
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    data["vvs"][1]["name"] = "\x1b[2Jwipe"
+    scenario = parse_scenario(data, base_dir=SCENARIOS)
+    with pytest.raises(ScenarioError, match=r"vvs\[1\]\.name: The name has a control character"):
+        scenario_apply(scenario=scenario, logins=False)
+    assert not Customer.objects.exists()

@@ -7,8 +7,9 @@ functions and nothing else that writes. Each changes state in one transaction an
 the dispatcher which host must act next (DESIGN.md section 3). A VV moves through its life like
 this:
 
-- ``vv_submit`` queues it; ``vv_admit_queued`` starts as many as the customer's quota of
-  parallel VVs allows, each on a ground station (the loader).
+- ``vv_submit`` queues it (within the customer's quota of queued VVs); ``vv_admit_queued``
+  starts as many as the customer's quota of parallel VVs allows, each on a ground station (the
+  loader).
 - ``vv_advance`` is what the host holding a VV does with it: run the program to its next
   blocking call (a *step*, by replay of the journal), then route the pending task: keep it on
   this RV, migrate to an RV that can serve it, park on a ground station while only RVs in
@@ -61,6 +62,7 @@ from vvm_worker.services.vvs import (
     VVAlreadyEnded,
     VVNotEnded,
     VVNotQueued,
+    VVQueueFull,
     copy_names,
     task_complete,
     vv_admit_queued,
@@ -90,6 +92,7 @@ __all__ = [
     "VVAlreadyEnded",
     "VVNotEnded",
     "VVNotQueued",
+    "VVQueueFull",
     "VehicleConfig",
     "copy_names",
     "customer_create",

@@ -22,6 +22,7 @@ class CustomerConfig(TypedDict, total=False):
     slug: str
     privileged: bool
     max_parallel_vvs: int
+    max_queued_vvs: int
     max_tasks_per_vv: int
     storage_bytes: int
     cpu_ms_per_step: int

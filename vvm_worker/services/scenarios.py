@@ -16,7 +16,14 @@ from django.utils.text import slugify
 
 from accounts.models import Customer, User
 from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
-from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle, VVStatus
+from missions.models import (
+    ACTIVE_STATUSES,
+    Task,
+    TaskStatus,
+    VirtualVehicle,
+    VVStatus,
+    vv_name_problem,
+)
 from vvm_worker.scenario import (
     CustomerSpec,
     FleetEvent,
@@ -42,6 +49,17 @@ class LoadedScenario:
     vehicles: dict[str, Vehicle] = field(default_factory=dict)
     ground_stations: dict[str, GroundStation] = field(default_factory=dict)
     logins: list[tuple[str, str | None]] = field(default_factory=list)
+
+
+def _check_vv_names(scenario: Scenario) -> None:
+    """A VV name the submission would refuse (vv_submit), said with its place in the file
+    before anything is loaded."""
+    for i, spec in enumerate(scenario.vvs):
+        problem = vv_name_problem(spec.name)
+        if problem is not None:
+            raise ScenarioError(
+                f"vvs[{i}].name", problem, file=str(scenario.path) if scenario.path else None
+            )
 
 
 def _check_sensors(scenario: Scenario) -> None:
@@ -125,7 +143,9 @@ def scenario_apply(*, scenario: Scenario, logins: bool = True) -> LoadedScenario
     each, unless ``logins`` is False) into the database. Running it twice changes nothing the
     second time.
 
-    Raises ScenarioError for a vehicle sensor that is in neither the SDC nor the scenario.
+    Raises ScenarioError for a vehicle sensor that is in neither the SDC nor the scenario,
+    and for a VV's name with a control or bidirectional formatting character (which
+    ``vv_submit`` would refuse).
     """
     loaded = LoadedScenario()
     with transaction.atomic():
@@ -141,6 +161,7 @@ def scenario_apply(*, scenario: Scenario, logins: bool = True) -> LoadedScenario
                 },
             )
         _check_sensors(scenario)
+        _check_vv_names(scenario)
         for gs in scenario.ground_stations:
             loaded.ground_stations[gs.name], _ = GroundStation.objects.update_or_create(
                 name=gs.name,

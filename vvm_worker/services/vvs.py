@@ -9,12 +9,14 @@ import secrets
 import uuid
 from typing import Any
 
+from django.core.exceptions import ValidationError
 from django.db import transaction
 from django.db.models import F
 
 from accounts.models import Customer, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
+from cpcc_site.json_depth import MAX_VALUE_DEPTH  # how deeply a stored value may nest
 from fleet.models import Vehicle
 from missions.events import task_event, vv_event
 from missions.models import (
@@ -25,6 +27,7 @@ from missions.models import (
     TaskStatus,
     VirtualVehicle,
     VVStatus,
+    vv_name_problem,
 )
 from missions.selectors import vv_get_for_user
 from vvm_worker.runtime import (
@@ -83,13 +86,26 @@ class VVNotQueued(RuntimeError):
         self.vv = vv
 
 
+class VVQueueFull(RuntimeError):
+    """The customer's queue holds as many VVs as its quota allows (``max_queued_vvs``), so no
+    more can be submitted until some start or are cancelled."""
+
+    def __init__(self, customer: Customer, *, queued: int, adding: int) -> None:
+        more = "one more" if adding == 1 else f"{adding} more"
+        super().__init__(
+            f"{customer.name} has {queued} VV(s) waiting in the queue and may have at most "
+            f"{customer.max_queued_vvs} (its quota max_queued_vvs), so {more} cannot be "
+            "submitted now: wait until some of them start, or cancel some, then submit again."
+        )
+        self.customer = customer
+        self.queued = queued
+        self.adding = adding
+
+
 # Steps one host runs for one VV before it lets other work go first (rejected tasks in a row).
 MAX_STEPS_PER_ADVANCE = 50
 # Copies of one program a user may submit at once (the web editor's "copies").
 MAX_COPIES = 50
-# How deeply a stored value may nest: far below Python's recursion limit, which parsing it
-# here and on every later read of the document must stay clear of.
-MAX_VALUE_DEPTH = 100
 _KEY_CHARS = StorageDocument._meta.get_field("key").max_length or 0
 _SHOWN_KEY_CHARS = 40  # of a key quoted in an error
 
@@ -121,23 +137,29 @@ def vv_submit(
     """Queue a new VV for the customer and, with ``admit``, start it if the quota allows.
 
     Raises ProgramRejected for a syntax error unless ``refuse_syntax_errors`` is False (a
-    scenario's VV then ends ``failed`` with the line and column when it is loaded).
+    scenario's VV then ends ``failed`` with the line and column when it is loaded),
+    ValidationError (naming ``name``) for a name with a control or bidirectional formatting
+    character, and VVQueueFull when the customer's queue is full (``max_queued_vvs``; every
+    submission counts: the API's, the editor's, a restart, a scenario's).
     """
+    _check_name(name)
     if refuse_syntax_errors:
         problem = check_syntax(program)
         if problem is not None:
             raise ProgramRejected(problem)
     now = vvm.clock.now_s()
-    vv = VirtualVehicle.objects.create(
-        id=vv_id or uuid.uuid4(),
-        customer=customer,
-        name=name,
-        program=program,
-        seed=secrets.randbits(31) if seed is None else seed,
-        start_ms=vvm.clock.epoch_ms(now),
-        catalog=customer_catalog(customer=customer),
-        submitted_s=now,
-    )
+    with transaction.atomic():
+        _check_queue(customer, adding=1)
+        vv = VirtualVehicle.objects.create(
+            id=vv_id or uuid.uuid4(),
+            customer=customer,
+            name=name,
+            program=program,
+            seed=secrets.randbits(31) if seed is None else seed,
+            start_ms=vvm.clock.epoch_ms(now),
+            catalog=customer_catalog(customer=customer),
+            submitted_s=now,
+        )
     logger.info("vv submitted", extra={"vv": str(vv.id), "customer": customer.slug})
     if announcing(vvm):
         vvm.announcer.announce(vv_event(vv))
@@ -145,6 +167,22 @@ def vv_submit(
         vv_admit_queued(customer_id=customer.pk, vvm=vvm)
         vv.refresh_from_db()  # admission changed it through another instance
     return vv
+
+
+def _check_name(name: str) -> None:
+    problem = vv_name_problem(name)
+    if problem is not None:
+        raise ValidationError({"name": [problem]})
+
+
+def _check_queue(customer: Customer, *, adding: int) -> None:
+    """Raise VVQueueFull unless ``adding`` more queued VVs fit the customer's quota. Holds the
+    customer's row until the transaction ends, as admission does, so that two submissions at
+    once cannot both take the last place."""
+    locked = Customer.objects.select_for_update().get(pk=customer.pk)
+    queued = VirtualVehicle.objects.filter(customer=locked, status=VVStatus.QUEUED).count()
+    if queued + adding > locked.max_queued_vvs:
+        raise VVQueueFull(locked, queued=queued, adding=adding)
 
 
 def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
@@ -560,13 +598,16 @@ def _submit_copies(
 ) -> list[VirtualVehicle]:
     """Queue ``copies`` VVs of one program in one transaction and, once it commits, ask the
     ground-station workers to admit the customer's queued VVs. Raises ProgramRejected for a
-    syntax error (checked once; nothing is created)."""
+    syntax error (checked once; nothing is created), ValidationError for a refused name and
+    VVQueueFull when the copies do not all fit the customer's queue (nothing is created)."""
     if not 1 <= copies <= MAX_COPIES:
         raise ValueError(f"copies must be between 1 and {MAX_COPIES}, not {copies}")
+    _check_name(name)
     problem = check_syntax(program)
     if problem is not None:
         raise ProgramRejected(problem)
     with transaction.atomic():
+        _check_queue(customer, adding=copies)  # all of them or none (vv_submit checks each)
         vvs = [
             vv_submit(
                 customer=customer,
@@ -648,11 +689,13 @@ def vv_update_program_for_user(
     """Change the name and program of one of the user's VVs while it waits in the queue; it
     keeps its place there.
 
-    Raises VVNotFound for a missing VV or another customer's, ProgramRejected (with the line
-    and column) for a program with a syntax error, and VVNotQueued once the VV has started or
-    ended. Returns the VV as it is afterwards.
+    Raises VVNotFound for a missing VV or another customer's, ValidationError (naming
+    ``name``) for a name with a control or bidirectional formatting character,
+    ProgramRejected (with the line and column) for a program with a syntax error, and
+    VVNotQueued once the VV has started or ended. Returns the VV as it is afterwards.
     """
     vv = vv_get_for_user(user=user, vv_id=vv_id)
+    _check_name(name)
     problem = check_syntax(program)
     if problem is not None:
         raise ProgramRejected(problem)

@@ -61,7 +61,7 @@
     var depot = L.circleMarker([0, 0], {
       radius: 5, color: '#222222', weight: 2, fillColor: '#ffffff', fillOpacity: 1,
       pmIgnore: true, snapIgnore: true
-    }).bindTooltip('depot');
+    }).bindTooltip(M.text('depot'));
     function placeDepot() {
       var lat = numberOf('id_depot_lat');
       var lng = numberOf('id_depot_lng');

@@ -6,7 +6,7 @@ import re
 from pathlib import Path
 
 import accounts.api.views
-from accounts.models import DEFAULT_MAX_PARALLEL_VVS, Customer
+from accounts.models import DEFAULT_MAX_PARALLEL_VVS, DEFAULT_MAX_QUEUED_VVS, Customer
 from vvm_worker.runtime import VVM_API_CALLS
 from vvm_worker.services import vv_submit
 
@@ -114,3 +114,22 @@ def test_a_customer_with_vvs_running_is_not_deleted(
 def test_the_known_api_calls_are_those_the_runtime_checks() -> None:
     checked = set(re.findall(r"allowed\('([\w.]+)'\)", PRELUDE.read_text()))
     assert checked == set(VVM_API_CALLS)
+
+
+def test_staff_see_and_set_the_queued_vv_quota_customers_cannot(
+    api_staff, api_a, customer_a, customer_b
+) -> None:
+    url = f"/api/v1/customers/{customer_a.pk}/"
+    assert api_staff.get(url).json()["max_queued_vvs"] == DEFAULT_MAX_QUEUED_VVS
+    changed = api_staff.patch(url, {"max_queued_vvs": 7}, format="json")
+    assert changed.status_code == 200 and changed.json()["max_queued_vvs"] == 7
+    refused = api_staff.patch(url, {"max_queued_vvs": 0}, format="json")
+    assert refused.status_code == 400 and "max_queued_vvs" in refused.json()
+    created = api_staff.post(
+        "/api/v1/customers/", {"name": "C", "max_queued_vvs": 3}, format="json"
+    )
+    assert created.status_code == 201 and created.json()["max_queued_vvs"] == 3
+    assert api_a.patch(url, {"max_queued_vvs": 10_000}, format="json").status_code == 403
+    customer_a.refresh_from_db()
+    customer_b.refresh_from_db()
+    assert (customer_a.max_queued_vvs, customer_b.max_queued_vvs) == (7, DEFAULT_MAX_QUEUED_VVS)

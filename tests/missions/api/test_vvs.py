@@ -72,3 +72,57 @@ def test_the_openapi_schema_describes_the_vv_endpoints(api_a) -> None:
     response = api_a.get("/api/schema/", HTTP_ACCEPT="application/vnd.oai.openapi+json")
     assert response.status_code == 200
     assert "/api/v1/vvs/" in response.json()["paths"]
+
+
+def test_a_name_with_control_or_bidi_characters_is_refused_naming_the_problem(api_a, api_b) -> None:
+    for api, name, shown in [
+        (api_a, "\x1b[31mred", "a control character (U+001B) at character 1"),
+        (api_b, "invoice\u202egpj.exe", "(U+202E RIGHT-TO-LEFT OVERRIDE) at character 8"),
+        (api_a, "\u2067rtl\u2069", "(U+2067 RIGHT-TO-LEFT ISOLATE) at character 1"),
+        (api_b, "mark\u200e", "(U+200E LEFT-TO-RIGHT MARK) at character 5"),
+    ]:
+        response = api.post("/api/v1/vvs/", {"name": name, "program": PROGRAM}, format="json")
+        assert response.status_code == 400, name
+        body = response.json()
+        assert body["detail"].startswith("name: The name has ") and shown in body["detail"]
+        assert shown in body["name"][0]
+    assert not VirtualVehicle.objects.exists()
+
+
+def test_a_program_longer_than_a_submission_may_be_is_refused_with_400(api_a) -> None:
+    too_long = "x" * 1_000_001
+    response = api_a.post("/api/v1/vvs/", {"name": "long", "program": too_long}, format="json")
+    assert response.status_code == 400
+    assert response.json() == {
+        "detail": "program: A program has at most 1,000,000 characters: split the work into "
+        "several VVs or make the program shorter.",
+        "program": [
+            "A program has at most 1,000,000 characters: split the work into several VVs or "
+            "make the program shorter."
+        ],
+    }
+
+
+def test_a_submission_beyond_the_queue_quota_answers_429_for_that_customer(
+    api_a, api_b, customer_a
+) -> None:
+    customer_a.max_queued_vvs = 2
+    customer_a.save()
+    for n in range(2):  # no ground station: they stay queued
+        created = api_a.post("/api/v1/vvs/", {"name": f"q{n}", "program": PROGRAM}, format="json")
+        assert created.status_code == 201
+    refused = api_a.post("/api/v1/vvs/", {"name": "q2", "program": PROGRAM}, format="json")
+    assert refused.status_code == 429
+    assert "Retry-After" not in refused  # waiting alone does not help: the message says what does
+    detail = refused.json()["detail"]
+    assert "Customer A has 2 VV(s) waiting in the queue and may have at most 2" in detail
+    assert "cancel some" in detail
+    assert VirtualVehicle.objects.filter(customer=customer_a).count() == 2
+    # Customer B's queue is its own.
+    other = api_b.post("/api/v1/vvs/", {"name": "b", "program": PROGRAM}, format="json")
+    assert other.status_code == 201
+    # Cancelling one makes room.
+    first = VirtualVehicle.objects.get(name="q0")
+    assert api_a.post(f"/api/v1/vvs/{first.pk}/cancel/").status_code == 200
+    again = api_a.post("/api/v1/vvs/", {"name": "q2", "program": PROGRAM}, format="json")
+    assert again.status_code == 201
