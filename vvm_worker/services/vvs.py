@@ -342,6 +342,12 @@ def _json_value(text: str, *, where: str) -> Any:
         raise _Unstorable(f"{where} nests more than {MAX_VALUE_DEPTH} levels deep") from None
     except ValueError as exc:
         raise _Unstorable(f"{where} is not valid JSON ({exc})") from None
+    # The walk runs for every value a step stores: only when the text could hide what it looks
+    # for (a string with U+0000 or a surrogate comes from a \u escape or a non-ASCII text; more
+    # levels than the limit take more opening brackets).
+    escapes = "\\u" in text or not text.isascii()
+    if not escapes and text.count("[") + text.count("{") <= MAX_VALUE_DEPTH:
+        return value
     todo: list[tuple[Any, int]] = [(value, 0)]
     while todo:
         item, depth = todo.pop()
