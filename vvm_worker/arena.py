@@ -2,11 +2,12 @@
 
 Pure Python (no Django, no V8): simulated vehicles (`fleet.simulation.SimVehicle`), the vehicle
 mapper's rules (`mapping.map_task`) and the route planners, on discrete-event time. Each
-vehicle follows the control loop of `vvm_worker.executor.VehicleLoop`: it asks its planner
-whenever it arrives somewhere or gets work (in flight too when the planner `retargets`), reads
-every open task within tolerance of where it stops, and when idle waits at its standby position
-(planners that `stands_by`) or flies home. `simulate` runs the same loop with the whole
-platform around it (programs, journal, database); for streams of one-task VVs both give the same
+vehicle runs the platform's control loop (`vvm_worker.control.ControlLoop`) over a store in
+memory: it asks its planner whenever it arrives somewhere or gets work (in flight too when the
+planner `retargets`), serves every open task within tolerance of where it stops, and when idle
+waits at its standby position (planners that `stands_by`) or flies home. `simulate` runs the
+same loop with the whole platform around it (programs, journal, database); for streams of
+one-task VVs both give the same
 latencies (the bench checks it on a few seeds), and this one is a hundred times faster, which is
 what a sweep over planners, arrival rates and seeds needs.
 """
@@ -19,26 +20,19 @@ import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from shapely.geometry import Polygon
 
-from fleet.geo import Position, distance_m
+from fleet.geo import Position
 from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as Kinematics
+from vvm_worker.control import ACTIVE, Area, ControlLoop, LoopConfig, LoopTask, VehicleState
 from vvm_worker.mapping import VehicleCaps, map_task
-from vvm_worker.planning import (
-    STANDBY_S,
-    Planner,
-    PlanTask,
-    TravelTime,
-    make_planner,
-    standby_position,
-)
+from vvm_worker.planning import STANDBY_S, Planner, TravelTime, make_planner
 from vvm_worker.runtime.types import TaskRequest
 
 TOLERANCE_M = 4.0
-_REACH_SLACK_M = 1e-3
-_RECENT = 20  # served tasks whose altitudes place the standby position
 
 
 @dataclass(frozen=True)
@@ -83,24 +77,64 @@ class ArenaResult:
         return max(self.done_s, default=0.0)
 
 
-class _Rig:
-    """One vehicle with its planner and the state of its control loop."""
+class MemoryStore:
+    """An RV's work in memory (``vvm_worker.control.Store``): the open tasks the mapper gave
+    it, always in service; a completed task is recorded in the arena's results."""
 
-    def __init__(self, spec: ArenaVehicle, planner: Planner) -> None:
+    def __init__(self, arena: Arena, spec: ArenaVehicle, polygon: Polygon) -> None:
+        self.arena = arena
         self.spec = spec
-        self.planner = planner
+        self._area = Area(polygon, spec.min_altitude_m, spec.max_altitude_m)
+        self.open: dict[int, LoopTask] = {}
+
+    def open_tasks(self) -> Sequence[LoopTask]:
+        return sorted(self.open.values(), key=lambda t: (t.requested_s, t.id))
+
+    def status(self) -> str:
+        return ACTIVE
+
+    def set_status(self, status: str, *, expected: str | None = None) -> None:
+        raise RuntimeError("the arena's vehicles have no battery and never leave service")
+
+    def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
+        del self.open[task.id]
+        self.arena.done[task.id] = now_s
+        self.arena.by[task.id] = self.spec.name
+
+    def record_state(self, state: VehicleState, *, moved: bool) -> None:
+        pass
+
+    def area(self) -> Area:
+        return self._area
+
+    def aboard(self) -> list[dict[str, Any]]:
+        return []
+
+
+class _Rig:
+    """One vehicle with its planner, its store and its control loop."""
+
+    def __init__(self, arena: Arena, spec: ArenaVehicle, planner: Planner) -> None:
+        self.spec = spec
         self.driver = SimVehicle(
             Kinematics(max_speed_mps=spec.max_speed_mps, climb_rate_mps=spec.climb_rate_mps),
             spec.depot,
         )
         self.polygon = Polygon([(lng, lat) for lat, lng in spec.area])
-        self.open: dict[int, PlanTask] = {}
-        self.target: int | None = None
-        self.token = 0
-        self.recent: list[float] = []
-        self.route: list[PlanTask] = []
+        self.store = MemoryStore(arena, spec, self.polygon)
+        self.loop = ControlLoop(
+            name=spec.name,
+            driver=self.driver,
+            planner=planner,
+            store=self.store,
+            scheduler=arena,
+            clock=arena.now_s,
+            config=LoopConfig(standby_s=arena.standby_s),
+            plan_timer=arena.clock,
+        )
 
     def caps(self, now: float, with_route: bool = True) -> VehicleCaps:
+        open_tasks = self.store.open
         return VehicleCaps(
             id=id(self),
             name=self.spec.name,
@@ -112,8 +146,12 @@ class _Rig:
             position=self.driver.position_at(now),
             max_speed_mps=self.spec.max_speed_mps,
             climb_rate_mps=self.spec.climb_rate_mps,
-            open_tasks=len(self.open),
-            route=tuple(t.position for t in self.route if t.id in self.open) if with_route else (),
+            open_tasks=len(open_tasks),
+            route=(
+                tuple(t.position for t in self.loop.route if t.id in open_tasks)
+                if with_route
+                else ()
+            ),
         )
 
 
@@ -130,30 +168,31 @@ class Arena:
         clock: Callable[[], float] | None = None,
         mapper_knows_routes: bool = True,
     ) -> None:
-        self.rigs = [
-            _Rig(
-                v,
-                make_planner(planner, travel_time=TravelTime(v.max_speed_mps, v.climb_rate_mps)),
-            )
-            for v in vehicles
-        ]
         self.tasks = list(tasks)
         self.standby_s = standby_s
         self.clock = clock  # wall clock for timing the planners (perf_counter), or None
         # False: the mapper ranks RVs as it once did, by distance plus 30 s per queued task.
         self.mapper_knows_routes = mapper_knows_routes
-        self._queue: list[tuple[float, int, Callable[[float], None]]] = []
+        self._queue: list[tuple[float, int, Callable[[], None]]] = []
         self._seq = itertools.count()
+        self._now = 0.0
         self.done: list[float] = [math.nan] * len(self.tasks)
         self.by: list[str] = [""] * len(self.tasks)
-        self.planning_s: list[float] = []
+        self.rigs = [
+            _Rig(
+                self,
+                v,
+                make_planner(planner, travel_time=TravelTime(v.max_speed_mps, v.climb_rate_mps)),
+            )
+            for v in vehicles
+        ]
 
     def run(self) -> ArenaResult:
         for index, task in enumerate(self.tasks):
-            self._at(task.at_s, functools.partial(self._request, index))
+            self.call_at(task.at_s, functools.partial(self._request, index))
         while self._queue:
-            t, _, fn = heapq.heappop(self._queue)
-            fn(t)
+            self._now, _, fn = heapq.heappop(self._queue)
+            fn()
         requested = [task.at_s for task in self.tasks]
         if any(math.isnan(done) for done in self.done):
             missing = [i for i, done in enumerate(self.done) if math.isnan(done)]
@@ -165,15 +204,21 @@ class Arena:
             vehicle=list(self.by),
             distance_m={rig.spec.name: rig.driver.distance_m(end) for rig in self.rigs},
             served={rig.spec.name: self.by.count(rig.spec.name) for rig in self.rigs},
-            planning_s=self.planning_s,
+            planning_s=[s for rig in self.rigs for s in rig.loop.planning_s],
         )
 
-    def _at(self, t: float, fn: Callable[[float], None]) -> None:
-        heapq.heappush(self._queue, (t, next(self._seq), fn))
+    # --- the scheduler and the clock of the control loops -------------------------------------
+
+    def call_at(self, t_s: float, fn: Callable[[], None]) -> None:
+        heapq.heappush(self._queue, (t_s, next(self._seq), fn))
+
+    def now_s(self) -> float:
+        return self._now
 
     # --- the mapper ------------------------------------------------------------------------------
 
-    def _request(self, index: int, now: float) -> None:
+    def _request(self, index: int) -> None:
+        now = self._now
         p = self.tasks[index].position
         request = TaskRequest(p.lat, p.lng, p.alt, TOLERANCE_M, ("GPS",))
         caps = [rig.caps(now, self.mapper_knows_routes) for rig in self.rigs]
@@ -181,64 +226,5 @@ class Arena:
         if decision.rejected or not decision.candidates:
             raise ValueError(f"task {index} at {p}: {decision.reason or 'no vehicle'}")
         rig = next(r for r, c in zip(self.rigs, caps, strict=True) if c is decision.candidates[0])
-        rig.open[index] = PlanTask(index, p, self.tasks[index].at_s)
-        self._wake(rig, now)
-
-    # --- the control loop (as VehicleLoop) ----------------------------------------------------
-
-    def _wake(self, rig: _Rig, now: float) -> None:
-        if rig.target is not None and rig.target in rig.open and not rig.planner.retargets:
-            return
-        self._plan(rig, now)
-
-    def _plan(self, rig: _Rig, now: float) -> None:
-        here = rig.driver.position_at(now)
-        tasks = list(rig.open.values())
-        start = self.clock() if self.clock is not None else 0.0
-        choice = rig.planner.next_task(here, tasks, now) if tasks else None
-        rig.route = rig.planner.route(here, tasks, now) if tasks else []
-        if self.clock is not None and tasks:
-            self.planning_s.append(self.clock() - start)
-        if choice is not None and choice.id == rig.target:
-            return  # still the best target: fly on
-        rig.token += 1
-        token = rig.token
-        if choice is not None:
-            rig.target = choice.id
-            arrival = rig.driver.fly_to(choice.position, now)
-            self._at(arrival, lambda t: self._arrive(rig, token, t))
-            return
-        rig.target = None
-        if rig.driver.is_landed_at(now):
-            return
-        if rig.planner.stands_by:
-            spot = standby_position(
-                rig.polygon,
-                rig.recent,
-                min_altitude_m=rig.spec.min_altitude_m,
-                max_altitude_m=rig.spec.max_altitude_m,
-            )
-            there = rig.driver.fly_to(spot, now)
-            self._at(there + self.standby_s, lambda t: self._home(rig, token, t))
-        else:
-            rig.driver.return_to_depot(now)
-
-    def _home(self, rig: _Rig, token: int, now: float) -> None:
-        if token == rig.token:
-            rig.token += 1
-            rig.driver.return_to_depot(now)
-
-    def _arrive(self, rig: _Rig, token: int, now: float) -> None:
-        if token != rig.token:
-            return
-        rig.target = None
-        here = rig.driver.position_at(now)
-        for index, task in sorted(
-            rig.open.items(), key=lambda item: (item[1].requested_s, item[0])
-        ):
-            if distance_m(here, task.position) <= TOLERANCE_M + _REACH_SLACK_M:
-                del rig.open[index]
-                self.done[index] = now
-                self.by[index] = rig.spec.name
-                rig.recent = [*rig.recent[-_RECENT + 1 :], task.position.alt]
-        self._plan(rig, now)
+        rig.store.open[index] = LoopTask(index, p, TOLERANCE_M, self.tasks[index].at_s)
+        rig.loop.wake()

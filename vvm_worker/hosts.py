@@ -31,13 +31,11 @@ from cpcc_site import database
 from fleet.mavlink.driver import MavlinkDriver
 from fleet.mavlink.errors import MavlinkError
 from fleet.models import Driver, GroundStation, Vehicle, VehicleStatus
-from fleet.simulation import SimVehicle
-from fleet.simulation import VehicleSpec as KinematicSpec
 from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus
 from vvm_worker.clock import Clock
-from vvm_worker.executor import VehicleLoop
+from vvm_worker.executor import build_rig, kinematics
 from vvm_worker.live import publish_vehicle
-from vvm_worker.planning import DEFAULT_PLANNER, TravelTime, make_planner
+from vvm_worker.planning import DEFAULT_PLANNER
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     VVM,
@@ -50,7 +48,7 @@ from vvm_worker.services import (
     vv_advance,
     vvs_reroute_waiting,
 )
-from vvm_worker.services.base import db_time_ago
+from vvm_worker.services.base import announcing, db_time_ago
 from vvm_worker.services.routing import online_vehicles
 
 logger = logging.getLogger("cpcc.hosts")
@@ -143,20 +141,14 @@ class RVHost:
         # battery and its charging with them. A MAVLink vehicle flies as fast as it flies:
         # the same acceleration only tells the estimates what a `mavsim --speed` does.
         scale = INSTANT if speed <= 0 else speed
-        battery_s = None if vehicle.battery_s is None else vehicle.battery_s / scale
-        spec = KinematicSpec(
-            max_speed_mps=vehicle.max_speed_mps * scale,
-            climb_rate_mps=vehicle.climb_rate_mps * scale,
-            battery_s=battery_s,
-        )
         self._link_down = False
-        driver: SimVehicle | MavlinkDriver
+        driver: MavlinkDriver | None = None
         if vehicle.driver == Driver.MAVLINK:
             if speed <= 0:
                 raise ValueError("a MAVLink vehicle cannot fly instantly: set CPCC_SIM_SPEED > 0")
             driver = MavlinkDriver(
                 vehicle.driver_url,
-                spec=spec,
+                spec=kinematics(vehicle, scale=scale),
                 depot=vehicle.depot,
                 area=vehicle.area,
                 min_altitude_m=vehicle.min_altitude_m,
@@ -167,24 +159,18 @@ class RVHost:
                 name=vehicle.name,
             )
             driver.connect(timeout_s=settings.CPCC_MAVLINK_CONNECT_S)
-        else:
-            driver = SimVehicle(spec, vehicle.depot, now_s=self.clock.now_s())
-        self.driver = driver
-        self.loop = VehicleLoop(
-            vehicle_id=vehicle.pk,
-            driver=driver,
-            planner=make_planner(
-                planner,
-                travel_time=TravelTime(spec.max_speed_mps, spec.climb_rate_mps),
-                time_limit_s=settings.CPCC_PLAN_TIME_LIMIT_S,
-            ),
+        self.rig = build_rig(
+            vehicle,
             vvm=self.vvm,
             scheduler=self.scheduler,
-            battery_s=battery_s,
-            reserve=settings.CPCC_BATTERY_RESERVE,
-            recharge_s=settings.CPCC_RECHARGE_S / scale,
-            standby_s=settings.CPCC_STANDBY_S / scale,
+            planner=planner,
+            scale=scale,
+            driver=driver,
+            plan_time_limit_s=settings.CPCC_PLAN_TIME_LIMIT_S,
+            live=announcing(self.vvm),
         )
+        self.driver = self.rig.driver
+        self.loop = self.rig.loop
         self._thread = threading.Thread(target=self._run, name=f"rv-{vehicle.pk}", daemon=True)
 
     # --- LocalHost (vvm_worker.dispatch): work this host does itself -------------------------
@@ -198,7 +184,8 @@ class RVHost:
     def wake_later(self) -> None:
         # This host changed its own work (a VV it advanced): no new fence, and no second plan
         # if the loop plans anyway before it gets to this.
-        self.scheduler.submit(self.loop.changed())
+        # (On this thread, in the commit of the change: the store forgets what it read now.)
+        self.scheduler.submit(self.rig.changed())
 
     # --- what Celery tasks ask -----------------------------------------------------------------
 
@@ -225,6 +212,7 @@ class RVHost:
                     )
                 except MavlinkError:
                     logger.exception("geofence not uploaded", extra={"vehicle": self.name})
+        self.rig.store.changed()
         self.loop.wake()
 
     def _link_lost(self) -> None:
@@ -275,6 +263,7 @@ class RVHost:
         advance_each(aboard, vvm=self.vvm, vehicle=self.name)
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
         vehicle_register(vehicle=vehicle, vvm=self.vvm)
+        self.rig.store.changed()
         self.loop.wake()
         self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
         self._beacon()
@@ -282,7 +271,10 @@ class RVHost:
     def _beacon(self) -> None:
         """Tell the live maps where the vehicle is, what it carries and where it goes next."""
         now = self.clock.now_s()
-        publish_vehicle(self.loop.live_state(now) | {"name": self.name})
+        state = self.loop.live_state(now)
+        publish_vehicle(
+            state | {"id": self.vehicle_id, "name": self.name, "t": self.clock.epoch_ms(now) / 1000}
+        )
         self.scheduler.call_at(now + settings.CPCC_MAP_TICK_S, self._beacon)
 
     def _heartbeat(self) -> None:
@@ -293,6 +285,7 @@ class RVHost:
     def _sweep(self) -> None:
         """Messages are hints: now and then, look for VVs aboard that wait for this host."""
         advance_each(stalled(host_rv_id=self.vehicle_id), vvm=self.vvm, vehicle=self.name)
+        self.rig.store.changed()  # what a lost message would have said
         self.loop.wake()
         self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
 

@@ -23,13 +23,12 @@ from typing import Any
 from django.conf import settings
 
 from fleet.models import Vehicle
-from fleet.simulation import SensorField, SimVehicle
-from fleet.simulation import VehicleSpec as KinematicSpec
+from fleet.simulation import SensorField
 from missions.models import ENDED_STATUSES, Migration, Task, TaskStatus, VirtualVehicle
 from missions.readings import map_camera_readings
 from vvm_worker.clock import SimulatedClock
-from vvm_worker.executor import VehicleLoop
-from vvm_worker.planning import DEFAULT_PLANNER, TravelTime, make_planner
+from vvm_worker.executor import VehicleRig, build_rig
+from vvm_worker.planning import DEFAULT_PLANNER, make_planner
 from vvm_worker.runtime import Runtime
 from vvm_worker.scenario import FleetEvent, Scenario, vv_instances
 from vvm_worker.services import (
@@ -97,9 +96,9 @@ class _QueueDispatcher:
         self.sim.queue.call_now(lambda: vv_advance(vv_id=vv_id, vvm=self.sim.vvm))
 
     def vehicle_changed(self, vehicle_id: int) -> None:
-        loop = self.sim.loops.get(vehicle_id)
-        if loop is not None:
-            self.sim.queue.call_now(loop.changed())
+        rig = self.sim.rigs.get(vehicle_id)
+        if rig is not None:
+            self.sim.queue.call_now(rig.changed())
 
     def customer_slot_freed(self, customer_id: int) -> None:
         self.sim.queue.call_now(lambda: vv_admit_queued(customer_id=customer_id, vvm=self.sim.vvm))
@@ -133,8 +132,7 @@ class Simulation:
             runtime=Runtime(max_contexts=WARM_CONTEXTS),
             hosts_share_runtime=True,
         )
-        self.loops: dict[int, VehicleLoop] = {}
-        self.drivers: dict[int, SimVehicle] = {}
+        self.rigs: dict[int, VehicleRig] = {}
         self.loaded: LoadedScenario | None = None
         self.events_run = 0
         self.wall_s = 0.0  # how long `run` took
@@ -142,34 +140,11 @@ class Simulation:
 
     # --- set-up --------------------------------------------------------------------------------
 
-    def add_vehicle_loop(self, vehicle: Vehicle) -> VehicleLoop:
+    def add_vehicle_loop(self, vehicle: Vehicle) -> VehicleRig:
         """Give an RV a simulated vehicle and a control loop (its worker, in one process)."""
-        driver = SimVehicle(
-            KinematicSpec(
-                max_speed_mps=vehicle.max_speed_mps,
-                climb_rate_mps=vehicle.climb_rate_mps,
-                battery_s=vehicle.battery_s,
-            ),
-            vehicle.depot,
-            now_s=self.clock.t,
-        )
-        self.drivers[vehicle.pk] = driver
-        loop = VehicleLoop(
-            vehicle_id=vehicle.pk,
-            driver=driver,
-            planner=make_planner(
-                self.planner_name,
-                travel_time=TravelTime(vehicle.max_speed_mps, vehicle.climb_rate_mps),
-            ),
-            vvm=self.vvm,
-            scheduler=self.queue,
-            battery_s=vehicle.battery_s,
-            reserve=settings.CPCC_BATTERY_RESERVE,
-            recharge_s=settings.CPCC_RECHARGE_S,
-            standby_s=settings.CPCC_STANDBY_S,
-        )
-        self.loops[vehicle.pk] = loop
-        return loop
+        rig = build_rig(vehicle, vvm=self.vvm, scheduler=self.queue, planner=self.planner_name)
+        self.rigs[vehicle.pk] = rig
+        return rig
 
     def _fleet_event(self, event: FleetEvent) -> None:
         assert self.loaded is not None
@@ -297,8 +272,8 @@ class Simulation:
                 }
             )
         vehicles = []
-        for vehicle in Vehicle.objects.filter(pk__in=list(self.drivers)).order_by("name"):
-            driver = self.drivers.get(vehicle.pk)
+        for vehicle in Vehicle.objects.filter(pk__in=list(self.rigs)).order_by("name"):
+            driver = self.rigs[vehicle.pk].driver if vehicle.pk in self.rigs else None
             vehicles.append(
                 {
                     "name": vehicle.name,

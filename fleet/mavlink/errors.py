@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from fleet.driving import DriverError
 from fleet.mavlink.wire import mavlink
 
 # MAV_RESULT names for messages (the dialect's enum table has them, but a plain dict keeps
@@ -45,15 +46,9 @@ def result_name(result: int) -> str:
     return RESULT_NAMES.get(result, str(result))
 
 
-class MavlinkError(Exception):
-    """Base of every error of ``fleet.mavlink``; ``permanent`` says whether a retry can help."""
-
-    permanent: bool = False
-
-    def __init__(self, message: str, *, permanent: bool | None = None) -> None:
-        super().__init__(message)
-        if permanent is not None:
-            self.permanent = permanent
+class MavlinkError(DriverError):
+    """Base of every error of ``fleet.mavlink``; ``permanent`` says whether a retry can help.
+    A kind of the control loop's ``DriverError``, which is all the loop catches."""
 
 
 class LinkError(MavlinkError):

@@ -3,8 +3,11 @@ it runs low, recharges at its depot and comes back; customers notice nothing but
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
+from fleet.simulation import SimVehicle
 from missions.models import Migration, TaskStatus, VVStatus
 from tests.factories import VehicleFactory
 from vvm_worker.services import vv_submit
@@ -55,9 +58,9 @@ def test_short_batteries_recharge_and_every_vv_finishes_with_every_reading_once(
         assert sorted(vv.storage.values_list("key", flat=True)) == sorted(
             f"p{n}" for n in range(12)
         )
-    charges = {pk: len(driver._charges) for pk, driver in platform.drivers.items()}
+    charges = {pk: len(driver._charges) for pk, driver in _drivers(platform).items()}
     assert sum(charges.values()) >= 2, f"the batteries were recharged: {charges}"
-    for driver in platform.drivers.values():
+    for driver in _drivers(platform).values():
         assert _lowest_battery_s(driver) >= RESERVE * BATTERY_S - 1e-6
     handed_over = Migration.objects.filter(from_kind="rv", to_kind__in=["rv", "gs"]).exclude(
         reason__in=["finished"]
@@ -75,6 +78,12 @@ def test_without_a_reserve_setting_the_battery_is_still_never_planned_empty(
     platform.drain()
     vv.refresh_from_db()
     assert vv.status == VVStatus.FINISHED, vv.error
-    (driver,) = platform.drivers.values()
+    (driver,) = _drivers(platform).values()
     assert driver._charges, "one RV alone recharges and carries on"
     assert _lowest_battery_s(driver) >= 0.0
+
+
+def _drivers(platform: Any) -> dict[int, SimVehicle]:
+    drivers = {pk: rig.driver for pk, rig in platform.rigs.items()}
+    assert all(isinstance(d, SimVehicle) for d in drivers.values())
+    return drivers  # type: ignore[return-value]

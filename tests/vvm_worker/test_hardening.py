@@ -233,7 +233,7 @@ def test_a_crash_before_the_answer_is_committed_flies_the_task_again(
     vv.refresh_from_db()
     assert vv.journal_length == 0 and vv.pending is not None
     # The vehicle's loop serves the still open task again.
-    platform.loops[fleet.pk].wake()
+    platform.rigs[fleet.pk].loop.wake()
     platform.drain()
     vv.refresh_from_db()
     assert vv.status == VVStatus.FINISHED

@@ -149,7 +149,7 @@ def test_every_planner_finishes_figure_3(planner: str) -> None:
 def test_rvs_land_at_their_depot_when_idle() -> None:
     sim = Simulation(load_scenario(SCENARIOS / "paper-fig3.json"))
     sim.run()
-    for driver in sim.drivers.values():
+    for driver in (rig.driver for rig in sim.rigs.values()):
         assert driver.is_landed_at(sim.clock.t)
         assert driver.position_at(sim.clock.t) == driver.depot
     assert all(v["flight_s"] > 0 for v in sim.summary()["vehicles"])

@@ -79,6 +79,14 @@ class Planner(Protocol):
         """
         ...
 
+    def plan(
+        self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
+    ) -> list[PlanTask]:
+        """`next_task` and `route` in one computation: every open task in the order the
+        planner intends to serve them, the first being what `next_task` returns (with the
+        same change of state). The vehicle's control loop calls this, once per decision."""
+        ...
+
     def state(self) -> dict[str, Any]:
         """A JSON-serialisable snapshot that `restore` accepts ({} for stateless planners)."""
         ...

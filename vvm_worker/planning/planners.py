@@ -55,6 +55,12 @@ class FcfsPlanner:
         """All open tasks by (requested_s, id). Raises ValueError on duplicate ids."""
         return canonical_order(open_tasks)
 
+    def plan(
+        self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
+    ) -> list[PlanTask]:
+        """`route`: the first task is `next_task`'s (there is no state to change)."""
+        return self.route(current, open_tasks, now_s)
+
     def state(self) -> dict[str, Any]:
         """Always {}: there is nothing to keep."""
         return {}
@@ -97,6 +103,12 @@ class NearestPlanner:
             return []
         matrix = build_cost_matrix(self.cost, current, [task.position for task in tasks])
         return [tasks[node - 1] for node in greedy_chain(matrix)[1:]]
+
+    def plan(
+        self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
+    ) -> list[PlanTask]:
+        """`route`: the first task is `next_task`'s (there is no state to change)."""
+        return self.route(current, open_tasks, now_s)
 
     def state(self) -> dict[str, Any]:
         """Always {}: there is nothing to keep."""
@@ -156,6 +168,12 @@ class TourPlanner:
         else:
             path = improve_path(matrix, greedy_chain(matrix))
         return [tasks[node - 1] for node in path[1:]]
+
+    def plan(
+        self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
+    ) -> list[PlanTask]:
+        """`route`: the first task is `next_task`'s (there is no state to change)."""
+        return self.route(current, open_tasks, now_s)
 
     def state(self) -> dict[str, Any]:
         """Always {}: every call re-plans from scratch."""
@@ -248,6 +266,14 @@ class GatedTspPlanner:
             planned.extend(batch)
             here = batch[-1].position
         return planned
+
+    def plan(
+        self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
+    ) -> list[PlanTask]:
+        """`next_task` (which may start a tour), then `route` over the tour it keeps."""
+        if self.next_task(current, open_tasks, now_s) is None:
+            return []
+        return self.route(current, open_tasks, now_s)
 
     def state(self) -> dict[str, Any]:
         """{"tour": [task ids still to serve, in order], "exact": proven optimal}."""
@@ -359,6 +385,14 @@ class LatencyPlanner:
         planned = self.route(current, open_tasks, now_s)
         self._route = [task.id for task in planned]
         return planned[0] if planned else None
+
+    def plan(
+        self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
+    ) -> list[PlanTask]:
+        """`route`, which becomes the plan to start from next time (as `next_task` does)."""
+        planned = self.route(current, open_tasks, now_s)
+        self._route = [task.id for task in planned]
+        return planned
 
     def route(
         self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None

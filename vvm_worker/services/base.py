@@ -51,6 +51,13 @@ class VVM:
     # Every host runs in this process with this one runtime (`simulate`): a VV that migrates
     # keeps its warm context, which the next host would otherwise rebuild by replay.
     hosts_share_runtime: bool = False
+    # The RVs whose hosts run in this process with this runtime (an rvworker of several RVs):
+    # a VV that migrates between two of them keeps its warm context too.
+    local_rvs: set[int] = dataclass_field(default_factory=set)
+
+    def keeps_context(self, vehicle_id: int | None) -> bool:
+        """Whether a VV moving to this RV (None: a ground station) keeps its warm context."""
+        return self.hosts_share_runtime or (vehicle_id is not None and vehicle_id in self.local_rvs)
 
 
 class ProgramRejected(ValueError):

@@ -355,7 +355,7 @@ def record_migration(
         vv.host_rv, vv.host_gs = None, to
     # The VV's warm context stays with the host it left: the new host resumes it by replay
     # (unless both are in this process, sharing one runtime).
-    if not vvm.hosts_share_runtime:
+    if not vvm.keeps_context(to.pk if isinstance(to, Vehicle) else None):
         vvm.runtime.forget(str(vv.pk))
     logger.info(
         "vv migrated",

@@ -262,7 +262,7 @@ def test_a_px4_copter_flies_in_offboard_mode(
 
 
 def test_it_has_the_control_loops_driver_api() -> None:
-    from vvm_worker.executor import Driver
+    from fleet.driving import Driver
 
     for name, member in inspect.getmembers(Driver, inspect.isfunction):
         if name.startswith("_"):

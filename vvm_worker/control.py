@@ -1,0 +1,464 @@
+"""The control loop of one RV (the paper's task executor): plan, fly, read sensors, hand the
+readings over, land, recharge, stand by.
+
+Pure: the loop knows its vehicle through a ``Driver`` (``fleet.driving``), its work through a
+``Store`` (the database for the platform, memory for the planners' arena), the sensors
+through a ``Sensing`` callable, and time through a clock and a ``Scheduler`` (the
+discrete-event queue of ``simulate`` and the arena, or real time in a worker).
+
+The loop keeps the route over the open tasks of every VV aboard with its planner, flies to
+the next task, reads the sensors there for every task within tolerance and completes those
+tasks (which resumes their VVs). It asks the planner again when it arrives and, when the
+planner ``retargets``, whenever work is added in flight. With nothing left to do it waits in
+the air at its standby position for a while (planners that ``stand_by``) and then flies home
+and lands. A battery that cannot take the vehicle to its next task and home with its reserve
+sends it home to recharge, out of service meanwhile.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from shapely.geometry import Polygon
+
+from fleet.driving import Driver, DriverError
+from fleet.geo import Position, distance_m
+from vvm_worker.planning import Planner, PlanTask, standby_position
+
+logger = logging.getLogger("cpcc.executor")
+
+# The vehicle's status, as the store keeps it (the values of fleet.models.VehicleStatus).
+ACTIVE = "active"
+MAINTENANCE = "maintenance"
+CHARGING = "charging"
+
+# A vehicle at its target serves every open task within the task's tolerance plus this much
+# (floating-point slack of the kinematics).
+REACH_SLACK_M = 1e-3
+# A vehicle not there at its estimated arrival is looked at this often, and sent there anew
+# when this late.
+ARRIVAL_POLL_S = 0.2
+ARRIVAL_OVERDUE_S = 60.0
+# Altitudes of this many tasks served last place the standby position.
+RECENT_TASKS = 20
+
+
+@dataclass(frozen=True)
+class LoopTask:
+    """An open task of the RV as the loop sees it. ``vv`` and ``group`` are the store's: the
+    VV that asked for it and the request it belongs to (an executeAll batch is one)."""
+
+    id: int
+    position: Position
+    tolerance_m: float
+    requested_s: float
+    sensors: tuple[str, ...] = ()
+    vv: Any = None
+    group: str | None = None
+
+    def as_plan_task(self) -> PlanTask:
+        return PlanTask(self.id, self.position, self.requested_s, group=self.group)
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """What the loop reports of its vehicle at ``t_s``."""
+
+    t_s: float
+    position: Position
+    phase: str
+    distance_m: float
+    flight_s: float
+    planner_state: Any
+
+
+@dataclass(frozen=True)
+class Area:
+    """Where the RV may fly: its area and altitudes (the standby position lies inside)."""
+
+    polygon: Polygon
+    min_altitude_m: float
+    max_altitude_m: float
+
+
+class Store(Protocol):
+    """The RV's work and status as the loop reads and changes them."""
+
+    def open_tasks(self) -> Sequence[LoopTask]:
+        """The RV's open tasks, oldest request first (requested_s, id)."""
+        ...
+
+    def status(self) -> str:
+        """The RV's status (ACTIVE, MAINTENANCE, CHARGING, ...)."""
+        ...
+
+    def set_status(self, status: str, *, expected: str | None = None) -> None:
+        """Change the RV's status (only from ``expected`` when given)."""
+        ...
+
+    def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
+        """The task was served with these readings (its VV resumes)."""
+        ...
+
+    def record_state(self, state: VehicleState, *, moved: bool) -> None:
+        """The vehicle is here now (``moved``: somewhere else than at the last record)."""
+        ...
+
+    def area(self) -> Area: ...
+
+    def aboard(self) -> list[dict[str, Any]]:
+        """The VVs aboard, for the live map (as of the last record)."""
+        ...
+
+
+class Scheduler(Protocol):
+    def call_at(self, t_s: float, fn: Callable[[], None]) -> None:
+        """Run fn when the platform clock reaches t_s."""
+        ...
+
+
+class Sensing(Protocol):
+    def __call__(
+        self, task: LoopTask, position: Position, now_s: float, battery: float | None
+    ) -> list[dict[str, Any]]:
+        """The readings of the task's sensors taken here and now."""
+        ...
+
+
+def no_sensors(
+    task: LoopTask, position: Position, now_s: float, battery: float | None
+) -> list[dict[str, Any]]:
+    """Sensing for a loop whose readings nobody reads (the arena)."""
+    return []
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """How the loop treats the battery and idle time (seconds of flight, at the driver's
+    speed)."""
+
+    battery_s: float | None = None
+    reserve: float = 0.0  # a fraction of battery_s never planned away
+    recharge_s: float = 0.0
+    standby_s: float = 0.0
+    live: bool = False  # someone watches the map: keep the route up to date at every change
+
+
+class ControlLoop:
+    """The control loop of one RV."""
+
+    def __init__(
+        self,
+        *,
+        name: str,
+        driver: Driver,
+        planner: Planner,
+        store: Store,
+        scheduler: Scheduler,
+        clock: Callable[[], float],
+        sensing: Sensing = no_sensors,
+        config: LoopConfig = LoopConfig(),
+        plan_timer: Callable[[], float] | None = None,
+    ) -> None:
+        self.name = name
+        self.driver = driver
+        self.planner = planner
+        self.store = store
+        self.scheduler = scheduler
+        self.clock = clock
+        self.sensing = sensing
+        self.config = config
+        # Endurance kept for the unexpected: never planned away (seconds of flight).
+        self.reserve_s = config.reserve * config.battery_s if config.battery_s else 0.0
+        self.standby_until: float | None = None  # waiting in the air for work until then
+        self.recent_alts: list[float] = []
+        self._charged_at: float | None = None  # when a charge under way is done
+        self.target: int | None = None  # the task the vehicle is flying to
+        self.returning = False
+        self._token = 0  # invalidates the arrival of a leg that was replaced
+        # What the live map shows between two plans: the status and the open tasks in the
+        # order the vehicle means to serve them.
+        self.status = ACTIVE
+        self.route: list[PlanTask] = []
+        self._last_state: VehicleState | None = None  # what record_state got last
+        self._changes = 0  # changes announced by `changed`
+        self._planned_at_change = 0  # how many of them the last plan had seen
+        # Wall time of each planner call, when `plan_timer` is given (the arena's sweeps).
+        self.plan_timer = plan_timer
+        self.planning_s: list[float] = []
+
+    def _log(self) -> dict[str, Any]:
+        return {"vehicle": self.name}
+
+    # --- events ------------------------------------------------------------------------------
+
+    def wake(self) -> None:
+        """The vehicle's tasks or status changed: re-plan, unless its target still stands and
+        its planner keeps targets until it gets there."""
+        now = self.clock()
+        if not self.planner.retargets and self.target is not None:
+            tasks = self.store.open_tasks()
+            if any(t.id == self.target for t in tasks):
+                if self.config.live:  # the map shows new work at once
+                    here = self.driver.position_at(now)
+                    plan = [t.as_plan_task() for t in tasks]
+                    self.route = self.planner.route(here, plan, now)
+                return
+        self._plan(now)
+
+    def changed(self) -> Callable[[], None]:
+        """The vehicle's tasks or status were just changed: the wake-up to run for it, which
+        does nothing if the loop has planned in the meantime (it saw the change then): a VV
+        resumed on this RV while it serves its stop needs no second plan."""
+        self._changes += 1
+        seen = self._changes
+
+        def wake_unless_planned() -> None:
+            if self._planned_at_change < seen:
+                self.wake()
+
+        return wake_unless_planned
+
+    def _arrive(self, token: int, target: Position, tolerance_m: float, due_s: float) -> None:
+        if token != self._token:
+            return
+        now = self.clock()
+        if not self.driver.has_arrived(target, tolerance_m, now):
+            # A real vehicle is there when its telemetry says so, not when the estimate said:
+            # look again shortly, and fly there anew if it is far overdue (a gust, a fence).
+            if now - due_s > ARRIVAL_OVERDUE_S:
+                logger.warning("arrival overdue: flying there again", extra=self._log())
+                self._plan(now)
+            else:
+                self.scheduler.call_at(
+                    now + ARRIVAL_POLL_S, lambda: self._arrive(token, target, tolerance_m, due_s)
+                )
+            return
+        self.target = None
+        # The end of the leg is on the track of the VVs aboard, before any of them leaves, and
+        # the store says the vehicle is here: a VV migrating off it now records this position.
+        self._record(now)
+        here = self.driver.position_at(now)
+        served = [
+            t
+            for t in self.store.open_tasks()
+            if distance_m(here, t.position) <= t.tolerance_m + REACH_SLACK_M
+        ]
+        battery = self.battery_fraction(now)
+        for task in served:
+            self.recent_alts = [*self.recent_alts[1 - RECENT_TASKS :], task.position.alt]
+            readings = self.sensing(task, here, now, battery)
+            self.store.complete(task, readings, now)
+        self._plan(now)
+
+    def _landed(self, token: int, due_s: float) -> None:
+        if token != self._token:
+            return
+        now = self.clock()
+        if not self.driver.is_landed_at(now):
+            if now - due_s > ARRIVAL_OVERDUE_S:
+                logger.warning("landing overdue: returning again", extra=self._log())
+                self._plan(now)
+            else:
+                self.scheduler.call_at(now + ARRIVAL_POLL_S, lambda: self._landed(token, due_s))
+            return
+        self.returning = False
+        if self.status == CHARGING:
+            self._charge(now)
+        self._record(now)
+
+    # --- the battery ---------------------------------------------------------------------------
+
+    def _within_battery(self, now: float, target: Position) -> bool:
+        """Whether the vehicle can fly to ``target`` and home from there with its reserve left."""
+        remaining = self.driver.battery_remaining_s(now)
+        if remaining is None:
+            return True
+        need = self.driver.time_to_s(target, now) + self.driver.time_home_s(target)
+        if remaining - need >= self.reserve_s:
+            return True
+        if self.driver.is_landed_at(now) and remaining >= (self.config.battery_s or 0.0):
+            # Full, and still too far: no charge helps; the mapper does not know the range.
+            logger.warning("task beyond the battery's range", extra=self._log())
+            return True
+        return False
+
+    def _run_low(self) -> None:
+        """Hand the work over and go home to recharge: the VVs aboard move to RVs that can
+        serve them (or wait), and this RV takes no work until it is full again."""
+        logger.info("battery low: recharging", extra=self._log())
+        self.store.set_status(CHARGING)
+        self.status = CHARGING
+
+    def _charge(self, now: float) -> None:
+        if self._charged_at is None:
+            self._charged_at = self.driver.recharge(now, self.config.recharge_s)
+            self.scheduler.call_at(self._charged_at, self._charged)
+
+    def _charged(self) -> None:
+        self._charged_at = None
+        # Back into service, unless the provider decided otherwise meanwhile.
+        self.store.set_status(ACTIVE, expected=CHARGING)
+        self.wake()
+
+    def battery_fraction(self, now: float) -> float | None:
+        remaining = self.driver.battery_remaining_s(now)
+        if remaining is None or not self.config.battery_s:
+            return None
+        return max(0.0, min(1.0, remaining / self.config.battery_s))
+
+    # --- planning ------------------------------------------------------------------------------
+
+    def _plan(self, now: float) -> None:
+        self._planned_at_change = self._changes
+        self.status = self.store.status()
+        tasks = list(self.store.open_tasks()) if self.status == ACTIVE else []
+        here = self.driver.position_at(now)
+        choice: LoopTask | None = None
+        self.route = []
+        if tasks:
+            started = self.plan_timer() if self.plan_timer is not None else 0.0
+            self.route = self.planner.plan(here, [t.as_plan_task() for t in tasks], now)
+            if self.plan_timer is not None:
+                self.planning_s.append(self.plan_timer() - started)
+            first = self.route[0].id if self.route else None
+            choice = next((t for t in tasks if t.id == first), None)
+            if choice is not None and not self._within_battery(now, choice.position):
+                self._run_low()
+                choice, self.route = None, []
+        if self.status == CHARGING and self.driver.is_landed_at(now):
+            self._charge(now)
+        if choice is not None and choice.id == self.target and not self.returning:
+            self._record(now)  # still the best target: fly on
+            return
+        self._token += 1
+        token = self._token
+        if choice is not None:
+            self.target = choice.id
+            self.returning = False
+            self.standby_until = None
+            try:
+                arrival = self.driver.fly_to(choice.position, now)
+            except DriverError as exc:
+                self._failed(exc)
+                return
+            position, tolerance_m = choice.position, choice.tolerance_m
+            self.scheduler.call_at(
+                arrival, lambda: self._arrive(token, position, tolerance_m, arrival)
+            )
+        else:
+            self.target = None
+            if not self.driver.is_landed_at(now) and not self._stand_by(now, token):
+                self._go_home(now, token)
+        self._record(now)
+
+    def _go_home(self, now: float, token: int) -> None:
+        self.returning = True
+        self.standby_until = None
+        try:
+            landing = self.driver.return_to_depot(now)
+        except DriverError as exc:
+            self._failed(exc)
+            return
+        self.scheduler.call_at(landing, lambda: self._landed(token, landing))
+
+    def _stand_by(self, now: float, token: int) -> bool:
+        """Wait in the air at the standby position, if the planner wants it and the battery
+        allows it (there, a while, and home with the reserve left). False: fly home."""
+        if (
+            not self.planner.stands_by
+            or self.config.standby_s <= 0
+            or self.status != ACTIVE
+            or self.returning
+        ):
+            return False
+        if self.standby_until is not None:
+            if now >= self.standby_until:
+                return False
+            self.scheduler.call_at(self.standby_until, lambda: self._standby_over(token))
+            return True  # already waiting (or on the way there): keep its deadline
+        area = self.store.area()
+        spot = standby_position(
+            area.polygon,
+            self.recent_alts,
+            min_altitude_m=area.min_altitude_m,
+            max_altitude_m=area.max_altitude_m,
+        )
+        wait_s = self.config.standby_s
+        remaining = self.driver.battery_remaining_s(now)
+        if remaining is not None:
+            spare = remaining - self.reserve_s - self.driver.time_to_s(spot, now)
+            wait_s = min(wait_s, spare - self.driver.time_home_s(spot))
+            if wait_s <= 0:
+                return False
+        try:
+            there = self.driver.fly_to(spot, now)
+        except DriverError as exc:
+            self._failed(exc)
+            return True
+        self.standby_until = there + wait_s
+        self.scheduler.call_at(self.standby_until, lambda: self._standby_over(token))
+        return True
+
+    def _standby_over(self, token: int) -> None:
+        if token != self._token:
+            return
+        now = self.clock()
+        self._token += 1
+        self._go_home(now, self._token)
+        self._record(now)
+
+    def _failed(self, exc: DriverError) -> None:
+        """The vehicle cannot be flown (its link, its autopilot refused, a pilot took over):
+        it leaves service so that its VVs move on; the operator returns it (or its worker,
+        once the link is back)."""
+        logger.error("vehicle out of service: %s", exc, extra=self._log())
+        self.target = None
+        self.store.set_status(MAINTENANCE, expected=ACTIVE)
+        self.status = MAINTENANCE
+
+    # --- what the vehicle reports -------------------------------------------------------------
+
+    def live_state(self, now: float) -> dict[str, Any]:
+        """The RV as the live map shows it now (positions as [lat, lng])."""
+        here = self.driver.position_at(now)
+        ahead = [t.position for t in self.route] if not self.returning else []
+        return {
+            "lat": here.lat,
+            "lng": here.lng,
+            "alt": here.alt,
+            "phase": self.driver.phase_at(now),
+            "status": self.status,
+            "battery": self.battery_fraction(now),
+            "vvs": self.store.aboard(),
+            "route": [[here.lat, here.lng]] + [[p.lat, p.lng] for p in ahead],
+        }
+
+    def _record(self, now: float) -> None:
+        state = VehicleState(
+            t_s=now,
+            position=self.driver.position_at(now),
+            phase=self.driver.phase_at(now),
+            distance_m=self.driver.distance_m(now),
+            flight_s=self.driver.flight_s(now),
+            planner_state=self.planner.state(),
+        )
+        last = self._last_state
+        moved = last is None or state.position != last.position
+        if last is not None and not moved and _same_report(state, last):
+            return  # the store says all this already (a second look at the same moment)
+        self.store.record_state(state, moved=moved)
+        self._last_state = state  # only once recorded: work redone after an outage records it
+
+
+def _same_report(a: VehicleState, b: VehicleState) -> bool:
+    return (a.position, a.phase, a.distance_m, a.flight_s, a.planner_state) == (
+        b.position,
+        b.phase,
+        b.distance_m,
+        b.flight_s,
+        b.planner_state,
+    )
