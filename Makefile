@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 SCENARIO ?= examples/scenarios/paper-fig3.json
 
-.PHONY: demo test lint check bench bench-simulate bench-planner bench-load bench-burst screenshots simulate-fig2 simulate-fig3 vendor clean
+.PHONY: demo test lint check bench bench-simulate bench-planner bench-load bench-burst bench-idle screenshots simulate-fig2 simulate-fig3 vendor clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
@@ -50,6 +50,7 @@ bench: $(STAMP)
 	$(MAKE) bench-planner
 	$(MAKE) bench-load
 	$(MAKE) bench-burst
+	$(MAKE) bench-idle
 
 # simulate on growing fleets (10 and 100 RVs, 10 VVs an RV, 10 tasks a VV; bench/simulate.py,
 # ~15 minutes; BENCH_SIMULATE="--large" adds 1,000 RVs and 100,000 tasks, hours).
@@ -74,6 +75,12 @@ bench-load: $(STAMP)
 # and Redis (db 13, flushed), then SIGTERM under load: bench/submit_burst.py, ~2 minutes.
 bench-burst: $(STAMP)
 	$(PY) -m bench.submit_burst
+
+# What an idle RV worker costs: one rvworker hosting 10 simulated RVs (and a gsworker) on a
+# fresh SQLite database with no VV, its CPU over 30 s per hosted RV (bench/idle.py, ~1 minute;
+# BENCH_IDLE="--rvs 40" or "--per-process" for other shapes).
+bench-idle: $(STAMP)
+	$(PY) -m bench.idle $(BENCH_IDLE)
 
 # The README's pictures of the web front end, from the real pages of a demo run (Playwright
 # driving /usr/bin/chromium): bench/screenshots.py, into docs/screenshots/.

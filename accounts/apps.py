@@ -8,6 +8,7 @@ class AccountsConfig(AppConfig):
     def ready(self) -> None:
         from auditlog.registry import auditlog
 
+        from accounts import signals  # noqa: F401 - connects the receivers
         from accounts.models import Customer
 
         # Customers and their quotas, SDC entries and VVM-API calls: who changed what.

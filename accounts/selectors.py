@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from django.db.models import QuerySet
+from django.db.models import Exists, OuterRef, QuerySet
 
 from accounts.models import Customer, User
 from fleet.models import SensorType
@@ -12,13 +12,15 @@ from fleet.models import SensorType
 
 def customer_catalog(*, customer: Customer) -> list[dict[str, Any]]:
     """The SDC entries the customer's VVs may use, as the VVM-API shows them."""
-    entries = SensorType.objects.all()
-    chosen = customer.allowed_sensors.all() if customer.pk else SensorType.objects.none()
-    if chosen.exists():
-        entries = chosen
+    # One read: every entry, each saying whether the customer's list holds it.
+    through = Customer.allowed_sensors.through
+    mine = through.objects.filter(customer_id=customer.pk, sensortype_id=OuterRef("pk"))
+    every = list(SensorType.objects.annotate(chosen=Exists(mine)).order_by("name"))
+    chosen = [e for e in every if e.chosen]
+    entries = chosen if customer.pk and chosen else every
     if not customer.privileged:
-        entries = entries.filter(privileged=False)
-    return [e.as_catalog_entry() for e in entries.order_by("name")]
+        entries = [e for e in entries if not e.privileged]
+    return [e.as_catalog_entry() for e in entries]
 
 
 def sensor_list_for_user(*, user: User) -> QuerySet[SensorType]:

@@ -50,7 +50,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import ctypes
 import datetime as dt
 import json
 import multiprocessing
@@ -62,7 +61,6 @@ import shutil
 import signal
 import socket
 import statistics
-import subprocess
 import sys
 import time
 from collections import Counter, defaultdict
@@ -70,6 +68,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlparse
+
+from bench._live import (
+    REQUEST_TIMEOUT_S,
+    START_TIMEOUT_S,
+    Children,
+    cpu_s,
+    fresh_postgres,
+    fresh_redis,
+    listening_socket,
+    pids_of,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_SCENARIO = ROOT / "examples" / "scenarios" / "paper-fig3.json"
@@ -79,8 +88,6 @@ VAR_DIR = ROOT / "var" / "bench-load"  # kept between runs: collectstatic copies
 ENDED = {"finished", "failed", "killed", "cancelled"}
 PREFERRED_SENSORS = ("GPS", "CO2", "Thermometer")
 TARGET_RATE, TARGET_P99_MS = 200.0, 100.0
-REQUEST_TIMEOUT_S = 10.0
-START_TIMEOUT_S = 120.0
 
 # What a client without a VV in flight does on its turn, with weights: a customer's script or
 # dashboard reading its recent VVs.
@@ -91,82 +98,11 @@ LIST_EVERY = 4
 RESULTS = ("storage/", "log/", "results.zip")
 
 
-# --- processes ----------------------------------------------------------------------------
-
-
-def _die_with_parent() -> None:
-    """In a child, before exec: SIGTERM when the bench dies, even by SIGKILL (Linux)."""
-    with contextlib.suppress(Exception):
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-
-
-class Children:
-    """The processes the bench starts, each in a process group of its own, with its log."""
-
-    def __init__(self, env: dict[str, str], logs: Path) -> None:
-        self.env = env
-        self.logs = logs
-        self.procs: dict[str, subprocess.Popen[bytes]] = {}
-
-    def start(self, label: str, args: list[str], pass_fds: tuple[int, ...] = ()) -> None:
-        log = (self.logs / f"{label}.log".replace(" ", "_")).open("wb")
-        self.procs[label] = subprocess.Popen(
-            [sys.executable, *args],
-            cwd=ROOT,
-            env=self.env,
-            stdin=subprocess.DEVNULL,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            pass_fds=pass_fds,
-            start_new_session=True,  # Ctrl-C reaches the bench, which stops them in order
-            preexec_fn=_die_with_parent,
-        )
-        log.close()
-
-    def log(self, label: str) -> str:
-        path = self.logs / f"{label}.log".replace(" ", "_")
-        return path.read_text(errors="replace") if path.exists() else ""
-
-    def check(self) -> None:
-        for label, proc in self.procs.items():
-            if proc.poll() is not None:
-                tail = "\n".join(self.log(label).splitlines()[-15:])
-                raise SystemExit(f"{label} exited with code {proc.returncode}:\n{tail}")
-
-    def pids(self, prefix: str) -> list[int]:
-        return [p.pid for label, p in self.procs.items() if label.startswith(prefix)]
-
-    def stop(self) -> None:
-        for proc in self.procs.values():
-            if proc.poll() is None:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(proc.pid, signal.SIGTERM)
-        deadline = time.monotonic() + 20
-        for proc in self.procs.values():
-            try:
-                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-
-
 def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
 # --- CPU accounting -------------------------------------------------------------------------
-
-TICK = os.sysconf("SC_CLK_TCK")
-
-
-def _cpu_s(pid: int) -> float:
-    """CPU seconds (user + system) a process has used, 0 once it is gone."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / TICK
 
 
 def _with_descendants(pids: list[int]) -> list[int]:
@@ -182,20 +118,6 @@ def _with_descendants(pids: list[int]) -> list[int]:
         pid = todo.pop()
         found.append(pid)
         todo.extend(children.get(pid, ()))
-    return found
-
-
-def _pids_of(comm: str, in_cmdline: str) -> list[int]:
-    """Processes of that name whose command line has ``in_cmdline`` (a server's port)."""
-    found = []
-    for proc in Path("/proc").iterdir():
-        if not proc.name.isdigit():
-            continue
-        with contextlib.suppress(OSError):
-            if (proc / "comm").read_text().strip() == comm and in_cmdline in (
-                proc / "cmdline"
-            ).read_text():
-                found.append(int(proc.name))
     return found
 
 
@@ -221,25 +143,6 @@ def _memory_gb() -> int:
 
 
 # --- the platform -------------------------------------------------------------------------
-
-
-def _fresh_redis(url: str) -> None:
-    import redis
-
-    client = redis.Redis.from_url(url)
-    client.flushdb()
-    client.close()
-
-
-def _listening_socket(port: int) -> socket.socket:
-    """The web server's socket, bound here and handed to every daphne process (``--fd``):
-    the kernel spreads the connections over the processes that accept on it."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind(("127.0.0.1", port))
-    sock.listen(1024)
-    sock.set_inheritable(True)
-    return sock
 
 
 @dataclass
@@ -732,15 +635,14 @@ def main() -> None:
     sys.path.insert(0, str(ROOT))
 
     from bench.live_map import _free_port
-    from bench.platform import _fresh_postgres
 
     children = Children(env, logs)
     listener: socket.socket | None = None
     subscribers = None
     try:
         with console.status("fresh database and Redis, migrate, collectstatic, the fleet"):
-            _fresh_postgres(args.database)
-            _fresh_redis(args.redis)
+            fresh_postgres(args.database)
+            fresh_redis(args.redis)
             setup = _load_platform(args)
         with console.status(f"starting {len(setup.workers)} workers and {args.web} web processes"):
             for command, name in setup.workers:
@@ -766,7 +668,7 @@ def main() -> None:
                     "ws", ["-m", "daphne", "-p", str(ws_port), "cpcc_site.asgi:application"]
                 )
             else:
-                listener = _listening_socket(port)
+                listener = listening_socket(port)
                 for n in range(args.web):
                     children.start(
                         f"web {n + 1}",
@@ -891,7 +793,7 @@ def _measure(
     web = "web (daphne)" if args.http == "daphne" else "web (gunicorn)"
     roles = {
         web: lambda: _with_descendants(children.pids("web")),
-        "Redis server": lambda: _pids_of("redis-server", f":{redis_port}"),
+        "Redis server": lambda: pids_of("redis-server", f":{redis_port}"),
         "RV workers": lambda: children.pids("rvworker"),
         "GS worker": lambda: children.pids("gsworker"),
         "map subscribers (bench)": lambda: [subscribers_pid] if subscribers_pid else [],
@@ -905,9 +807,9 @@ def _measure(
         edges.append(
             {
                 "t": time.time(),
-                "cpu": {role: sum(_cpu_s(p) for p in pids()) for role, pids in roles.items()},
+                "cpu": {role: sum(cpu_s(p) for p in pids()) for role, pids in roles.items()},
                 "self": sum(os.times()[:2]),
-                "pg": {p: _cpu_s(p) for p in backends},
+                "pg": {p: cpu_s(p) for p in backends},
                 "machine": _machine_ticks(),
                 "sessions": sessions,
                 "backends": len(backends),

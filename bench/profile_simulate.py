@@ -4,7 +4,8 @@ Runs ``simulate`` in this process on a generated grid scenario (``--rows`` x ``-
 in cells of 200 m, ``--vvs`` VVs of ``--tasks`` random point tasks anywhere on the grid, so
 that they migrate often) on a fresh SQLite database, under cProfile, and prints: wall time,
 tasks a second, the queries per task by statement and table (with their time in the
-database), transactions per task, and the functions with the most cumulative time. The
+database), commits per task (transactions and statements outside one, which commit by
+themselves), and the functions with the most cumulative time. The
 profiler slows the run down (about 1.4 times); the wall time without it is what ``manage.py
 simulate`` prints.
 """
@@ -55,6 +56,7 @@ def main() -> None:
     parser.add_argument(
         "--sort", default="cumulative", help="order of the functions (cumulative, tottime)"
     )
+    parser.add_argument("--top-sites", type=int, default=40, help="query sites to list")
     parser.add_argument("--dump", help="also write the profile to this file (for pstats, snakeviz)")
     parser.add_argument(
         "--sites", action="store_true", help="also list where in the project the queries come from"
@@ -86,6 +88,8 @@ def main() -> None:
         table = _TABLE.search(sql)
         key = f"{sql.split()[0].upper()} {table.group(1) if table else ''}".strip()
         started = time.perf_counter()
+        if key.split()[0] in ("INSERT", "UPDATE", "DELETE") and not connection.in_atomic_block:
+            count["lone write"] += 1  # a statement outside a transaction commits by itself
         try:
             return execute(sql, params, many, context)
         finally:
@@ -104,19 +108,21 @@ def main() -> None:
         profile.disable()
         wall = time.perf_counter() - started
     tasks = sum(v["tasks_done"] for v in summary["vvs"]) or 1
-    queries = sum(count.values())
+    queries = sum(n for key, n in count.items() if key != "lone write")
+    commits = count["BEGIN"] + count["lone write"]
     print(f"{data['name']}: {wall:.1f} s under the profiler, {tasks} tasks, {tasks / wall:.1f} "
           f"tasks/s, {len(summary['migrations'])} migrations, {simulation.events_run} events")  # fmt: skip
     print(
         f"{queries} statements = {queries / tasks:.1f} a task, {sum(spent.values()):.1f} s in "
-        f"the database; transactions: {count['BEGIN'] / tasks:.1f} a task"
+        f"the database; commits: {commits / tasks:.1f} a task ({count['BEGIN'] / tasks:.1f} "
+        f"transactions, {count['lone write'] / tasks:.1f} statements outside one)"
     )
     print("statements a task, mean time, kind and table:")
-    for key, n in count.most_common(20):
+    for key, n in [(k, n) for k, n in count.most_common(21) if k != "lone write"]:
         print(f"  {n / tasks:6.2f}  {spent[key] * 1000 / n:6.3f} ms  {key}")
     if args.sites:
         print("statements a task by kind, table and the project's calls that made them:")
-        for site, n in sites.most_common(40):
+        for site, n in sites.most_common(args.top_sites):
             print(f"  {n / tasks:6.2f}  {site}")
     if args.dump:
         profile.dump_stats(args.dump)

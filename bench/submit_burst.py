@@ -30,8 +30,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from bench.load import Children, _fresh_redis, _listening_socket, _pct
-from bench.platform import _fresh_postgres
+from bench._live import Children, fresh_postgres, fresh_redis, listening_socket
+from bench.load import _pct
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATABASE = "postgres://postgres@127.0.0.1:5432/cpcc_bench_burst"
@@ -148,13 +148,13 @@ def main() -> None:
     }
     os.environ.update({k: env[k] for k in ("DEBUG", "SECRET_KEY", "ALLOWED_HOSTS", "CPCC_HTTPS")})
     os.environ["CPCC_VAR_DIR"] = str(var_dir)
-    _fresh_postgres(args.database)
-    _fresh_redis(args.redis)
+    fresh_postgres(args.database)
+    fresh_redis(args.redis)
     tokens = _setup(args.database)
     warm_ms, cold_ms = _check_costs()
     print(f"syntax check: {warm_ms:.2f} ms warm (V8 thread), {cold_ms:.2f} ms in a new isolate")
 
-    sock = _listening_socket(PORT)
+    sock = listening_socket(PORT)
     children = Children(env, var_dir)
     children.start(
         "web",

@@ -3,10 +3,13 @@
 Environment: ``CPCC_URL`` (default http://127.0.0.1:8000) and ``CPCC_TOKEN``, your API token
 (``python manage.py drf_create_token USERNAME`` on the server gives one).
 
-Exit codes: 0 success (``submit --wait``: the VV finished); 1 the server refused the request,
-could not be reached, or the VV ended otherwise than finished; 2 a usage or set-up problem, or
-a program with a syntax error (printed as ``FILE:LINE:COLUMN: message``); 3 ``--wait`` gave up
-after ``--timeout`` seconds.
+``cpcc submit`` with several programs sends them in one request (``POST /api/v1/vvs/`` with a
+list): all of them are queued, or none.
+
+Exit codes: 0 success (``submit --wait``: every VV finished); 1 the server refused the request,
+could not be reached, or a VV ended otherwise than finished; 2 a usage or set-up problem, or
+programs with syntax errors (each printed as ``FILE:LINE:COLUMN: message``); 3 ``--wait`` gave
+up after ``--timeout`` seconds.
 """
 
 from __future__ import annotations
@@ -57,24 +60,72 @@ def _vv_path(vv_id: str, rest: str = "") -> str:
 
 
 def cmd_submit(client: Client, args: argparse.Namespace) -> int:
-    source = Path(args.program)
+    sources = [Path(program) for program in args.program]
+    if args.name is not None and len(sources) > 1:
+        raise UsageError("--name names one VV: give one program, or leave --name out")
+    items = [{"name": args.name or source.stem, "program": _read(source)} for source in sources]
+    if len(items) == 1:
+        return _submit_one(client, args, items[0])
+    # Several programs: one request, one transaction on the server (all of them or none).
     try:
-        program = source.read_text(encoding="utf-8")
+        vvs = client.call("POST", VVS, data=items)
+    except ApiError as exc:
+        errors = exc.body.get("errors") if isinstance(exc.body, dict) else None
+        if exc.status == 400 and isinstance(errors, list) and len(errors) == len(items):
+            return _refused(args.program, errors)
+        raise
+    for vv in vvs:
+        _out(vv["id"])
+    if not args.wait:
+        return EXIT_OK
+    return _wait_all(client, vvs, args.program, timeout_s=args.timeout, poll_s=args.poll)
+
+
+def _read(source: Path) -> str:
+    try:
+        return source.read_text(encoding="utf-8")
     except OSError as exc:
         raise UsageError(f"cannot read {source}: {exc.strerror or exc}") from None
-    name = args.name or source.stem
+
+
+def _submit_one(client: Client, args: argparse.Namespace, item: dict[str, str]) -> int:
     try:
-        vv = client.call("POST", VVS, data={"name": name, "program": program})
+        vv = client.call("POST", VVS, data=item)
     except ApiError as exc:
-        error = exc.body.get("error") if isinstance(exc.body, dict) else None
-        if exc.status == 400 and isinstance(error, dict) and "line" in error:
-            _err(f"{args.program}:{error['line']}:{error['column']}: {error['message']}")
+        location = _syntax_error(args.program[0], exc.body) if exc.status == 400 else None
+        if location is not None:
+            _err(location)
             return EXIT_USAGE
         raise
     _out(vv["id"])
     if not args.wait:
         return EXIT_OK
     return _wait(client, vv, timeout_s=args.timeout, poll_s=args.poll)
+
+
+def _syntax_error(program: str, body: Any) -> str | None:
+    """``FILE:LINE:COLUMN: message`` for a refusal that says where a program's error is."""
+    error = body.get("error") if isinstance(body, dict) else None
+    if isinstance(error, dict) and "line" in error:
+        return f"{program}:{error['line']}:{error['column']}: {error['message']}"
+    return None
+
+
+def _refused(programs: Sequence[str], errors: list[Any]) -> int:
+    """Each refused program of a bulk submission (nothing was submitted): exit 2 when they
+    all have syntax errors, as for one program; 1 when another problem is among them."""
+    other = False
+    for program, error in zip(programs, errors, strict=True):
+        if not error:
+            continue
+        location = _syntax_error(program, error)
+        if location is None:
+            other = True
+            detail = error.get("detail") if isinstance(error, dict) else error
+            location = f"{program}: {detail}"
+        _err(location)
+    _err("cpcc: nothing was submitted")
+    return EXIT_ERROR if other else EXIT_USAGE
 
 
 def _wait(client: Client, vv: dict[str, Any], *, timeout_s: float | None, poll_s: float) -> int:
@@ -92,6 +143,37 @@ def _wait(client: Client, vv: dict[str, Any], *, timeout_s: float | None, poll_s
             _err(vv["error"])
         return EXIT_ERROR
     return EXIT_OK
+
+
+def _wait_all(
+    client: Client,
+    vvs: list[dict[str, Any]],
+    programs: Sequence[str],
+    *,
+    timeout_s: float | None,
+    poll_s: float,
+) -> int:
+    """Wait until every VV has ended; print ``ID STATUS`` for each, in order."""
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    while any(vv["status"] not in ENDED for vv in vvs):
+        if deadline is not None and time.monotonic() >= deadline:
+            for vv in vvs:
+                _out(f"{vv['id']} {vv['status']}")
+            waiting = sum(vv["status"] not in ENDED for vv in vvs)
+            _err(f"gave up waiting after {timeout_s:g} s: {waiting} VV(s) have not ended")
+            return EXIT_TIMEOUT
+        _sleep(poll_s)
+        vvs = [
+            vv if vv["status"] in ENDED else client.call("GET", _vv_path(vv["id"])) for vv in vvs
+        ]
+    code = EXIT_OK
+    for vv, program in zip(vvs, programs, strict=True):
+        _out(f"{vv['id']} {vv['status']}")
+        if vv["status"] != "finished":
+            code = EXIT_ERROR
+            if vv.get("error"):
+                _err(f"{program}: {vv['error']}")
+    return code
 
 
 def cmd_status(client: Client, args: argparse.Namespace) -> int:
@@ -227,10 +309,22 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--url", help="the platform's address (default: $CPCC_URL)")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    submit = commands.add_parser("submit", help="submit a VV program, print its id")
-    submit.add_argument("program", metavar="PROG.js", help="the program (JavaScript)")
-    submit.add_argument("--name", help="the VV's name (default: the file name)")
-    submit.add_argument("--wait", action="store_true", help="wait until it ends, print status")
+    submit = commands.add_parser(
+        "submit",
+        help="submit VV programs, print their ids",
+        description="Submit one VV per program and print their ids, one a line. Several "
+        "programs go in one request: all of them are queued, or none (each refused one is "
+        "printed).",
+    )
+    submit.add_argument(
+        "program", metavar="PROG.js", nargs="+", help="the programs (JavaScript), one VV each"
+    )
+    submit.add_argument("--name", help="the VV's name, with one program (default: the file name)")
+    submit.add_argument(
+        "--wait",
+        action="store_true",
+        help="wait until they end, print their status (with several: ID STATUS a line)",
+    )
     submit.add_argument(
         "--timeout", type=float, default=None, metavar="S", help="stop waiting after S seconds"
     )

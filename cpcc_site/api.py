@@ -1,7 +1,7 @@
 """REST API plumbing shared by the apps' ``api`` packages: the staff permission, the 409 and 429
 errors, the JSON error shape for the schema, the JSON parser, content negotiation for endpoints
-that answer with a file, authentication that the audit log sees, and the per-address
-throttle."""
+that answer with a file, and authentication that the audit log sees. (The throttles:
+cpcc_site/throttling.py.)"""
 
 from __future__ import annotations
 
@@ -19,7 +19,6 @@ from rest_framework.parsers import JSONParser
 from rest_framework.permissions import IsAdminUser
 from rest_framework.renderers import BaseRenderer
 from rest_framework.request import Request
-from rest_framework.throttling import SimpleRateThrottle
 
 from cpcc_site.json_depth import too_deep, too_deep_message
 
@@ -127,15 +126,6 @@ class AuditedSessionAuthentication(_Audited, SessionAuthentication):
     """Session authentication (the browsable API, the pages' scripts), audited likewise."""
 
 
-class AddressRateThrottle(SimpleRateThrottle):
-    """Requests per client address, whoever sends them (the "address" rate)."""
-
-    scope = "address"
-
-    def get_cache_key(self, request: Request, view: Any) -> str:
-        return self.cache_format % {"scope": self.scope, "ident": self.get_ident(request)}
-
-
 _ERROR = {"application/json": {"schema": {"$ref": "#/components/schemas/Detail"}}}
 _ERRORS = {
     "400": "The request is malformed or a value is invalid: the body says which and why.",
@@ -209,8 +199,14 @@ def exception_handler(exc: Exception, context: dict[str, Any]) -> Any:
     if isinstance(data, list):
         response.data = {"detail": " ".join(str(item) for item in data), "errors": data}
     elif isinstance(data, dict) and "detail" not in data:
-        response.data = {"detail": _first_problem(data), **data}
+        response.data = error_body(data)
     return response
+
+
+def error_body(errors: dict[str, Any]) -> dict[str, Any]:
+    """Field errors (``{"name": ["..."]}``) as an answer's body: with a ``detail`` naming the
+    first problem."""
+    return {"detail": _first_problem(errors), **errors}
 
 
 def _first_problem(errors: dict[str, Any]) -> str:

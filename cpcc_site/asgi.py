@@ -10,6 +10,9 @@ os.environ.setdefault("DJANGO_SETTINGS_MODULE", "cpcc_site.settings")
 # Under ASGI each request runs in a thread of its own: a persistent database connection would
 # stay open per thread until the server refuses more clients (Django's advice: none).
 os.environ.setdefault("CPCC_DB_CONN_MAX_AGE", "0")
+# With PostgreSQL, those connections come from a pool of the process (settings.py says how it
+# recovers after an outage).
+os.environ.setdefault("CPCC_DB_POOL_SIZE", "8")
 django_asgi_app = get_asgi_application()
 
 from cpcc_site.serving import drain_before_shutdown  # noqa: E402

@@ -1,20 +1,27 @@
 """Database outages: telling one from a fault of the work, and waiting one out.
 
-An outage is the database server unreachable (refused, reset, timed out) or, with SQLite, the
-file locked past its busy timeout. Work that meets one is not wrong: a worker waits until the
-database answers and does it again (the work is transactional, and what it committed before
-stays committed); the web answers 503 with Retry-After (cpcc_site.errors).
+An outage is the database server unreachable (refused, reset, timed out), no connection from
+the process's pool in time, or, with SQLite, the file locked past its busy timeout. Work that
+meets one is not wrong: a worker waits until the database answers and does it again (the work
+is transactional, and what it committed before stays committed); the web answers 503 with
+Retry-After (cpcc_site.errors).
+
+Whether the database answers is asked on a connection of its own, opened past the process's
+connection pool (PostgreSQL with CPCC_DB_POOL_SIZE): the pool would hand out a connection it
+already holds, perhaps one the outage broke, or make the probe wait for one.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import sys
 import threading
 from collections.abc import Callable
 from typing import TypeVar
 
 from django.db import DEFAULT_DB_ALIAS, InterfaceError, OperationalError, connections
+from django.db.backends.base.base import BaseDatabaseWrapper
 
 logger = logging.getLogger("cpcc.database")
 T = TypeVar("T")
@@ -28,8 +35,8 @@ _LOCKED = ("database is locked", "database table is locked", "database is busy")
 
 def answers(alias: str = DEFAULT_DB_ALIAS) -> bool:
     """Whether the database takes a new connection and a query, asked on a connection of its
-    own (the caller's may be broken, or inside a transaction)."""
-    probe = connections.create_connection(alias)
+    own (the caller's may be broken, or inside a transaction), past any pool."""
+    probe = direct_connection(alias)
     try:
         with probe.cursor() as cursor:
             cursor.execute("SELECT 1")
@@ -42,6 +49,16 @@ def answers(alias: str = DEFAULT_DB_ALIAS) -> bool:
             probe.close()
 
 
+def direct_connection(alias: str = DEFAULT_DB_ALIAS) -> BaseDatabaseWrapper:
+    """A new connection (not yet open) to the database, not taken from the process's pool."""
+    settings_dict = connections[alias].settings_dict
+    options = settings_dict.get("OPTIONS") or {}
+    if "pool" not in options:
+        return connections.create_connection(alias)
+    unpooled = {**settings_dict, "OPTIONS": {k: v for k, v in options.items() if k != "pool"}}
+    return type(connections[alias])(unpooled, alias)
+
+
 def is_outage(exc: BaseException, alias: str = DEFAULT_DB_ALIAS) -> bool:
     """Whether ``exc`` means the database is unavailable, as opposed to a query that is wrong
     (SQLite reports both as OperationalError: the server is asked when in doubt)."""
@@ -49,9 +66,16 @@ def is_outage(exc: BaseException, alias: str = DEFAULT_DB_ALIAS) -> bool:
         return True
     if not isinstance(exc, OperationalError):
         return False
-    if any(words in str(exc).lower() for words in _LOCKED):
+    if any(words in str(exc).lower() for words in _LOCKED) or _pool_timeout(exc):
         return True
     return not answers(alias)
+
+
+def _pool_timeout(exc: BaseException) -> bool:
+    """The pool had no connection to give in time: every one of its connections busy, or none
+    to be made (the server away). Nothing was done: the request can be sent again."""
+    pool = sys.modules.get("psycopg_pool")  # not imported: no pool in this process
+    return pool is not None and isinstance(exc.__cause__, pool.PoolTimeout)
 
 
 def wait_until_available(

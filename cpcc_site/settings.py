@@ -70,7 +70,7 @@ MIDDLEWARE = [
     "cpcc_site.security.ContentSecurityPolicyMiddleware",
     "cpcc_site.security.RequestSizeLimitMiddleware",
     # Who changed what (the admin's session user; API token users are added by
-    # cpcc_site.api.AuditedTokenAuthentication once DRF has authenticated them).
+    # accounts.authentication.CachedTokenAuthentication once DRF has authenticated them).
     "auditlog.middleware.AuditlogMiddleware",
     # Login attempts: locked after CPCC_LOGIN_FAILURES failures (must come last).
     "axes.middleware.AxesMiddleware",
@@ -158,6 +158,26 @@ else:
     # A database server that does not answer is unavailable after 5 s, not after the
     # operating system's TCP timeout (minutes).
     DATABASES["default"].setdefault("OPTIONS", {})["connect_timeout"] = 5
+# PostgreSQL through a pool of at most CPCC_DB_POOL_SIZE connections per process (psycopg's
+# pool; 0: none, each thread opens its own as CPCC_DB_CONN_MAX_AGE says). The web server has
+# one by default (asgi.py): under ASGI each request runs in a thread of its own, which would
+# otherwise open a connection per request. Each connection is checked as it is taken, and a
+# broken one drains the pool (cpcc_site/postgresql/base.py), so that after an outage the pool
+# hands out new connections, not the broken ones it held; it gives up a reconnection after 5 s
+# and starts a new one for the next request, so that it is back as soon as the database is,
+# not after a back-off as long as the outage. A request waits at most 5 s for a connection,
+# then answers 503 (cpcc_site.database.is_outage). The outage probe connects past the pool.
+CPCC_DB_POOL_SIZE = int(env_float("CPCC_DB_POOL_SIZE", 0, minimum=0))
+if CPCC_DB_POOL_SIZE and DATABASES["default"]["ENGINE"] == "django.db.backends.postgresql":
+    DATABASES["default"]["ENGINE"] = "cpcc_site.postgresql"
+    DATABASES["default"]["CONN_MAX_AGE"] = 0  # the pool keeps them (Django requires 0)
+    DATABASES["default"]["OPTIONS"]["pool"] = {
+        "min_size": min(2, CPCC_DB_POOL_SIZE),
+        "max_size": CPCC_DB_POOL_SIZE,
+        "timeout": 5.0,
+        "reconnect_timeout": 5.0,
+        "max_idle": 300.0,
+    }
 
 AUTH_USER_MODEL = "accounts.User"
 AUTH_PASSWORD_VALIDATORS = [
@@ -219,6 +239,8 @@ CHANNEL_LAYERS = {
 }
 # The live map's feed (missions/events.py): a stream of changes and the RVs' latest states.
 CPCC_FEED_REDIS_URL = _channels_host
+# The API's request counts, shared by every web process (cpcc_site/throttling.py).
+CPCC_THROTTLE_REDIS_URL = _channels_host
 # The live map: each RV worker publishes its vehicle's state this often; a map socket sends
 # its browser at most one frame per batch interval, with everything that came meanwhile.
 CPCC_MAP_TICK_S = env_float("CPCC_MAP_TICK_S", 0.5, minimum=0.05)
@@ -256,15 +278,21 @@ CPCC_MAVLINK_LINK_TIMEOUT_S = env_float("CPCC_MAVLINK_LINK_TIMEOUT_S", 3.0, mini
 # An RV worker that has not reported for this long is taken as gone: its VVs move on.
 CPCC_RV_LEASE_S = env_float("CPCC_RV_LEASE_S", 20.0, minimum=1.0)
 
+# A web process answers an API token it looked up in the last CPCC_TOKEN_CACHE_S seconds from
+# its memory (accounts/authentication.py): a token revoked in another process stops working
+# there within this time, in the revoking process at once (0: every request reads it).
+CPCC_TOKEN_CACHE_S = env_float("CPCC_TOKEN_CACHE_S", 10.0, minimum=0.0)
+
 REST_FRAMEWORK = {
     "DEFAULT_AUTHENTICATION_CLASSES": [
-        "cpcc_site.api.AuditedTokenAuthentication",
+        "accounts.authentication.CachedTokenAuthentication",
         "cpcc_site.api.AuditedSessionAuthentication",
     ],
-    # Per user (token or session) and per client address; 429 with Retry-After beyond.
+    # Per user (token or session) and per client address, counted for all web processes
+    # together (in Redis); 429 with Retry-After beyond.
     "DEFAULT_THROTTLE_CLASSES": [
-        "rest_framework.throttling.UserRateThrottle",
-        "cpcc_site.api.AddressRateThrottle",
+        "cpcc_site.throttling.UserRateThrottle",
+        "cpcc_site.throttling.AddressRateThrottle",
     ],
     "DEFAULT_THROTTLE_RATES": {
         "user": env_str("CPCC_API_RATE_USER", "1200/minute"),
@@ -296,6 +324,14 @@ SPECTACULAR_SETTINGS = {
 
 # Simulation: time acceleration of simulated vehicles (0 = discrete-event, no sleeping).
 CPCC_SIM_SPEED = env_float("CPCC_SIM_SPEED", 1.0, minimum=0.0)
+# V8 isolates a worker process prepares ahead of time (vvm_worker/runtime/pool.py; 0: each is
+# made when a VV needs it).
+CPCC_ISOLATE_POOL = int(env_float("CPCC_ISOLATE_POOL", 2, minimum=0))
+# The password `loadscenario` and `demo` give the scenario's customers' logins (empty:
+# loadscenario generates one for a new login and prints it, demo keeps one in var/), and the
+# demo's admin password (empty: one kept in var/).
+CPCC_SCENARIO_PASSWORD = env_str("CPCC_SCENARIO_PASSWORD", "")
+CPCC_ADMIN_PASSWORD = env_str("CPCC_ADMIN_PASSWORD", "")
 # Journal limits in the spirit of Temporal: a warning in the VV's log, then the VV is stopped
 # (a VV that moves to another host, or whose worker restarts, replays the whole journal).
 CPCC_JOURNAL_WARN_ENTRIES = int(env_float("CPCC_JOURNAL_WARN_ENTRIES", 10_000, minimum=1))

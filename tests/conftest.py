@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import pytest
@@ -72,6 +73,7 @@ def broker_url(tmp_path_factory: pytest.TempPathFactory):
     with EmbeddedRedis(socket):
         app.conf.broker_url = f"redis+socket://{socket}"
         settings.CPCC_FEED_REDIS_URL = f"unix://{socket}"  # the live map's feed
+        settings.CPCC_THROTTLE_REDIS_URL = f"unix://{socket}"  # the API's request counts
         yield f"unix://{socket}"
 
 
@@ -84,11 +86,18 @@ def _fast_password_hashing(settings) -> None:
 
 @pytest.fixture(autouse=True)
 def _fresh_cache() -> None:
-    """API throttles and login lockouts count in the cache: every test starts from zero
-    (ids repeat between tests, and every test client comes from 127.0.0.1)."""
+    """API throttles and login lockouts count in the cache, tokens are remembered: every test
+    starts from zero (ids repeat between tests, and every test client comes from 127.0.0.1)."""
+    import redis
     from django.core.cache import cache
 
+    from accounts.authentication import TOKENS
+    from cpcc_site import throttling
+
     cache.clear()
+    TOKENS.clear()
+    with contextlib.suppress(redis.RedisError):  # without Redis, each process counts alone
+        throttling.forget_all(throttling.throttle_client())
 
 
 @pytest.fixture(autouse=True)
@@ -170,3 +179,12 @@ def vvm_factory(db):
         return VVM(clock=SimulatedClock(), dispatcher=RecordingDispatcher(), field=SensorField(1))
 
     return make
+
+
+@pytest.fixture(autouse=True)
+def _fresh_fleet_shape() -> None:
+    """Each test's database starts afresh (rolled back): the mapper reads the fleet's shape
+    again rather than trust what it saw within its look interval in the test before."""
+    from vvm_worker.services import routing
+
+    routing._shape_seen_at = None

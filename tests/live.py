@@ -67,14 +67,17 @@ class Workers:
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
 
     def start(
-        self, kind: str, name: str, *, env: dict[str, str] | None = None
+        self, kind: str, name: str, *more: str, env: dict[str, str] | None = None
     ) -> subprocess.Popen[bytes]:
-        """Start ``manage.py gsworker NAME`` or ``rvworker NAME``; returns once it runs.
-        ``env``: more variables (a fault to inject: tests/inject/sitecustomize.py)."""
-        log = (self.tmp / f"{kind}-{name}.log".replace(" ", "_")).open("ab")
+        """Start ``manage.py gsworker NAME`` or ``rvworker NAME [NAME ...]`` (one process
+        hosting several RVs, known to ``kill`` and ``terminate`` by its first name); returns
+        once it runs. ``env``: more variables (a fault to inject: tests/inject/sitecustomize.py)."""
+        names = [name, *more]
+        group = f"+{len(more)}" if more else ""  # the file of a group is named by its first
+        log = (self.tmp / f"{kind}-{name}{group}.log".replace(" ", "_")).open("ab")
         logged = log.tell()
         process = subprocess.Popen(
-            [sys.executable, "manage.py", kind, name],
+            [sys.executable, "manage.py", kind, *names],
             cwd=ROOT,
             env={**self.env, "DATABASE_URL": database_url(), **faults(env or {})},
             stdout=log,
@@ -84,13 +87,11 @@ class Workers:
         self.processes[name] = process
         path = Path(log.name)
         # The log is appended to: only what this process wrote says that it runs.
+        started = f"{kind} {', '.join(names)}:".encode()
         wait_for(
-            lambda: (
-                f"{kind} {name}:".encode() in path.read_bytes()[logged:]
-                or process.poll() is not None
-            ),
+            lambda: started in path.read_bytes()[logged:] or process.poll() is not None,
             timeout=60,
-            what=f"{kind} {name} to start",
+            what=f"{kind} {', '.join(names)} to start",
         )
         assert process.poll() is None, path.read_text()
         return process

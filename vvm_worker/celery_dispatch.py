@@ -29,8 +29,9 @@ class CeleryDispatcher:
     """Hands work to the hosts' Celery workers, once the transaction that made it commits.
 
     A VV goes to the queue of the host it is on at that moment, a vehicle's wake-up to the
-    vehicle's queue. ``local`` lets a host do its own work in its own thread without a round
-    trip through Redis (an RV resuming a VV it keeps, or re-planning after new work).
+    vehicle's queue. ``local`` lets an RV worker do the work of its own vehicles in its own
+    thread without a round trip through Redis (an RV resuming a VV it keeps, a VV moving
+    between two vehicles of the worker, a re-plan after new work).
     """
 
     def __init__(self, local: LocalHost | None = None) -> None:
@@ -60,7 +61,7 @@ class CeleryDispatcher:
 
     def _send_vehicle(self, vehicle_id: int) -> None:
         if self.local is not None and self.local.is_vehicle(vehicle_id):
-            self.local.wake_later()
+            self.local.wake_later(vehicle_id)
             return
         app.send_task(VEHICLE_CHANGED_TASK, args=[vehicle_id], queue=rv_queue(vehicle_id))
 

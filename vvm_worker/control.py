@@ -437,6 +437,11 @@ class ControlLoop:
             "route": [[here.lat, here.lng]] + [[p.lat, p.lng] for p in ahead],
         }
 
+    @property
+    def last_state(self) -> VehicleState | None:
+        """What the store was told last (it says so, written or about to be)."""
+        return self._last_state
+
     def _record(self, now: float) -> None:
         state = VehicleState(
             t_s=now,

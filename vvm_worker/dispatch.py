@@ -47,11 +47,21 @@ ADMIT_TASK = "cpcc.admit"
 
 
 class LocalHost(Protocol):
-    """The RV this process runs, for work it can do itself."""
+    """The RVs this process runs (an RV worker hosts one or several), for work it can do
+    itself without a message."""
 
-    def is_vehicle(self, vehicle_id: int) -> bool: ...
-    def advance_later(self, vv_id: uuid.UUID) -> None: ...
-    def wake_later(self) -> None: ...
+    def is_vehicle(self, vehicle_id: int) -> bool:
+        """Whether this process hosts the vehicle."""
+        ...
+
+    def advance_later(self, vv_id: uuid.UUID) -> None:
+        """Advance the VV, which is on one of this process's vehicles, on its host thread."""
+        ...
+
+    def wake_later(self, vehicle_id: int) -> None:
+        """The open tasks or status of this vehicle (one of this process's) changed: its
+        control loop re-plans on the host thread."""
+        ...
 
 
 class Announcer(Protocol):

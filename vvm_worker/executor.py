@@ -16,14 +16,17 @@ from dataclasses import dataclass
 from typing import Any
 
 from django.conf import settings
+from django.db import transaction
+from django.db.models import F
 
 from fleet.driving import Driver
-from fleet.geo import Position
+from fleet.geo import Position, distance_m
 from fleet.models import SensorType, Vehicle, VehicleStatus
 from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.control import (
+    REACH_SLACK_M,
     Area,
     ControlLoop,
     LoopConfig,
@@ -33,49 +36,90 @@ from vvm_worker.control import (
 )
 from vvm_worker.planning import TravelTime, make_planner
 from vvm_worker.sensing import read_sensors
-from vvm_worker.services import VVM, task_complete, vehicle_record_state, vehicle_set_status
+from vvm_worker.services import (
+    VVM,
+    task_complete,
+    vehicle_record_state,
+    vehicle_record_track,
+    vehicle_set_status,
+)
+from vvm_worker.services.base import LocalRV, Settled
+from vvm_worker.services.routing import planned_order
 
 _SDC_TTL_S = 10.0
+_TASK_FIELDS = ("id", "lat", "lng", "alt", "tolerance_m", "requested_s", "sensors", "vv_id", "q")
+
+
+def _loop_task(task: Task) -> LoopTask:
+    return LoopTask(
+        id=task.pk,
+        position=Position(task.lat, task.lng, task.alt),
+        tolerance_m=task.tolerance_m,
+        requested_s=task.requested_s,
+        sensors=tuple(task.sensors),
+        vv=task.vv_id,
+        # The tasks of one request (an executeAll batch) share a group.
+        group=f"{task.vv_id}:{task.q}",
+    )
 
 
 class DatabaseStore:
     """An RV's work as the platform keeps it (``vvm_worker.control.Store``)."""
 
-    def __init__(self, *, vehicle_id: int, vvm: VVM, live: bool = False) -> None:
+    def __init__(
+        self, *, vehicle_id: int, vvm: VVM, live: bool = False, defer_reports: bool = False
+    ) -> None:
         self.vehicle_id = vehicle_id
         self.vvm = vvm
         self.live = live
+        # ``defer_reports`` (``simulate``, where the process is the platform and the services
+        # ask the loops, not the rows): the reports wait, and are written (``settle``) by the
+        # transaction that next changes who is aboard, before it does (an answer here, a VV
+        # boarding or leaving), or by ``flush``: the ends of the legs flown, for the track of
+        # the VVs aboard, then the row as of the latest report.
+        self.defer_reports = defer_reports
+        self._points: list[VehicleState] = []
+        self._latest: VehicleState | None = None
+        self._tasks_done = 0  # served since the row was written
+        # What `settle` wrote, for the fleet to take back if the transaction rolls back.
+        self.settled_log: list[tuple[DatabaseStore, _Waiting]] | None = None
         self._tasks: list[LoopTask] | None = None
+        self._added: list[Task] = []  # put on the list since (see `add`)
         self._status: str | None = None
         self._aboard: list[dict[str, Any]] = []
+        # Where the vehicle stopped, to be recorded with the first task it serves there (one
+        # transaction), or on its own by the next record.
+        self._arrival: VehicleState | None = None
 
     def changed(self) -> None:
         """The RV's tasks or status may have changed: read them again when next asked."""
         self._tasks = None
         self._status = None
+        self._added = []
+
+    def add(self, tasks: Sequence[Task]) -> None:
+        """These tasks were put on the RV's list (saved by the end of the transaction that
+        put them there): known without reading them again."""
+        if self._tasks is not None:
+            self._added.extend(tasks)
 
     def open_tasks(self) -> Sequence[LoopTask]:
+        if self._tasks is not None and any(t.pk is not None for t in self._added):
+            # (One not saved yet is kept for later; the transaction saves it.)
+            added = [_loop_task(t) for t in self._added if t.pk is not None]
+            self._added = [t for t in self._added if t.pk is None]
+            have = {t.id for t in self._tasks}
+            self._tasks = sorted(
+                [*self._tasks, *(t for t in added if t.id not in have)],
+                key=lambda t: (t.requested_s, t.id),
+            )
         if self._tasks is None:
             rows = (
                 Task.objects.filter(vehicle_id=self.vehicle_id, status=TaskStatus.OPEN)
                 .order_by("requested_s", "id")
-                .values_list(
-                    "pk", "lat", "lng", "alt", "tolerance_m", "requested_s", "sensors", "vv_id", "q"
-                )
+                .only(*_TASK_FIELDS)
             )
-            self._tasks = [
-                LoopTask(
-                    id=pk,
-                    position=Position(lat, lng, alt),
-                    tolerance_m=tolerance_m,
-                    requested_s=requested_s,
-                    sensors=tuple(sensors),
-                    vv=vv_id,
-                    # The tasks of one request (an executeAll batch) share a group.
-                    group=f"{vv_id}:{q}",
-                )
-                for pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q in rows
-            ]
+            self._tasks = [_loop_task(task) for task in rows]
         return self._tasks
 
     def status(self) -> str:
@@ -92,25 +136,109 @@ class DatabaseStore:
         self._status = None
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
-        done = task_complete(
-            task_id=task.id,
-            readings=readings,
-            vvm=self.vvm,
-            vehicle_id=self.vehicle_id,
-            vv_id=task.vv,
-        )
+        log = self.settled_log
+        if log is not None:
+            log.clear()  # what was settled before is committed
+        arrival, self._arrival = self._arrival, None
+        if self._tasks is not None:  # what the mapper sees of this RV meanwhile
+            self._tasks = [t for t in self._tasks if t.id != task.id]
+        try:
+            done = task_complete(
+                task_id=task.id,
+                readings=readings,
+                vvm=self.vvm,
+                vehicle_id=self.vehicle_id,
+                vv_id=task.vv,
+                arrival=arrival,
+            )
+        except BaseException:
+            self._arrival = arrival  # rolled back with the answer: still to be recorded
+            self._tasks = None
+            for store, waiting in reversed(log or []):
+                store.unsettle(waiting)
+            raise
         if not done:  # no longer this RV's (cancelled, moved on): read the tasks again
             self._tasks = None
-        elif self._tasks is not None:
-            self._tasks = [t for t in self._tasks if t.id != task.id]
+            if arrival is not None:
+                self._write(arrival, moved=True)
 
     def record_state(self, state: VehicleState, *, moved: bool) -> None:
-        if moved or self.live:  # the track and the map need the VVs aboard
+        if self.defer_reports:
+            if moved:
+                self._points.append(state)
+            self._latest = state
+            return
+        if self._arrival is not None:  # no task was served where it stopped
+            arrival, self._arrival = self._arrival, None
+            self._write(arrival, moved=True)
+        if moved and not self.live and self._serves_here(state.position):
+            self._arrival = state
+            return
+        self._write(state, moved=moved)
+
+    def settle(self, *, tasks_done: int = 0) -> Settled:
+        """Write the track points that wait (``defer_reports``), in the caller's transaction,
+        and count ``tasks_done`` more tasks (written with the row); where the RV last said it
+        is (None: it has said nothing since the row was written)."""
+        if self._points:
+            points, self._points = self._points, []
+            vehicle_record_track(
+                vehicle_id=self.vehicle_id, points=[(p.t_s, p.position) for p in points]
+            )
+            if self.settled_log is not None:
+                self.settled_log.append((self, _Waiting(points, tasks_done)))
+        elif tasks_done and self.settled_log is not None:
+            self.settled_log.append((self, _Waiting([], tasks_done)))
+        self._tasks_done += tasks_done
+        return Settled(None if self._latest is None else self._latest.position)
+
+    def unsettle(self, waiting: _Waiting) -> None:
+        """What ``settle`` wrote was rolled back: it waits again."""
+        self._points = [*waiting.points, *self._points]
+        self._tasks_done -= waiting.tasks_done
+
+    def flush(self) -> None:
+        """Write the reports that wait (see ``defer_reports``): track points, then the row."""
+        if self._latest is not None:
+            latest = self._latest
+            with transaction.atomic():
+                self.settle()
+                vehicle_record_state(
+                    vehicle_id=self.vehicle_id,
+                    t_s=latest.t_s,
+                    position=latest.position,
+                    phase=latest.phase,
+                    distance_m=latest.distance_m,
+                    flight_s=latest.flight_s,
+                    planner_state=latest.planner_state,
+                    tasks_done=self._tasks_done,
+                )
+            self._latest, self._tasks_done = None, 0
+        elif self._tasks_done:
+            Vehicle.objects.filter(pk=self.vehicle_id).update(
+                tasks_done=F("tasks_done") + self._tasks_done
+            )
+            self._tasks_done = 0
+        if self._arrival is not None:
+            arrival, self._arrival = self._arrival, None
+            self._write(arrival, moved=True)
+
+    def _serves_here(self, here: Position) -> bool:
+        """Whether the loop is about to serve an open task here (it records its arrival
+        first): then the record goes with the first answer."""
+        return any(
+            distance_m(here, t.position) <= t.tolerance_m + REACH_SLACK_M for t in self.open_tasks()
+        )
+
+    def _write(self, state: VehicleState, *, moved: bool) -> None:
+        if self.live:  # the map shows the VVs aboard
             self._aboard = self._read_aboard()
         vehicle_record_state(
             vehicle_id=self.vehicle_id,
             t_s=state.t_s,
-            carrying=[vv["id"] for vv in self._aboard] if moved else [],
+            # The end of a straight leg is on the track of every VV aboard.
+            carrying=[vv["id"] for vv in self._aboard] if moved and self.live else [],
+            track_aboard=moved and not self.live,
             position=state.position,
             phase=state.phase,
             distance_m=state.distance_m,
@@ -134,6 +262,14 @@ class DatabaseStore:
             .order_by("submitted_s", "id")
             .values_list("pk", "name", "customer_id")
         ]
+
+
+@dataclass(frozen=True)
+class _Waiting:
+    """What one ``settle`` of an RV wrote or counted: the ends of legs, tasks served."""
+
+    points: list[VehicleState]
+    tasks_done: int
 
 
 class PlatformSensing:
@@ -183,6 +319,55 @@ class VehicleRig:
         return self.loop.changed()
 
 
+class RigFleet:
+    """The RVs whose loops run in this process, as the services ask and tell them
+    (``vvm_worker.services.base.LocalFleet``). ``wake`` runs a rig's wake-up where its loop
+    runs (the discrete-event queue, the host thread)."""
+
+    def __init__(
+        self, wake: Callable[[VehicleRig, Callable[[], None]], None], *, alone: bool = True
+    ) -> None:
+        self.rigs: dict[int, VehicleRig] = {}
+        self._wake = wake
+        # Alone (`simulate`): every change of an RV is made in this process, so what its loop
+        # knows is what its row says. Otherwise another process may have changed its status
+        # a moment ago (its message still on the way): the mapper reads the rows.
+        self.alone = alone
+        self._settled: list[tuple[DatabaseStore, _Waiting]] = []
+
+    def live(self, vehicle_id: int) -> LocalRV | None:
+        rig = self.rigs.get(vehicle_id)
+        if rig is None or not self.alone:
+            return None
+        store, state = rig.store, rig.loop.last_state
+        if state is None:  # it has reported nothing yet: its row says where it is
+            return None
+        items = [(t.id, t.position) for t in store.open_tasks()]
+        return LocalRV(
+            status=store.status(),
+            position=state.position,
+            route=planned_order(items, state.planner_state),
+        )
+
+    def add(self, rig: VehicleRig) -> None:
+        self.rigs[rig.vehicle_id] = rig
+        rig.store.settled_log = self._settled
+
+    def settle(self, vehicle_id: int, *, tasks_done: int = 0) -> Settled | None:
+        rig = self.rigs.get(vehicle_id)
+        if rig is None or not rig.store.defer_reports:
+            return None
+        return rig.store.settle(tasks_done=tasks_done)
+
+    def assigned(self, vehicle_id: int, tasks: Sequence[Any]) -> bool:
+        rig = self.rigs.get(vehicle_id)
+        if rig is None:
+            return False
+        rig.store.add(tasks)
+        self._wake(rig, rig.loop.changed())
+        return True
+
+
 def kinematics(vehicle: Vehicle, *, scale: float = 1.0) -> KinematicSpec:
     """The vehicle's kinematics, ``scale`` times faster (time acceleration of a simulated
     vehicle: distances stay right, flights and the battery's endurance shorten)."""
@@ -203,6 +388,8 @@ def build_rig(
     driver: Driver | None = None,
     plan_time_limit_s: float | None = None,
     live: bool = False,
+    defer_reports: bool = False,
+    sensing: PlatformSensing | None = None,
 ) -> VehicleRig:
     """An RV's control loop over the database: for ``simulate`` (one per RV, one queue) and
     for the RV workers (real time). ``driver``: the vehicle's (a MAVLink autopilot), else a
@@ -210,7 +397,7 @@ def build_rig(
     spec = kinematics(vehicle, scale=scale)
     if driver is None:
         driver = SimVehicle(spec, vehicle.depot, now_s=vvm.clock.now_s())
-    store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, live=live)
+    store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, live=live, defer_reports=defer_reports)
     loop = ControlLoop(
         name=vehicle.name,
         driver=driver,
@@ -222,7 +409,7 @@ def build_rig(
         store=store,
         scheduler=scheduler,
         clock=vvm.clock.now_s,
-        sensing=PlatformSensing(vvm),
+        sensing=sensing or PlatformSensing(vvm),
         config=LoopConfig(
             battery_s=spec.battery_s,
             reserve=settings.CPCC_BATTERY_RESERVE,

@@ -1,14 +1,17 @@
-"""The hosts of the distributed platform: a ground station's worker and an RV's worker.
+"""The hosts of the distributed platform: a ground station's worker and the RV worker.
 
-Each worker process is a Celery worker on its host's own queue (``gs.<id>``, ``rv.<id>``) that
-runs one host object. Celery messages only say "look at this VV" or "look at your tasks": the
-database holds all state, so a worker that starts (or restarts after a crash) first recovers
-everything its host is responsible for, and a message delivered twice finds nothing to do.
+Each worker process is a Celery worker on its hosts' own queues (``gs.<id>``, ``rv.<id>``)
+that runs one host object. Celery messages only say "look at this VV" or "look at your tasks":
+the database holds all state, so a worker that starts (or restarts after a crash) first
+recovers everything its hosts are responsible for, and a message delivered twice finds nothing
+to do.
 
-An RV's worker does all its VVM work in one thread of its own, the host thread: the VV steps
-(with the warm V8 contexts of the VVs aboard), and the vehicle's control loop, which needs
-timers (flights take time). Celery tasks hand work to that thread and wait until it is
-committed, so a message is acknowledged only after its checkpoint is in the database.
+An RV worker hosts one vehicle (on the vehicle's own computer) or several (simulated vehicles,
+or MAVLink links that reach a server). It does all its VVM work in one thread of its own, the
+host thread: the VV steps (with the warm V8 contexts of the VVs aboard its vehicles, in one
+runtime), and each vehicle's control loop, which needs timers (flights take time). Celery
+tasks hand work to that thread and wait until it is committed, so a message is acknowledged
+only after its checkpoint is in the database.
 """
 
 from __future__ import annotations
@@ -20,23 +23,25 @@ import queue
 import threading
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from django.conf import settings
-from django.db import close_old_connections, connection
-from django.db.models import Q, QuerySet
+from django.db import close_old_connections, connection, transaction
+from django.db.models import Exists, OuterRef, Q, QuerySet
 
 from cpcc_site import database
 from fleet.mavlink.driver import MavlinkDriver
 from fleet.mavlink.errors import MavlinkError
 from fleet.models import Driver, GroundStation, Vehicle, VehicleStatus
-from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus
+from missions.events import VEHICLE_STALE_S
+from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle, VVStatus
 from vvm_worker.clock import Clock
-from vvm_worker.executor import build_rig, kinematics
+from vvm_worker.executor import RigFleet, build_rig, kinematics
 from vvm_worker.live import publish_vehicle
 from vvm_worker.planning import DEFAULT_PLANNER
 from vvm_worker.platform import platform_vvm
+from vvm_worker.runtime import Runtime
 from vvm_worker.services import (
     VVM,
     LeasesUnsure,
@@ -58,13 +63,22 @@ INSTANT = 1e6
 WAIT_S = 60.0  # how long a Celery task waits for the host thread
 SWEEP_S = 5.0  # how often a host looks for work a lost message would have started
 WAITING_LOOK_S = 30.0  # how often a ground station routes a VV waiting for an RV again
+# Warm V8 contexts an RV worker keeps per vehicle it hosts (about 1 MB each, more for a VV
+# with a large heap), and at most in all; a VV beyond them resumes by replay.
+WARM_CONTEXTS = 64
+MAX_CONTEXTS = 512
+# A vehicle whose state does not change (landed, idle) tells the live maps again this often,
+# well before they forget it.
+BEACON_KEYFRAME_S = VEHICLE_STALE_S / 3
 
 
 class RealTimeScheduler:
     """Timers on the platform clock and work from other threads, run in one thread.
 
-    ``call_at`` is for the host thread itself (the vehicle's control loop); ``submit`` for any
-    thread, which gets a future for the result.
+    ``call_at`` is for the host thread itself (the vehicles' control loops, the worker's own
+    timers); ``submit`` for any thread, which gets a future for the result. Between two pieces
+    of work the thread sleeps until the next timer is due or work comes in (0.5 s at most):
+    idle, it wakes for timers only, however many vehicles it serves.
     """
 
     def __init__(self, clock: Clock) -> None:
@@ -128,15 +142,182 @@ class RealTimeScheduler:
                 future.set_result(result)
 
 
-class RVHost:
-    """The worker of one real vehicle: the VVs aboard and the vehicle's control loop."""
+class CannotFly(Exception):
+    """A vehicle of an RV worker cannot be flown: its MAVLink autopilot does not answer, or
+    it is asked to fly instantly. The message names the vehicle and where it was sought."""
 
-    def __init__(self, vehicle: Vehicle, *, speed: float, planner: str = DEFAULT_PLANNER) -> None:
-        self.vehicle_id = vehicle.pk
-        self.name = vehicle.name
+    def __init__(self, vehicle: Vehicle, cause: Exception) -> None:
+        where = f" at {vehicle.driver_url}" if vehicle.driver_url else ""
+        super().__init__(f"{vehicle.name}: cannot fly its vehicle{where}: {cause}")
+        self.vehicle_name = vehicle.name
+
+
+class RVHost:
+    """The worker of one or more real vehicles in one process: the VVs aboard them and their
+    control loops, all on one host thread with one VVM (one V8 runtime and its warm contexts).
+
+    Each vehicle has its own control loop (``HostedRV``) and its own Celery queue; the VVM's
+    ``local_rvs`` names them all, so a VV that migrates between two of them keeps its warm
+    context and goes over without a message. The timers that every vehicle needs (heartbeat,
+    sweep, map beacon) are one timer each for the whole process, which serves every vehicle in
+    turn: N idle vehicles wake the thread no more often than one. One vehicle is the worker
+    of a vehicle's own computer, as before.
+    """
+
+    def __init__(
+        self, vehicles: Sequence[Vehicle], *, speed: float, planner: str = DEFAULT_PLANNER
+    ) -> None:
+        if not vehicles:
+            raise ValueError("an RV worker hosts at least one vehicle")
         self.vvm = platform_vvm(local=self)
+        # One runtime for every vehicle here: as many warm contexts per vehicle as a worker
+        # of one vehicle keeps, up to what `simulate` keeps for a whole fleet.
+        self.vvm.runtime = Runtime(max_contexts=min(WARM_CONTEXTS * len(vehicles), MAX_CONTEXTS))
+        self.vvm.local_rvs = {vehicle.pk for vehicle in vehicles}
         self.clock = self.vvm.clock
         self.scheduler = RealTimeScheduler(self.clock)
+        # The loops here, as the services tell them of work routed to them (no message).
+        self.fleet = RigFleet(lambda rig, wake: self.scheduler.submit(wake), alone=False)
+        self.vvm.local_fleet = self.fleet
+        self.rvs: dict[int, HostedRV] = {}
+        for vehicle in vehicles:
+            try:
+                self.rvs[vehicle.pk] = HostedRV(vehicle, host=self, speed=speed, planner=planner)
+                self.fleet.add(self.rvs[vehicle.pk].rig)
+            except (MavlinkError, ValueError) as exc:
+                self._close_drivers()
+                raise CannotFly(vehicle, exc) from exc
+            except BaseException:
+                self._close_drivers()
+                raise
+        self.name = ", ".join(rv.name for rv in self.rvs.values())
+        self._thread = threading.Thread(target=self._run, name="rv-host", daemon=True)
+
+    # --- LocalHost (vvm_worker.dispatch): work this process does itself -----------------------
+
+    def is_vehicle(self, vehicle_id: int) -> bool:
+        return vehicle_id in self.rvs
+
+    def advance_later(self, vv_id: uuid.UUID) -> None:
+        self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
+
+    def wake_later(self, vehicle_id: int) -> None:
+        # A vehicle here whose work this process changed (a VV it advanced, one that moved
+        # between two of its vehicles): no new fence, and no second plan if the loop plans
+        # anyway before it gets to this.
+        # (On this thread, in the commit of the change: the store forgets what it read now.)
+        self.scheduler.submit(self.rvs[vehicle_id].rig.changed())
+
+    # --- what Celery tasks ask -----------------------------------------------------------------
+
+    def advance(self, vv_id: uuid.UUID) -> None:
+        self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm)).result(WAIT_S)
+
+    def wake(self, vehicle_id: int) -> None:
+        rv = self.rvs.get(vehicle_id)
+        if rv is None:  # a message for a vehicle another process hosts now: not ours to do
+            logger.warning("wake-up for a vehicle not hosted here", extra={"vehicle": vehicle_id})
+            return
+        self.scheduler.submit(rv.changed).result(WAIT_S)
+
+    # --- life ---------------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._thread.start()
+        self.scheduler.submit(self._recover).result(WAIT_S * len(self.rvs))
+        logger.info("rv worker started", extra={"vehicle": self.name})
+
+    def stop(self) -> None:
+        self.scheduler.stop()
+        self._thread.join(timeout=10)
+
+    def _run(self) -> None:
+        try:
+            self.scheduler.run()
+        finally:
+            self.vvm.runtime.close()
+            self._close_drivers()
+            connection.close()
+
+    def _close_drivers(self) -> None:
+        for rv in self.rvs.values():
+            rv.close()
+
+    def _recover(self) -> None:
+        """Take up whatever the vehicles were doing. Every lease is renewed first, so that a
+        VV aboard one of them whose next task another serves goes straight there. (Done again
+        after a database outage: the timers start only once it is all done.)"""
+        self._renew_leases()
+        for rv in self.rvs.values():
+            rv.recover()
+        now = self.clock.now_s()
+        self.scheduler.call_at(now + settings.CPCC_RV_LEASE_S / 4, self._heartbeat)
+        self.scheduler.call_at(now + SWEEP_S, self._sweep)
+        self.scheduler.call_at(now, self._beacon)
+
+    def _each(self, work: Callable[[HostedRV], None], what: str) -> None:
+        """Do a vehicle's part of a periodic job for each vehicle: one whose part fails for
+        another reason than a database outage is logged and the others go on; an outage is
+        raised (the scheduler waits it out and does the job again, which is safe to redo)."""
+        for rv in self.rvs.values():
+            try:
+                work(rv)
+            except Exception as exc:
+                if database.is_outage(exc):
+                    raise
+                logger.exception("%s failed", what, extra={"vehicle": rv.name})
+
+    def _renew_leases(self) -> None:
+        """Every vehicle here is alive: their leases in one commit (the commit is most of
+        what a heartbeat costs), then each MAVLink link that came back is in service again."""
+        try:
+            with transaction.atomic():
+                for rv in self.rvs.values():
+                    vehicle_heartbeat(vehicle_id=rv.vehicle_id, vvm=self.vvm)
+        except Exception as exc:
+            if database.is_outage(exc):
+                raise
+            logger.exception("heartbeat failed", extra={"vehicle": self.name})
+        self._each(HostedRV.link_check, "link check")
+
+    def _heartbeat(self) -> None:
+        self._renew_leases()
+        self.scheduler.call_at(self.clock.now_s() + settings.CPCC_RV_LEASE_S / 4, self._heartbeat)
+
+    def _sweep(self) -> None:
+        """Messages are hints: now and then, look for VVs aboard the vehicles here that wait
+        for this worker, and tell each vehicle's loop what a lost message would have told it.
+        Two queries for all the vehicles, whatever their number."""
+        ids = list(self.rvs)
+        advance_each(stalled(host_rv_id__in=ids), vvm=self.vvm, vehicle=self.name)
+        open_tasks = Task.objects.filter(vehicle_id=OuterRef("pk"), status=TaskStatus.OPEN)
+        rows = (
+            Vehicle.objects.filter(pk__in=ids)
+            .annotate(busy=Exists(open_tasks))
+            .values_list("pk", "status", "busy")
+        )
+        seen = {pk: (status, busy) for pk, status, busy in rows}
+        self._each(lambda rv: rv.look_again(*seen.get(rv.vehicle_id, (None, True))), "sweep")
+        self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
+
+    def _beacon(self) -> None:
+        now = self.clock.now_s()
+        self._each(lambda rv: rv.beacon(now), "map beacon")
+        self.scheduler.call_at(now + settings.CPCC_MAP_TICK_S, self._beacon)
+
+
+class HostedRV:
+    """One real vehicle of an RV worker: its control loop (``build_rig``), its driver, and
+    the vehicle's part of the worker's recovery, sweep, map beacon and link checks. Runs on
+    the worker's host thread, with the worker's VVM."""
+
+    def __init__(
+        self, vehicle: Vehicle, *, host: RVHost, speed: float, planner: str = DEFAULT_PLANNER
+    ) -> None:
+        self.vehicle_id = vehicle.pk
+        self.name = vehicle.name
+        self.host = host
+        vvm, scheduler = host.vvm, host.scheduler
         # Simulated flights: time acceleration shortens them (distances stay right), and the
         # battery and its charging with them. A MAVLink vehicle flies as fast as it flies:
         # the same acceleration only tells the estimates what a `mavsim --speed` does.
@@ -153,49 +334,32 @@ class RVHost:
                 area=vehicle.area,
                 min_altitude_m=vehicle.min_altitude_m,
                 max_altitude_m=vehicle.max_altitude_m,
-                clock=self.clock.now_s,
+                clock=vvm.clock.now_s,
                 link_timeout_s=settings.CPCC_MAVLINK_LINK_TIMEOUT_S,
-                on_link_lost=lambda: self.scheduler.submit(self._link_lost),
+                on_link_lost=self._link_lost_later,
                 name=vehicle.name,
             )
             driver.connect(timeout_s=settings.CPCC_MAVLINK_CONNECT_S)
         self.rig = build_rig(
             vehicle,
-            vvm=self.vvm,
-            scheduler=self.scheduler,
+            vvm=vvm,
+            scheduler=scheduler,
             planner=planner,
             scale=scale,
             driver=driver,
             plan_time_limit_s=settings.CPCC_PLAN_TIME_LIMIT_S,
-            live=announcing(self.vvm),
+            live=announcing(vvm),
         )
         self.driver = self.rig.driver
         self.loop = self.rig.loop
-        self._thread = threading.Thread(target=self._run, name=f"rv-{vehicle.pk}", daemon=True)
+        # What the map was told last (without its time) and when: an RV whose state does not
+        # change (landed, idle) is told again only every BEACON_KEYFRAME_S.
+        self._told: tuple[dict[str, Any], float] | None = None
 
-    # --- LocalHost (vvm_worker.dispatch): work this host does itself -------------------------
+    def _log(self) -> dict[str, Any]:
+        return {"vehicle": self.name}
 
-    def is_vehicle(self, vehicle_id: int) -> bool:
-        return vehicle_id == self.vehicle_id
-
-    def advance_later(self, vv_id: uuid.UUID) -> None:
-        self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
-
-    def wake_later(self) -> None:
-        # This host changed its own work (a VV it advanced): no new fence, and no second plan
-        # if the loop plans anyway before it gets to this.
-        # (On this thread, in the commit of the change: the store forgets what it read now.)
-        self.scheduler.submit(self.rig.changed())
-
-    # --- what Celery tasks ask -----------------------------------------------------------------
-
-    def advance(self, vv_id: uuid.UUID) -> None:
-        self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm)).result(WAIT_S)
-
-    def wake(self) -> None:
-        self.scheduler.submit(self._changed).result(WAIT_S)
-
-    def _changed(self) -> None:
+    def changed(self) -> None:
         """The vehicle's work, status or configuration changed: re-plan, and give a MAVLink
         vehicle its new geofence if its area or altitudes changed."""
         if isinstance(self.driver, MavlinkDriver) and self.driver.link_ok:
@@ -211,83 +375,70 @@ class RVHost:
                         vehicle.area, vehicle.min_altitude_m, vehicle.max_altitude_m
                     )
                 except MavlinkError:
-                    logger.exception("geofence not uploaded", extra={"vehicle": self.name})
+                    logger.exception("geofence not uploaded", extra=self._log())
         self.rig.store.changed()
         self.loop.wake()
+
+    def _link_lost_later(self) -> None:  # on the driver's thread
+        self.host.scheduler.submit(self._link_lost)
 
     def _link_lost(self) -> None:
         """The vehicle stopped answering: like an RV taken out of service, its VVs move on
         (a reading it may still report is refused); it comes back when the link does."""
-        logger.warning("vehicle link lost", extra={"vehicle": self.name})
+        logger.warning("vehicle link lost", extra=self._log())
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
         if vehicle.status == VehicleStatus.ACTIVE:
             self._link_down = True
-            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.MAINTENANCE, vvm=self.vvm)
+            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.MAINTENANCE, vvm=self.host.vvm)
 
-    def _link_check(self) -> None:
+    def link_check(self) -> None:
+        """The MAVLink link lost before is back: in service again."""
         if not self._link_down or not getattr(self.driver, "link_ok", True):
             return
         self._link_down = False
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
         if vehicle.status == VehicleStatus.MAINTENANCE:
-            logger.warning("vehicle link back: in service again", extra={"vehicle": self.name})
-            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.ACTIVE, vvm=self.vvm)
+            logger.warning("vehicle link back: in service again", extra=self._log())
+            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.ACTIVE, vvm=self.host.vvm)
 
-    # --- life ---------------------------------------------------------------------------------
-
-    def start(self) -> None:
-        self._thread.start()
-        self.scheduler.submit(self._recover).result(WAIT_S)
-        logger.info("rv worker started", extra={"vehicle": self.name})
-
-    def stop(self) -> None:
-        self.scheduler.stop()
-        self._thread.join(timeout=10)
-
-    def _run(self) -> None:
-        try:
-            self.scheduler.run()
-        finally:
-            self.vvm.runtime.close()
-            if isinstance(self.driver, MavlinkDriver):
-                self.driver.close()
-            connection.close()
-
-    def _recover(self) -> None:
+    def recover(self) -> None:
         """Take up whatever this RV was doing: VVs aboard, its open tasks, and any VV waiting
-        for an RV that this one can serve."""
-        self._heartbeat()
+        for an RV that this one can serve (its lease is renewed already)."""
+        vvm = self.host.vvm
         aboard = VirtualVehicle.objects.filter(
             host_rv_id=self.vehicle_id, status__in=ACTIVE_STATUSES
         )
-        advance_each(aboard, vvm=self.vvm, vehicle=self.name)
+        advance_each(aboard, vvm=vvm, vehicle=self.name)
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
-        vehicle_register(vehicle=vehicle, vvm=self.vvm)
+        vehicle_register(vehicle=vehicle, vvm=vvm)
         self.rig.store.changed()
         self.loop.wake()
-        self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
-        self._beacon()
 
-    def _beacon(self) -> None:
-        """Tell the live maps where the vehicle is, what it carries and where it goes next."""
-        now = self.clock.now_s()
+    def look_again(self, status: str | None, busy: bool) -> None:
+        """The sweep's look at the vehicle (``status``: the vehicle's in the database;
+        ``busy``: it has open tasks there): what a lost message would have said. A vehicle
+        with work reads it again and re-plans; an idle one only if its loop still holds tasks
+        or another status (nothing else a message says changes an idle vehicle's plan)."""
+        store = self.rig.store
+        if busy or store.open_tasks() or store.status() != status:
+            store.changed()
+            self.loop.wake()
+
+    def beacon(self, now: float) -> None:
+        """Tell the live maps where the vehicle is, what it carries and where it goes next:
+        when that changed, else now and then (a map forgets a state VEHICLE_STALE_S old)."""
         state = self.loop.live_state(now)
+        if self._told is not None and self._told[0] == state and now < self._told[1]:
+            return
+        self._told = (state, now + BEACON_KEYFRAME_S)
+        clock = self.host.clock
         publish_vehicle(
-            state | {"id": self.vehicle_id, "name": self.name, "t": self.clock.epoch_ms(now) / 1000}
+            state | {"id": self.vehicle_id, "name": self.name, "t": clock.epoch_ms(now) / 1000}
         )
-        self.scheduler.call_at(now + settings.CPCC_MAP_TICK_S, self._beacon)
 
-    def _heartbeat(self) -> None:
-        vehicle_heartbeat(vehicle_id=self.vehicle_id, vvm=self.vvm)
-        self._link_check()
-        self.scheduler.call_at(self.clock.now_s() + settings.CPCC_RV_LEASE_S / 4, self._heartbeat)
-
-    def _sweep(self) -> None:
-        """Messages are hints: now and then, look for VVs aboard that wait for this host."""
-        advance_each(stalled(host_rv_id=self.vehicle_id), vvm=self.vvm, vehicle=self.name)
-        self.rig.store.changed()  # what a lost message would have said
-        self.loop.wake()
-        self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
+    def close(self) -> None:
+        if isinstance(self.driver, MavlinkDriver):
+            self.driver.close()
 
 
 class GSHost:
@@ -312,7 +463,7 @@ class GSHost:
     def admit(self, customer_id: int) -> None:
         vv_admit_queued(customer_id=customer_id, vvm=self.vvm)
 
-    def wake(self) -> None:  # an RV's message that reached a ground station: nothing to do
+    def wake(self, vehicle_id: int) -> None:  # an RV's message that reached a GS: nothing to do
         pass
 
     def start(self) -> None:
@@ -395,7 +546,7 @@ def _admit_all(vvm: VVM) -> None:
             logger.exception("admission failed", extra={"customer": customer})
 
 
-def stalled(*, waiting_s: float | None = None, **host: int) -> QuerySet[VirtualVehicle]:
+def stalled(*, waiting_s: float | None = None, **host: Any) -> QuerySet[VirtualVehicle]:
     """VVs on a host that have not moved for a while although they could: answered but not
     resumed, or arrived but not taken up (their message was lost); with ``waiting_s``, also
     those that have waited that long for an RV (routed again, they wait ``waiting_s`` more)."""

@@ -21,13 +21,21 @@ from pathlib import Path
 from typing import Any
 
 from django.conf import settings
+from django.db.models import Prefetch
 
 from fleet.models import Vehicle
 from fleet.simulation import SensorField
-from missions.models import ENDED_STATUSES, Migration, Task, TaskStatus, VirtualVehicle
+from missions.models import (
+    ENDED_STATUSES,
+    Migration,
+    StorageDocument,
+    Task,
+    TaskStatus,
+    VirtualVehicle,
+)
 from missions.readings import map_camera_readings
 from vvm_worker.clock import SimulatedClock
-from vvm_worker.executor import VehicleRig, build_rig
+from vvm_worker.executor import PlatformSensing, RigFleet, VehicleRig, build_rig
 from vvm_worker.planning import DEFAULT_PLANNER, make_planner
 from vvm_worker.runtime import Runtime
 from vvm_worker.scenario import FleetEvent, Scenario, vv_instances
@@ -47,9 +55,11 @@ logger = logging.getLogger("cpcc.simulation")
 
 ProgressFn = Callable[["Progress"], None]
 _PROGRESS_EVERY_S = 0.1
-# Warm V8 contexts kept by the one runtime every host shares (about 1 MB each); a VV beyond
-# them resumes by replay, as it would on another host.
-WARM_CONTEXTS = 512
+# Warm V8 contexts kept by the one runtime every host shares (an isolate is about 1 MB, 1.5
+# with a program's heap); a VV beyond them resumes by replay (a new isolate and its journal
+# run again), as it would on another host. 2,048 keep every VV of a 1,000-VV run warm (a
+# replay costs some 20 times a resumed step) within about 3 GB.
+WARM_CONTEXTS = 2048
 
 
 @dataclass(frozen=True)
@@ -132,7 +142,11 @@ class Simulation:
             runtime=Runtime(max_contexts=WARM_CONTEXTS),
             hosts_share_runtime=True,
         )
-        self.rigs: dict[int, VehicleRig] = {}
+        # Every RV's loop runs here: the services ask them, not the database.
+        self.fleet = RigFleet(lambda rig, wake: self.queue.call_now(wake))
+        self.rigs: dict[int, VehicleRig] = self.fleet.rigs
+        self.sensing = PlatformSensing(self.vvm)  # one copy of the SDC for every RV
+        self.vvm.local_fleet = self.fleet
         self.loaded: LoadedScenario | None = None
         self.events_run = 0
         self.wall_s = 0.0  # how long `run` took
@@ -142,8 +156,15 @@ class Simulation:
 
     def add_vehicle_loop(self, vehicle: Vehicle) -> VehicleRig:
         """Give an RV a simulated vehicle and a control loop (its worker, in one process)."""
-        rig = build_rig(vehicle, vvm=self.vvm, scheduler=self.queue, planner=self.planner_name)
-        self.rigs[vehicle.pk] = rig
+        rig = build_rig(
+            vehicle,
+            vvm=self.vvm,
+            scheduler=self.queue,
+            planner=self.planner_name,
+            defer_reports=True,
+            sensing=self.sensing,
+        )
+        self.fleet.add(rig)
         return rig
 
     def _fleet_event(self, event: FleetEvent) -> None:
@@ -226,6 +247,8 @@ class Simulation:
             if progress is not None and time.monotonic() >= next_report:
                 progress(self._progress(total))
                 next_report = time.monotonic() + _PROGRESS_EVERY_S
+        for rig in self.rigs.values():  # the rows say where every RV is now
+            rig.store.flush()
         if progress is not None:
             progress(self._progress(total))
 
@@ -244,7 +267,22 @@ class Simulation:
     def summary(self) -> dict[str, Any]:
         end = self.clock.t
         vvs = []
-        mine = VirtualVehicle.objects.filter(pk__in=self.vv_ids).select_related("customer")
+        # Three reads for all of them (the VVs, their tasks, their storage), only what the
+        # summary shows.
+        tasks_shown = (
+            Task.objects.select_related("vehicle")
+            .only("vv_id", "lat", "lng", "alt", "vehicle__name", "requested_s", "done_s", "status")
+            .order_by("q", "index")
+        )
+        mine = (
+            VirtualVehicle.objects.filter(pk__in=self.vv_ids)
+            .select_related("customer")
+            .only("name", "customer__name", "status", "error", "submitted_s", "finished_s")
+            .prefetch_related(
+                Prefetch("tasks", queryset=tasks_shown),
+                Prefetch("storage", queryset=StorageDocument.objects.order_by("key")),
+            )
+        )
         for vv in mine.order_by("submitted_s", "customer__name", "name"):
             tasks = [
                 {
@@ -254,7 +292,7 @@ class Simulation:
                     "done_s": _r(t.done_s),
                     "status": t.status,
                 }
-                for t in vv.tasks.select_related("vehicle").order_by("q", "index")
+                for t in vv.tasks.all()
             ]
             vvs.append(
                 {
@@ -265,9 +303,7 @@ class Simulation:
                     "submitted_s": _r(vv.submitted_s),
                     "finished_s": _r(vv.finished_s),
                     "tasks_done": sum(1 for t in tasks if t["status"] == TaskStatus.DONE),
-                    "storage": {
-                        d.key: _resolve_images(d.value) for d in vv.storage.order_by("key")
-                    },
+                    "storage": {d.key: _resolve_images(d.value) for d in vv.storage.all()},
                     "tasks": tasks,
                 }
             )
@@ -283,10 +319,10 @@ class Simulation:
                 }
             )
         migrations = [
-            {"vv": m.vv.name, "from": m.from_name, "to": m.to_name, "at_s": _r(m.at_s)}
-            for m in Migration.objects.filter(vv__in=self.vv_ids)
-            .select_related("vv")
+            {"vv": vv_name, "from": from_name, "to": to_name, "at_s": _r(at_s)}
+            for vv_name, from_name, to_name, at_s in Migration.objects.filter(vv__in=self.vv_ids)
             .order_by("at_s", "id")
+            .values_list("vv__name", "from_name", "to_name", "at_s")
         ]
         finished = [v["finished_s"] for v in vvs if v["finished_s"] is not None]
         waits = [

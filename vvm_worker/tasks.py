@@ -22,7 +22,8 @@ from vvm_worker.services import vv_advance as advance
 
 @shared_task(name=VV_ADVANCE_TASK, acks_late=True, ignore_result=True)
 def vv_advance(vv_id: str) -> None:
-    """The VV arrived on this worker's host (or must be looked at again): step and route it."""
+    """The VV arrived on one of this worker's hosts (or must be looked at again): step and
+    route it (an RV worker does it on its host thread, whichever of its vehicles it is on)."""
     host = current_host()
     if host is None:
         database.through_outages(lambda: advance(vv_id=uuid.UUID(vv_id), vvm=platform_vvm()))
@@ -32,10 +33,10 @@ def vv_advance(vv_id: str) -> None:
 
 @shared_task(name=VEHICLE_CHANGED_TASK, acks_late=True, ignore_result=True)
 def vehicle_changed(vehicle_id: int) -> None:
-    """This worker's vehicle has new work or a new status: its control loop re-plans."""
+    """A vehicle of this worker has new work or a new status: its control loop re-plans."""
     host = current_host()
     if host is not None:
-        host.wake()
+        host.wake(vehicle_id)
 
 
 @shared_task(name=ADMIT_TASK, acks_late=True, ignore_result=True)

@@ -13,7 +13,12 @@ from django.core.files.storage import default_storage
 from django.db.models import QuerySet
 from django.http import FileResponse
 from drf_spectacular.types import OpenApiTypes
-from drf_spectacular.utils import OpenApiParameter, extend_schema, extend_schema_view
+from drf_spectacular.utils import (
+    OpenApiParameter,
+    PolymorphicProxySerializer,
+    extend_schema,
+    extend_schema_view,
+)
 from rest_framework import generics, mixins, status, viewsets
 from rest_framework.decorators import action
 from rest_framework.exceptions import NotFound, PermissionDenied, ValidationError
@@ -21,7 +26,13 @@ from rest_framework.request import Request
 from rest_framework.response import Response
 from rest_framework.serializers import BaseSerializer, as_serializer_error
 
-from cpcc_site.api import Conflict, DetailSerializer, FileOrJSONNegotiation, QuotaReached
+from cpcc_site.api import (
+    Conflict,
+    DetailSerializer,
+    FileOrJSONNegotiation,
+    QuotaReached,
+    error_body,
+)
 from missions.api.results import build_results_zip, results_filename
 from missions.api.serializers import (
     LogEntryOutSerializer,
@@ -47,12 +58,17 @@ from missions.selectors import (
     with_task_counts,
 )
 from vvm_worker.platform import platform_vvm
+from vvm_worker.runtime import SyntaxProblem
 from vvm_worker.services import (
+    MAX_SUBMISSIONS,
     NotACustomer,
+    Submission,
+    SubmissionsRefused,
     VVAlreadyEnded,
     VVQueueFull,
     vv_cancel_for_user,
     vv_create_for_user,
+    vvs_submit_many_for_user,
 )
 
 NO_SUCH_VV = (
@@ -63,6 +79,21 @@ NOT_FOUND = {404: DetailSerializer}
 # A VV's id in a path: anything else is no route at all (404), never a database error.
 UUID_PATTERN = "[0-9a-fA-F]{8}-?[0-9a-fA-F]{4}-?[0-9a-fA-F]{4}-?[0-9a-fA-F]{4}-?[0-9a-fA-F]{12}"
 IMAGE = {(200, "image/png"): OpenApiTypes.BINARY, (200, "image/jpeg"): OpenApiTypes.BINARY}
+NOT_A_CUSTOMER = "Only a customer's users can submit VVs."
+# POST /api/v1/vvs/ takes one submission or a list of them (DESIGN.md section 9), and answers
+# in the same form.
+SUBMISSIONS = PolymorphicProxySerializer(
+    component_name="VVSubmission",
+    serializers=[VVCreateSerializer, VVCreateSerializer(many=True)],
+    resource_type_field_name=None,
+    many=False,
+)
+SUBMITTED = PolymorphicProxySerializer(
+    component_name="VVSubmitted",
+    serializers=[VVSerializer, VVSerializer(many=True)],
+    resource_type_field_name=None,
+    many=False,
+)
 
 
 class VVErrorsMixin:
@@ -88,6 +119,28 @@ class VVErrorsMixin:
         elif isinstance(exc, DjangoValidationError):
             exc = ValidationError(as_serializer_error(exc))
         return super().handle_exception(exc)  # type: ignore[misc, no-any-return]
+
+
+def _refused_program(problem: SyntaxProblem) -> dict[str, Any]:
+    """The 400 body of a submission whose program has a syntax error: where it is."""
+    error = {"message": problem.message, "line": problem.line, "column": problem.column}
+    return {"detail": f"program: {problem}", "program": [str(problem)], "error": error}
+
+
+def _refused_items(errors: list[dict[str, Any]]) -> Response:
+    """400 for a bulk submission of which some items are refused (nothing was created):
+    ``errors`` has one entry per item, ``{}`` for those that were fine."""
+    refused = [index for index, error in enumerate(errors) if error]
+    more = f" (and {len(refused) - 1} more item(s))" if len(refused) > 1 else ""
+    detail = (
+        f"item {refused[0]}: {errors[refused[0]]['detail']}{more}. Nothing was submitted: "
+        "correct the items that 'errors' names and send the list again."
+    )
+    return Response({"detail": detail, "errors": errors}, status=status.HTTP_400_BAD_REQUEST)
+
+
+def _fields(errors: dict[str, Any] | list[Any]) -> dict[str, Any]:
+    return errors if isinstance(errors, dict) else {"non_field_errors": errors}
 
 
 def _image_response(reference: str) -> FileResponse:
@@ -135,13 +188,22 @@ class VirtualVehicleViewSet(
         return vv_get_for_user(user=self.request.user, vv_id=self.kwargs["pk"])  # type: ignore[arg-type]
 
     @extend_schema(
-        request=VVCreateSerializer,
-        responses={201: VVSerializer, 429: DetailSerializer},
-        description="Queue a new VV. 400 for a program with a syntax error (with its line and "
-        "column) or a refused name; 429 when your queue of VVs waiting to start is full (the "
-        "customer's max_queued_vvs) or a request rate is passed.",
+        request=SUBMISSIONS,
+        responses={201: SUBMITTED, 429: DetailSerializer},
+        description="Queue a new VV: `{name, program}` answers the VV. 400 for a program with "
+        "a syntax error (with its line and column) or a refused name; 429 when your queue of "
+        "VVs waiting to start is full (the customer's max_queued_vvs) or a request rate is "
+        "passed.\n\n"
+        f"Several at once: a list of 1 to {MAX_SUBMISSIONS} `{{name, program}}` answers the "
+        "list of VVs in the same order. It is one transaction: all of them are queued or none. "
+        "When any item is refused, the answer is 400 with `errors`, one entry per item in "
+        "order: `{}` for an item that was fine, otherwise the body a single submission of that "
+        "item would get (`program` and `error` with the line and column, or the refused "
+        "field). The quota counts the whole list: 429 when it does not all fit.",
     )
     def create(self, request: Request) -> Response:
+        if isinstance(request.data, list):
+            return self._create_many(request, request.data)
         given = VVCreateSerializer(data=request.data)
         given.is_valid(raise_exception=True)
         try:
@@ -151,16 +213,52 @@ class VirtualVehicleViewSet(
                 **given.validated_data,
             )
         except NotACustomer:
-            raise PermissionDenied("Only a customer's users can submit VVs.") from None
+            raise PermissionDenied(NOT_A_CUSTOMER) from None
         if problem is not None:
-            error = {"message": problem.message, "line": problem.line, "column": problem.column}
-            return Response(
-                {"detail": f"program: {problem}", "program": [str(problem)], "error": error},
-                status=status.HTTP_400_BAD_REQUEST,
-            )
+            return Response(_refused_program(problem), status=status.HTTP_400_BAD_REQUEST)
         # Just created: no task yet (not two counts to say so).
         vv.tasks_done = vv.tasks_open = 0  # type: ignore[attr-defined]
         return Response(self.get_serializer(vv).data, status=status.HTTP_201_CREATED)
+
+    def _create_many(self, request: Request, items: list[Any]) -> Response:
+        """A bulk submission: every item checked, then all queued in one transaction."""
+        if not 1 <= len(items) <= MAX_SUBMISSIONS:
+            detail = (
+                f"A list holds 1 to {MAX_SUBMISSIONS} submissions, this one {len(items)}: "
+                f"send them in several requests of at most {MAX_SUBMISSIONS}."
+            )
+            return Response({"detail": detail}, status=status.HTTP_400_BAD_REQUEST)
+        given = VVCreateSerializer(data=items, many=True)
+        if not given.is_valid():
+            # DRF gives the refused items' errors by their index (older versions: a list), an
+            # item's as a list of messages when it is not an object at all (null).
+            found = given.errors
+            by_index = found if isinstance(found, dict) else dict(enumerate(found))
+            return _refused_items(
+                [
+                    error_body(_fields(by_index[i])) if by_index.get(i) else {}
+                    for i in range(len(items))
+                ]
+            )
+        submissions = [Submission(**item) for item in given.validated_data]
+        try:
+            vvs = vvs_submit_many_for_user(
+                user=request.user,  # type: ignore[arg-type]
+                submissions=submissions,
+                vvm=platform_vvm(),
+            )
+        except NotACustomer:
+            raise PermissionDenied(NOT_A_CUSTOMER) from None
+        except SubmissionsRefused as refused:
+            errors: list[dict[str, Any]] = [{} for _ in items]
+            for index, problem in refused.names.items():
+                errors[index] = error_body({"name": [problem]})
+            for index, syntax in refused.programs.items():
+                errors[index] = {**_refused_program(syntax), **errors[index]}
+            return _refused_items(errors)
+        for vv in vvs:
+            vv.tasks_done = vv.tasks_open = 0  # type: ignore[attr-defined]
+        return Response(self.get_serializer(vvs, many=True).data, status=status.HTTP_201_CREATED)
 
     @extend_schema(
         request=None,

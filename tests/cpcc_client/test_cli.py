@@ -158,3 +158,71 @@ def test_python_dash_m_runs_the_same_command() -> None:
         [sys.executable, "-m", "cpcc_client", "--help"], capture_output=True, text=True, check=False
     )
     assert done.returncode == 0 and "submit" in done.stdout and "CPCC_TOKEN" in done.stdout
+
+
+# --- several programs at once -------------------------------------------------------------------
+
+
+@pytest.fixture
+def requests_sent(monkeypatch) -> list[tuple[str, str]]:
+    """(method, path) of every API call the command makes."""
+    sent: list[tuple[str, str]] = []
+    call = cli.Client.call
+
+    def recording(self, method, path, **kwargs):
+        sent.append((method, path))
+        return call(self, method, path, **kwargs)
+
+    monkeypatch.setattr(cli.Client, "call", recording)
+    return sent
+
+
+def test_several_programs_go_in_one_request_and_print_their_ids_in_order(
+    cpcc, tmp_path, requests_sent, user_a
+) -> None:
+    files = []
+    for name in ("north", "south", "east"):
+        path = tmp_path / f"{name}.js"
+        path.write_text(f"VV.log('{name}');\n")
+        files.append(str(path))
+    code, out, err = cpcc("submit", *files)
+    assert code == 0, err
+    assert requests_sent == [("POST", "/api/v1/vvs/")]
+    ids = out.split()
+    assert [VirtualVehicle.objects.get(pk=vv_id).name for vv_id in ids] == [
+        "north",
+        "south",
+        "east",
+    ]
+    assert {vv.customer_id for vv in VirtualVehicle.objects.all()} == {user_a.customer_id}
+    code, _, err = cpcc("submit", *files, "--name", "one")
+    assert code == 2 and "--name names one VV" in err
+
+
+def test_several_programs_with_errors_are_each_named_and_none_is_submitted(cpcc, tmp_path) -> None:
+    fine, bad, worse = tmp_path / "fine.js", tmp_path / "bad.js", tmp_path / "worse.js"
+    fine.write_text("VV.log('fine');\n")
+    bad.write_text("var a = 1;\nvar b = ;\n")
+    worse.write_text("VV.log(;\n")
+    code, out, err = cpcc("submit", str(fine), str(bad), str(worse))
+    assert code == 2 and out == ""
+    assert err.splitlines() == [
+        f"{bad}:2:9: SyntaxError: Unexpected token ';'",
+        f"{worse}:1:8: SyntaxError: Unexpected token ';'",
+        "cpcc: nothing was submitted",
+    ]
+    assert not VirtualVehicle.objects.exists()
+
+
+def test_submit_wait_with_several_programs_waits_for_all_of_them(
+    cpcc, tmp_path, platform, fleet_one, monkeypatch
+) -> None:
+    monkeypatch.setattr(cli, "_sleep", lambda seconds: platform.drain())
+    good, failing = tmp_path / "good.js", tmp_path / "failing.js"
+    good.write_text("VV.log('fine');\n")
+    failing.write_text("null.boom;\n")
+    code, out, err = cpcc("submit", str(good), str(failing), "--wait")
+    assert code == 1
+    ids, statuses = out.splitlines()[:2], out.splitlines()[2:]
+    assert statuses == [f"{ids[0]} finished", f"{ids[1]} failed"]
+    assert err.startswith(f"{failing}: ") and "TypeError" in err

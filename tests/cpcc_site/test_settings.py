@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import json
+import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -46,3 +49,53 @@ def test_a_production_server_refuses_the_test_clients_host(tmp_path: Path) -> No
         [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True
     )
     assert out.stdout.split()[-1] == "401"  # answered: the API asks for credentials
+
+
+# Settings come from the environment through cpcc_site/env.py (read in settings.py) only. Not
+# settings: V8's time zone, which the runtime pins for the process.
+NOT_SETTINGS = {"cpcc_site/env.py", "vvm_worker/runtime/v8.py"}
+READS = re.compile(r"os\.environ\.get\(|os\.getenv\(|os\.environ\[[^\]]+\](?!\s*=[^=])")
+
+
+def test_no_module_reads_the_environment_but_the_settings() -> None:
+    readers = sorted(
+        str(path.relative_to(ROOT))
+        for package in ("accounts", "fleet", "missions", "vvm_worker", "cpcc_site")
+        for path in (ROOT / package).rglob("*.py")
+        if str(path.relative_to(ROOT)) not in NOT_SETTINGS and READS.search(path.read_text())
+    )
+    assert readers == []
+
+
+def test_the_isolate_pool_and_the_database_pool_follow_the_environment(tmp_path: Path) -> None:
+    code = (
+        "import json, os, django; django.setup(); from django.conf import settings; "
+        "from vvm_worker.runtime.pool import POOL; db = settings.DATABASES['default']; "
+        "print(json.dumps([POOL.size, db['ENGINE'], db['CONN_MAX_AGE'], "
+        "db['OPTIONS'].get('pool')]))"
+    )
+
+    def read(**env: str) -> list[object]:
+        out = subprocess.run(
+            [sys.executable, "-c", code],
+            cwd=ROOT,
+            env={**os.environ, "CPCC_VAR_DIR": str(tmp_path), **env},
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        return json.loads(out.stdout)
+
+    postgres = "postgres://cpcc@127.0.0.1:5432/cpcc"
+    size, engine, max_age, pool = read(
+        CPCC_ISOLATE_POOL="0", DATABASE_URL=postgres, CPCC_DB_POOL_SIZE="3"
+    )
+    assert (size, engine, max_age) == (0, "cpcc_site.postgresql", 0)
+    assert pool["max_size"] == 3 and pool["timeout"] == 5.0
+    size, engine, _, pool = read(DATABASE_URL=postgres, CPCC_DB_POOL_SIZE="0")
+    assert (size, engine, pool) == (2, "django.db.backends.postgresql", None)
+    # SQLite never pools.
+    _, engine, _, pool = read(
+        DATABASE_URL=f"sqlite:///{tmp_path}/db.sqlite3", CPCC_DB_POOL_SIZE="8"
+    )
+    assert (engine, pool) == ("django.db.backends.sqlite3", None)

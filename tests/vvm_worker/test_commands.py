@@ -244,8 +244,8 @@ def test_simulate_refuses_an_unknown_planner(tmp_path: Path) -> None:
 
 
 @pytest.mark.django_db
-def test_loadscenario_loads_fleet_customers_and_vvs_and_is_idempotent(monkeypatch, capsys) -> None:
-    monkeypatch.setenv("CPCC_SCENARIO_PASSWORD", "paper-pass-1")
+def test_loadscenario_loads_fleet_customers_and_vvs_and_is_idempotent(settings, capsys) -> None:
+    settings.CPCC_SCENARIO_PASSWORD = "paper-pass-1"
     path = str(SCENARIOS / "paper-fig3.json")
     call_command("loadscenario", path)
     call_command("loadscenario", path, "--no-vvs")
@@ -261,8 +261,8 @@ def test_loadscenario_loads_fleet_customers_and_vvs_and_is_idempotent(monkeypatc
 
 
 @pytest.mark.django_db
-def test_loadscenario_generates_and_prints_a_password(monkeypatch, capsys) -> None:
-    monkeypatch.delenv("CPCC_SCENARIO_PASSWORD", raising=False)
+def test_loadscenario_generates_and_prints_a_password(settings, capsys) -> None:
+    settings.CPCC_SCENARIO_PASSWORD = ""
     call_command("loadscenario", str(SCENARIOS / "paper-fig2.json"), "--no-vvs")
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if "login customer-b" in x)

@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 import pytest
+from django.conf import settings
 from django.core.management import call_command
 
 from fleet.models import Vehicle, VehicleStatus
@@ -24,7 +25,7 @@ FIELD = [[48.109, 12.859], [48.109, 12.868], [48.114, 12.868], [48.114, 12.859],
 
 
 def load(data_or_name: dict | str, tmp_path: Path, monkeypatch) -> None:
-    monkeypatch.setenv("CPCC_SCENARIO_PASSWORD", "pass-word-1")
+    monkeypatch.setattr(settings, "CPCC_SCENARIO_PASSWORD", "pass-word-1")
     if isinstance(data_or_name, str):
         call_command("loadscenario", str(SCENARIOS / data_or_name))
         return

@@ -159,7 +159,8 @@ def test_a_crash_between_a_tasks_answer_and_the_checkpoint_loses_and_repeats_not
 ) -> None:
     vv = vv_submit(customer=customer_a, name="VV", program=CALLBACKS, vvm=platform.vvm)
     task = run_until_task(platform, vv, q=1)
-    # The worker dies right after the answer is committed, while it replays the VV.
+    # The worker dies after the answer is written, while it resumes the VV: the answer and
+    # the step are one transaction (one unit of work), so neither is committed.
     original = Runtime.step
 
     def crash(self, step):
@@ -169,8 +170,10 @@ def test_a_crash_between_a_tasks_answer_and_the_checkpoint_loses_and_repeats_not
     with pytest.raises(Crash):
         task_complete(task_id=task.pk, readings=[{"sensor": "GPS", "value": 1}], vvm=platform.vvm)
     vv.refresh_from_db()
-    assert vv.journal_length == 2 and vv.pending is None  # the answer survived
-    assert vv.storage.get(key="calls").value == 1  # the callback's effects did not
+    task.refresh_from_db()
+    assert vv.journal_length == 1 and vv.pending is not None  # the answer went with the step
+    assert task.status == TaskStatus.OPEN and task.readings is None  # to be read again
+    assert vv.storage.get(key="calls").value == 1  # the callback's effects did not survive
     # The worker comes back: it resumes the VV from its checkpoint.
     monkeypatch.setattr(Runtime, "step", original)
     platform.vvm.runtime.forget(str(vv.pk))
@@ -189,18 +192,18 @@ def test_a_crash_after_the_effects_but_before_the_commit_applies_them_once(
 ) -> None:
     vv = vv_submit(customer=customer_a, name="VV", program=CALLBACKS, vvm=platform.vvm)
     task = run_until_task(platform, vv, q=1)
-    original = vv_services._create_tasks
+    original = vv_services._new_tasks
 
     def crash(*args, **kwargs):
         raise Crash("database connection lost")
 
-    monkeypatch.setattr(vv_services, "_create_tasks", crash)
+    monkeypatch.setattr(vv_services, "_new_tasks", crash)
     with pytest.raises(Crash):
         task_complete(task_id=task.pk, readings=[{"sensor": "GPS", "value": 1}], vvm=platform.vvm)
     vv.refresh_from_db()
     assert vv.storage.get(key="calls").value == 1  # rolled back with the step
     assert LogEntry.objects.filter(vv=vv).count() == 1
-    monkeypatch.setattr(vv_services, "_create_tasks", original)
+    monkeypatch.setattr(vv_services, "_new_tasks", original)
     vv_advance(vv_id=vv.pk, vvm=platform.vvm)
     platform.drain()
     vv.refresh_from_db()

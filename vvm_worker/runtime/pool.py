@@ -6,7 +6,6 @@ import asyncio
 import contextlib
 import json
 import logging
-import os
 import secrets
 from dataclasses import dataclass
 from pathlib import Path
@@ -110,4 +109,5 @@ class IsolatePool:
             self._filling = None
 
 
-POOL = IsolatePool(int(os.environ.get("CPCC_ISOLATE_POOL", "2")))
+# The process's pool; vvm_worker's app sets its size from the settings (CPCC_ISOLATE_POOL).
+POOL = IsolatePool(2)

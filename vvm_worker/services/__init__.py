@@ -19,8 +19,9 @@ this:
   resumes the VV on that RV.
 
 What a user does with their own VVs (the REST API and the web pages): ``vv_create_for_user``
-and ``vv_create_copies_for_user`` (N copies at once), ``vv_update_program_for_user`` (while it
-is queued), ``vv_restart_for_user`` (a new VV with the program of an ended one) and
+and ``vv_create_copies_for_user`` (N copies at once), ``vvs_submit_many_for_user`` (several
+programs at once, all or none: ``submissions``), ``vv_update_program_for_user`` (while it is
+queued), ``vv_restart_for_user`` (a new VV with the program of an ended one) and
 ``vv_cancel_for_user``.
 """
 
@@ -47,6 +48,7 @@ from vvm_worker.services.fleet import (
     vehicle_heartbeat,
     vehicle_reconfigured,
     vehicle_record_state,
+    vehicle_record_track,
     vehicle_register,
     vehicle_set_status,
     vehicle_update,
@@ -55,6 +57,12 @@ from vvm_worker.services.fleet import (
 )
 from vvm_worker.services.journal import JournalView
 from vvm_worker.services.routing import fleet_caps, vehicle_caps
+from vvm_worker.services.submissions import (
+    MAX_SUBMISSIONS,
+    Submission,
+    SubmissionsRefused,
+    vvs_submit_many_for_user,
+)
 from vvm_worker.services.vvs import (
     MAX_COPIES,
     MAX_STEPS_PER_ADVANCE,
@@ -79,6 +87,7 @@ from vvm_worker.services.vvs import (
 __all__ = [
     "MAX_COPIES",
     "MAX_STEPS_PER_ADVANCE",
+    "MAX_SUBMISSIONS",
     "REACH_FIELDS",
     "VVM",
     "CustomerBusy",
@@ -89,6 +98,8 @@ __all__ = [
     "LeasesUnsure",
     "NotACustomer",
     "ProgramRejected",
+    "Submission",
+    "SubmissionsRefused",
     "VVAlreadyEnded",
     "VVNotEnded",
     "VVNotQueued",
@@ -110,6 +121,7 @@ __all__ = [
     "vehicle_heartbeat",
     "vehicle_reconfigured",
     "vehicle_record_state",
+    "vehicle_record_track",
     "vehicle_register",
     "vehicle_set_status",
     "vehicle_update",
@@ -124,4 +136,5 @@ __all__ = [
     "vv_submit",
     "vv_update_program_for_user",
     "vvs_reroute_waiting",
+    "vvs_submit_many_for_user",
 ]

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import datetime as dt
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
-from typing import Any
+from typing import Any, Protocol
 
 from django.core.exceptions import ValidationError
 from django.db.models import Count, DateTimeField, ExpressionWrapper, OuterRef, Subquery
@@ -33,6 +33,46 @@ from vvm_worker.runtime import (
 logger = logging.getLogger("cpcc.vvm")
 
 
+@dataclass(frozen=True)
+class LocalRV:
+    """What the process that hosts an RV knows of it now, as its row would say once written:
+    its status, its last reported position, its open tasks in the order its planner last
+    meant to serve them."""
+
+    status: str
+    position: Position
+    route: tuple[Position, ...]
+
+
+@dataclass(frozen=True)
+class Settled:
+    """An RV whose host settled it: where it last said it is (None: where its row says)."""
+
+    position: Position | None
+
+
+class LocalFleet(Protocol):
+    """The RVs whose control loops run in this process, which the services ask and tell
+    directly instead of through the database and the dispatcher."""
+
+    def live(self, vehicle_id: int) -> LocalRV | None:
+        """The RV as it is now, if this process hosts it and knows all of it (else None:
+        read its row)."""
+        ...
+
+    def settle(self, vehicle_id: int, *, tasks_done: int = 0) -> Settled | None:
+        """Write what the RV reported and is still to be on the track of the VVs aboard it,
+        in the caller's transaction, which is about to change who is aboard; count
+        ``tasks_done`` more tasks served. None when this process does not settle this RV
+        (then the caller counts ``tasks_done`` itself)."""
+        ...
+
+    def assigned(self, vehicle_id: int, tasks: Sequence[Any]) -> bool:
+        """These tasks (saved by the end of the caller's transaction) were put on the RV's
+        list: True when this process hosts it and its loop was told (no vehicle_changed)."""
+        ...
+
+
 @dataclass
 class VVM:
     """What the services need from the process they run in: the clock, who to tell what to
@@ -54,6 +94,32 @@ class VVM:
     # The RVs whose hosts run in this process with this runtime (an rvworker of several RVs):
     # a VV that migrates between two of them keeps its warm context too.
     local_rvs: set[int] = dataclass_field(default_factory=set)
+    # Those RVs' loops, as the services see them (None: ask the database, tell the dispatcher).
+    local_fleet: LocalFleet | None = None
+
+    @property
+    def listened(self) -> bool:
+        """Whether anyone listens for changes (the map): nobody pays for events unheard."""
+        return not isinstance(self.announcer, Silent)
+
+    def announce(self, make: Callable[[], dict[str, Any] | Iterable[dict[str, Any]]]) -> None:
+        """Tell the listeners of a change: ``make`` builds the event (or events), and is
+        called only when someone listens."""
+        if not self.listened:
+            return
+        events = make()
+        for event in [events] if isinstance(events, dict) else events:
+            self.announcer.announce(event)
+
+    def settle_host(self, vehicle: Any) -> None:
+        """Before a VV boards or leaves this RV (a Vehicle row read in this transaction):
+        its reports that wait are written, and the row says where it is now."""
+        if self.local_fleet is None or vehicle is None:
+            return
+        settled = self.local_fleet.settle(vehicle.pk)
+        if settled is not None and settled.position is not None:
+            here = settled.position
+            vehicle.lat, vehicle.lng, vehicle.alt = here.lat, here.lng, here.alt
 
     def keeps_context(self, vehicle_id: int | None) -> bool:
         """Whether a VV moving to this RV (None: a ground station) keeps its warm context."""
@@ -118,4 +184,4 @@ def sensor_entries(names: Sequence[str], *, field: str) -> list[SensorType]:
 
 def announcing(vvm: VVM) -> bool:
     """Whether anyone listens for changes (the map), so that nobody pays for events unheard."""
-    return not isinstance(vvm.announcer, Silent)
+    return vvm.listened

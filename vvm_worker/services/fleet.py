@@ -4,12 +4,14 @@ service, their workers' leases and live state, and what each change means for th
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import time
 from collections.abc import Sequence
 from typing import Any, TypedDict
 
 from django.core.exceptions import ValidationError
-from django.db import transaction
+from django.db import connection, transaction
+from django.db.models import F
 from django.db.models.functions import Now
 
 from fleet.geo import Position
@@ -26,12 +28,12 @@ from missions.models import (
 from vvm_worker.services.base import VVM, logger, sensor_entries
 from vvm_worker.services.routing import (
     fleet_caps,
-    migrate_to_ground_station,
     online_vehicles,
-    record_migration,
-    release_tasks,
     request_of,
     vehicle_caps,
+    vv_migrate_to_ground_station,
+    vv_record_migration,
+    vv_release_tasks,
 )
 
 # Changing any of these may leave tasks planned on the RV that it can no longer serve.
@@ -134,8 +136,10 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
         vehicle = Vehicle.objects.prefetch_related("sensors").get(pk=vehicle.pk)
         if vehicle.status != VehicleStatus.ACTIVE:
             return
-        newcomer = vehicle_caps(vehicle)
         fleet = {c.id: c for c in fleet_caps(vvm)}
+        newcomer = vehicle_caps(vehicle)
+        if vehicle.pk in fleet:  # where it is now (its host may know better than its row)
+            newcomer = dataclasses.replace(newcomer, position=fleet[vehicle.pk].position)
         aboard_others = (
             VirtualVehicle.objects.select_for_update(of=("self",))
             .filter(status=VVStatus.RUNNING, host_rv__isnull=False, pending__isnull=False)
@@ -151,12 +155,14 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
                 continue
             if newcomer.cost_s(requests[0]) >= host.cost_s(requests[0]):
                 continue
-            release_tasks(vv, vvm)
-            record_migration(vv, to=vehicle, reason="a closer vehicle came into service", vvm=vvm)
+            vv_release_tasks(vv=vv, vvm=vvm)
+            vv_record_migration(
+                vv=vv, to=vehicle, reason="a closer vehicle came into service", vvm=vvm
+            )
             vv.status = VVStatus.MIGRATING
             vv.save(update_fields=["host_rv", "host_gs", "status", "updated"])
             vvm.dispatcher.vv_arrived(vv.pk)
-            newcomer = vehicle_caps(vehicle, newcomer.open_tasks + len(tasks))
+            newcomer = dataclasses.replace(newcomer, open_tasks=newcomer.open_tasks + len(tasks))
     vvm.dispatcher.vehicle_changed(vehicle.pk)
 
 
@@ -202,8 +208,8 @@ def vehicles_check_leases(*, vvm: VVM) -> list[str]:
                 .select_related("customer", "host_gs", "host_rv")
             )
             for vv in stranded:
-                migrate_to_ground_station(
-                    vv, reason="its vehicle's worker stopped reporting", vvm=vvm
+                vv_migrate_to_ground_station(
+                    vv=vv, reason="its vehicle's worker stopped reporting", vvm=vvm
                 )
                 vv.save()
             gone.append(vehicle.name)
@@ -320,12 +326,17 @@ def vehicle_record_state(
     flight_s: float,
     planner_state: Any,
     carrying: Sequence[str] = (),
+    track_aboard: bool = False,
+    tasks_done: int = 0,
 ) -> None:
     """What an RV's control loop reports of its vehicle at ``t_s``: where it is, its flight
     phase, its odometer and flight time, and the planner's state (kept for a restarted worker);
-    ``carrying`` names the VVs aboard whose track gets this point."""
+    ``carrying`` names the VVs aboard whose track gets this point, or ``track_aboard``: every
+    VV aboard now gets it (found by the database in the same statement); ``tasks_done``: the
+    RV served that many more tasks. Inside the caller's transaction when there is one."""
     # One commit for the track points and the row (a lone UPDATE commits by itself).
-    with transaction.atomic() if carrying else contextlib.nullcontext():
+    alone = (carrying or track_aboard) and connection.get_autocommit()
+    with transaction.atomic() if alone else contextlib.nullcontext():
         if carrying:
             TrackPoint.objects.bulk_create(
                 TrackPoint(
@@ -333,6 +344,8 @@ def vehicle_record_state(
                 )
                 for vv_id in carrying
             )
+        elif track_aboard:
+            _track_aboard(vehicle_id, t_s, position)
         Vehicle.objects.filter(pk=vehicle_id).update(
             lat=position.lat,
             lng=position.lng,
@@ -341,4 +354,37 @@ def vehicle_record_state(
             distance_m=distance_m,
             flight_s=flight_s,
             planner_state=planner_state,
+            **({"tasks_done": F("tasks_done") + tasks_done} if tasks_done else {}),
         )
+
+
+def _track_aboard(vehicle_id: int, t_s: float, position: Position) -> None:
+    """A track point at ``position`` for every VV aboard the RV."""
+    _track_points_aboard(vehicle_id, [(t_s, position)])
+
+
+def _track_points_aboard(vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:
+    """Track points (time, position) for every VV aboard the RV now: one INSERT ... SELECT."""
+    track, vvs = TrackPoint._meta.db_table, VirtualVehicle._meta.db_table
+    statuses = [str(status) for status in ACTIVE_STATUSES]
+    marks = ", ".join(["%s"] * len(statuses))
+    rows = " UNION ALL ".join(
+        ['SELECT %s AS "t_s", %s AS "lat", %s AS "lng", %s AS "alt"'] * len(points)
+    )
+    values = [v for t_s, p in points for v in (t_s, p.lat, p.lng, p.alt)]
+    with connection.cursor() as cursor:
+        cursor.execute(
+            f'INSERT INTO "{track}" ("vv_id", "t_s", "lat", "lng", "alt") '
+            f'SELECT v."id", p."t_s", p."lat", p."lng", p."alt" FROM "{vvs}" v, ({rows}) p '
+            f'WHERE v."host_rv_id" = %s AND v."status" IN ({marks}) '
+            'ORDER BY p."t_s", v."submitted_s", v."id"',
+            [*values, vehicle_id, *statuses],
+        )
+
+
+def vehicle_record_track(*, vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:
+    """Points (time, position) on the track of every VV aboard the RV now: the ends of the
+    legs it flew since it last wrote them, in order. Inside the caller's transaction, which is
+    about to change who is aboard."""
+    if points:
+        _track_points_aboard(vehicle_id, points)

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import threading
+from collections import OrderedDict
 from collections.abc import Sequence
 from typing import Any, overload
 
 from django.conf import settings
+from django.db import connection, transaction
 from django.db.models import QuerySet, TextField
 from django.db.models.functions import Cast
 
@@ -17,14 +20,46 @@ from missions.models import (
 )
 from vvm_worker.services.base import VVM
 
+# The last entry this process appended to each VV's journal, once committed (VV id -> (seq,
+# text)): the next step of the VV here needs it (its context checks it is the same) and
+# reads it from memory. Only committed entries: the journal is append-only, so what is here
+# is what the database holds.
+_RECENT_VVS = 20_000
+_recent: OrderedDict[str, tuple[int, str]] = OrderedDict()
+_recent_lock = threading.Lock()
+
+
+def _remember(vv_id: str, seq: int, text: str) -> None:
+    with _recent_lock:
+        _recent[vv_id] = (seq, text)
+        _recent.move_to_end(vv_id)
+        while len(_recent) > _RECENT_VVS:
+            _recent.popitem(last=False)
+
+
+def _stored_text(entry: dict[str, Any]) -> str | None:
+    """The entry's text exactly as the database gives it back, where that is known without
+    reading it: SQLite keeps the JSON text Django wrote (keys in the order they were made).
+    None for PostgreSQL, whose jsonb orders keys and numbers its own way: there, the text is
+    read back, so that a warm context and a replay see the same objects."""
+    if connection.vendor != "sqlite":
+        return None
+    return json.dumps(entry)
+
 
 class JournalView(Sequence[str]):
-    """A VV's journal as the runtime reads it, each entry as the JSON text the database holds:
-    a warm context asks only for the entries it does not have (and the last one it has, to
-    check it is the same), a new one for all."""
+    """A VV's journal as the runtime reads it, each entry as JSON text: a warm context asks
+    only for the entries it does not have (and the last one it has, to check it is the same),
+    a new one for all. Entries appended in this transaction, and the last one this process
+    appended before, come from memory; the others from the database."""
 
     def __init__(self, vv: VirtualVehicle) -> None:
         self.vv = vv
+        key = str(vv.pk)
+        with _recent_lock:
+            recent = _recent.get(key)
+        self._known: dict[int, str] = dict([recent]) if recent is not None else {}
+        self._known.update(vv.__dict__.get("_journal_fresh", {}))
 
     def __len__(self) -> int:
         return self.vv.journal_length
@@ -46,17 +81,26 @@ class JournalView(Sequence[str]):
         if isinstance(index, slice):
             start, stop, step = index.indices(len(self))
             assert step == 1
+            if all(seq in self._known for seq in range(start, stop)):
+                return [self._known[seq] for seq in range(start, stop)]
             return list(self._texts().filter(seq__gte=start, seq__lt=stop).order_by("seq"))
         if index < 0:
             index += len(self)
         if not 0 <= index < len(self):
             raise IndexError(index)
+        if index in self._known:
+            return self._known[index]
         return self._texts().get(seq=index)
 
 
 def journal_append(vv: VirtualVehicle, entry: dict[str, Any], vvm: VVM) -> None:
     """Add an answer to the VV's journal (the caller saves the VV in the same transaction)."""
-    JournalEntry.objects.create(vv=vv, seq=vv.journal_length, entry=entry)
+    seq = vv.journal_length
+    JournalEntry.objects.create(vv=vv, seq=seq, entry=entry)
+    text = _stored_text(entry)
+    if text is not None:
+        vv.__dict__.setdefault("_journal_fresh", {})[seq] = text
+        transaction.on_commit(lambda: _remember(str(vv.pk), seq, text))
     vv.journal_length += 1
     vv.journal_bytes += len(json.dumps(entry, separators=(",", ":")))
     if vv.journal_length == settings.CPCC_JOURNAL_WARN_ENTRIES:

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import itertools
+import time
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from django.db.models import Count, Max, QuerySet
+from django.db.models import BooleanField, Count, ExpressionWrapper, Max, Q, QuerySet
+from django.db.models.signals import m2m_changed, post_delete, post_save
 from shapely import STRtree
 from shapely.geometry import Point
 
@@ -30,7 +34,6 @@ from vvm_worker.runtime import (
 )
 from vvm_worker.services.base import (
     VVM,
-    announcing,
     db_time_ago,
     ground_station_for,
     logger,
@@ -71,6 +74,7 @@ class _FleetShape:
     sensors and speeds, a spatial index of the areas, and which areas overlap."""
 
     caps: dict[int, VehicleCaps]  # in name order; live fields are filled in per call
+    rows: dict[int, Vehicle]  # the rows the shape was made of (live fields as they were then)
     ids: tuple[int, ...]  # in the order of the index's geometries
     index: STRtree
     overlaps: dict[int, frozenset[int]]
@@ -84,10 +88,36 @@ class _FleetShape:
 
 
 _shapes_seen: dict[tuple[Any, ...], _FleetShape] = {}
+# A vehicle row changed in this process (saved, deleted, its sensors): the version is read
+# again at once. A change made by another process is seen within SHAPE_LOOK_S (the version
+# is read at most that often otherwise); the RV's own host hears of it by message anyway.
+SHAPE_LOOK_S = 1.0
+_shape_generation = itertools.count()
+_shape_seen_at: tuple[int, float, _FleetShape] | None = None  # (generation, monotonic, shape)
+_generation = 0
+
+
+def _vehicles_changed(**kwargs: Any) -> None:
+    global _generation
+    _generation = next(_shape_generation) + 1
+
+
+post_save.connect(_vehicles_changed, sender=Vehicle, dispatch_uid="cpcc-fleet-shape-save")
+post_delete.connect(_vehicles_changed, sender=Vehicle, dispatch_uid="cpcc-fleet-shape-delete")
+m2m_changed.connect(
+    _vehicles_changed, sender=Vehicle.sensors.through, dispatch_uid="cpcc-fleet-shape-sensors"
+)
 
 
 def _fleet_shape() -> _FleetShape:
-    """The fleet's shape, read again only when a vehicle row changed: one light query."""
+    """The fleet's shape, read again only when a vehicle row changed: one light query, at
+    most every SHAPE_LOOK_S unless this process changed a vehicle."""
+    global _shape_seen_at
+    seen = _shape_seen_at
+    now = time.monotonic()
+    if seen is not None and seen[0] == _generation and now - seen[1] < SHAPE_LOOK_S:
+        return seen[2]
+    generation = _generation
     version = Vehicle.objects.aggregate(count=Count("id"), changed=Max("updated"), top=Max("id"))
     key = (version["count"], version["changed"], version["top"])
     shape = _shapes_seen.get(key)
@@ -106,9 +136,10 @@ def _fleet_shape() -> _FleetShape:
             overlaps[a] = frozenset(
                 b for b in near if caps[a].area.intersection(caps[b].area).area > 0.0
             )
-        shape = _FleetShape(caps, ids, index, overlaps)
+        shape = _FleetShape(caps, {v.pk: v for v in vehicles}, ids, index, overlaps)
         _shapes_seen.clear()
         _shapes_seen[key] = shape
+    _shape_seen_at = (generation, now, shape)
     return shape
 
 
@@ -118,40 +149,64 @@ def fleet_caps(
     """The mapper's view of the fleet: every RV that is in service or in maintenance; one whose
     worker is gone counts as in maintenance (it may come back). With ``requests``, only the RVs
     whose areas hold one of them: no other could serve them (`map_task` decides the same)."""
+    return fleet_caps_and_rows(vvm, requests, shape)[0]
+
+
+def fleet_caps_and_rows(
+    vvm: VVM, requests: Sequence[TaskRequest] | None = None, shape: _FleetShape | None = None
+) -> tuple[list[VehicleCaps], dict[int, Vehicle]]:
+    """``fleet_caps`` and the rows of those RVs as read for it (by id): one read of the RVs,
+    one of their open tasks."""
     shape = shape or _fleet_shape()
     wanted = shape.covering(requests) if requests is not None else set(shape.ids)
     if not wanted:
-        return []
-    live = {
-        pk: (
-            status,
-            Position(lat, lng, alt or 0.0) if lat is not None and lng is not None else None,
-            state,
-        )
-        for pk, status, lat, lng, alt, state in Vehicle.objects.filter(pk__in=sorted(wanted))
-        .exclude(status=VehicleStatus.REMOVED)
-        .values_list("pk", "status", "lat", "lng", "alt", "planner_state")
-    }
-    routes, counts = planned_routes({pk: state for pk, (_, _, state) in live.items()})
-    online = None
-    if vvm.lease_s is not None:
-        online = set(online_vehicles(vvm).filter(pk__in=list(live)).values_list("pk", flat=True))
+        return [], {}
+    # The RVs this process hosts are asked, the others read.
+    local = vvm.local_fleet
+    known = {pk: live for pk in wanted if local and (live := local.live(pk)) is not None}
+    rows: dict[int, Vehicle] = {}
+    routes: dict[int, tuple[Position, ...]] = {}
+    online: dict[int, bool] = {}
+    for pk, live in known.items():
+        if live.status == VehicleStatus.REMOVED or pk not in shape.rows:
+            continue
+        row = copy.copy(shape.rows[pk])
+        row._state = copy.copy(row._state)
+        row.status = live.status
+        row.lat, row.lng, row.alt = live.position.lat, live.position.lng, live.position.alt
+        rows[pk], routes[pk], online[pk] = row, live.route, True  # its worker is this process
+    remote = sorted(wanted - set(known))
+    if remote:
+        vehicles = Vehicle.objects.filter(pk__in=remote).exclude(status=VehicleStatus.REMOVED)
+        if vvm.lease_s is not None:
+            # Whose worker renewed its lease within lease_s, by the database's clock.
+            vehicles = vehicles.annotate(
+                online=ExpressionWrapper(
+                    Q(worker_seen__gte=db_time_ago(vvm.lease_s)), output_field=BooleanField()
+                )
+            )
+        read = {v.pk: v for v in vehicles}
+        routes.update(planned_routes({pk: v.planner_state for pk, v in read.items()})[0])
+        for pk, vehicle in read.items():
+            rows[pk] = vehicle
+            online[pk] = vvm.lease_s is None or bool(getattr(vehicle, "online", False))
     caps = []
     for pk, static in shape.caps.items():
-        if pk not in live:
+        vehicle = rows.get(pk)
+        if vehicle is None:
             continue
-        status, position, _ = live[pk]
-        active = status == VehicleStatus.ACTIVE and (online is None or pk in online)
+        reported = vehicle.lat is not None and vehicle.lng is not None
+        route = routes.get(pk, ())
         caps.append(
             dataclasses.replace(
                 static,
-                active=active,
-                position=position or static.position,
-                open_tasks=counts.get(pk, 0),
-                route=routes.get(pk, ()),
+                active=vehicle.status == VehicleStatus.ACTIVE and online[pk],
+                position=vehicle.position if reported else static.position,
+                open_tasks=len(route),
+                route=route,
             )
         )
-    return caps
+    return caps, rows
 
 
 def planned_routes(
@@ -168,14 +223,19 @@ def planned_routes(
     tasks: dict[int, list[tuple[int, Position]]] = {}
     for pk, vehicle_id, lat, lng, alt in rows:
         tasks.setdefault(vehicle_id, []).append((pk, Position(lat, lng, alt)))
-    routes = {}
-    for vehicle_id, items in tasks.items():
-        state = plans[vehicle_id]
-        plan = state.get("route", []) if isinstance(state, dict) else []
-        rank = {task_id: k for k, task_id in enumerate(plan if isinstance(plan, list) else [])}
-        items.sort(key=lambda item: rank.get(item[0], len(rank)))
-        routes[vehicle_id] = tuple(position for _, position in items)
+    routes = {
+        vehicle_id: planned_order(items, plans[vehicle_id]) for vehicle_id, items in tasks.items()
+    }
     return routes, {vehicle_id: len(items) for vehicle_id, items in tasks.items()}
+
+
+def planned_order(items: Sequence[tuple[int, Position]], state: Any) -> tuple[Position, ...]:
+    """An RV's open tasks (id, position), oldest first, in the order of its planner's state
+    (tasks the plan does not know yet come last, oldest first)."""
+    plan = state.get("route", []) if isinstance(state, dict) else []
+    rank = {task_id: k for k, task_id in enumerate(plan if isinstance(plan, list) else [])}
+    ordered = sorted(items, key=lambda item: rank.get(item[0], len(rank)))
+    return tuple(position for _, position in ordered)
 
 
 def online_vehicles(vvm: VVM) -> QuerySet[Vehicle]:
@@ -185,11 +245,16 @@ def online_vehicles(vvm: VVM) -> QuerySet[Vehicle]:
     return Vehicle.objects.filter(worker_seen__gte=db_time_ago(vvm.lease_s))
 
 
-def route(vv: VirtualVehicle, vvm: VVM) -> bool:
-    """Find who serves the pending request. True when the VV must step again right here."""
+def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None = None) -> bool:
+    """Find who serves the pending request. True when the VV must step again right here.
+
+    ``open_tasks``: the request's open tasks as the caller has them, in index order (new
+    ones not saved yet: they are saved assigned, or rejected, by the caller); None: read them.
+    The caller saves the VV."""
     pending = pending_of(vv)
     assert pending is not None
-    open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
+    if open_tasks is None:
+        open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
     host = vv.host_rv
     mine: list[Task] = []
     shape = _fleet_shape()
@@ -200,36 +265,50 @@ def route(vv: VirtualVehicle, vvm: VVM) -> bool:
         caps = shape.caps.get(host.pk) or vehicle_caps(host)
         mine = [t for t in open_tasks if caps.can_serve(request_of(t))]
         if mine and not shape.overlaps.get(host.pk):
-            assign(mine, host, vvm)
+            tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
             return False
         if not mine and any(t.vehicle_id == host.pk for t in open_tasks):
             return False
-    fleet = fleet_caps(vvm, [request_of(t) for t in open_tasks], shape)
-    decisions = {t.pk: map_task(request_of(t), fleet) for t in open_tasks}
-    if host is not None and mine and _stays(host, mine, fleet, decisions):
-        assign(mine, host, vvm)
+    fleet, rows = fleet_caps_and_rows(vvm, [request_of(t) for t in open_tasks], shape)
+    decisions = [map_task(request_of(t), fleet) for t in open_tasks]
+    if host is not None and mine and _stays(host, open_tasks, mine, fleet, decisions):
+        tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
         return False
-    rejected = [(t, decisions[t.pk]) for t in open_tasks if decisions[t.pk].rejected]
+    rejected = [(t, d) for t, d in zip(open_tasks, decisions, strict=True) if d.rejected]
     # A batch is accepted or rejected as a whole, before any of its tasks is answered.
     if rejected and not _partly_answered(vv, pending):
         if vv.host_rv is not None:
-            migrate_to_ground_station(vv, reason="no vehicle can serve its task", vvm=vvm)
+            vv_migrate_to_ground_station(
+                vv=vv, reason="no vehicle can serve its task", vvm=vvm, open_tasks=open_tasks
+            )
             return False
-        reject(vv, pending, rejected, vvm)
+        vv_reject_request(vv=vv, pending=pending, rejected=rejected, open_tasks=open_tasks, vvm=vvm)
         return True
 
     best = _best_vehicle(open_tasks, decisions)
     if best is not None:
-        vehicle = Vehicle.objects.get(pk=best.id)
-        release_tasks(vv, vvm, open_tasks)
-        record_migration(vv, to=vehicle, reason="its next task", vvm=vvm)
+        vehicle = rows[best.id]
+        vv_release_tasks(vv=vv, vvm=vvm, open_tasks=open_tasks)
+        vv_record_migration(vv=vv, to=vehicle, reason="its next task", vvm=vvm)
+        if vvm.keeps_context(vehicle.pk):
+            # The RV's host runs in this process: the VV is there at once, its tasks on the
+            # RV's list (what the RV's host would do with it next, without a message).
+            vv.status = VVStatus.RUNNING
+            tasks_assign(tasks=_servable(best, open_tasks), vehicle=vehicle, vvm=vvm)
+            return False
         vv.status = VVStatus.MIGRATING
         vvm.dispatcher.vv_arrived(vv.id)
         return False
     # Only RVs in maintenance could serve it: park on a ground station until one returns.
     if vv.host_rv is not None:
-        migrate_to_ground_station(vv, reason="waiting for a vehicle", vvm=vvm)
+        vv_migrate_to_ground_station(
+            vv=vv, reason="waiting for a vehicle", vvm=vvm, open_tasks=open_tasks
+        )
     return False
+
+
+def _servable(caps: VehicleCaps, tasks: Sequence[Task]) -> list[Task]:
+    return [t for t in tasks if caps.can_serve(request_of(t))]
 
 
 # Another RV must be this much sooner (seconds of the mapper's cost) before a VV that its RV
@@ -238,11 +317,17 @@ HANDOVER_MARGIN_S = 5.0
 
 
 def _stays(
-    host: Vehicle, mine: Sequence[Task], fleet: Sequence[VehicleCaps], decisions: dict[int, Any]
+    host: Vehicle,
+    tasks: Sequence[Task],
+    mine: Sequence[Task],
+    fleet: Sequence[VehicleCaps],
+    decisions: Sequence[MapDecision],
 ) -> bool:
-    """Whether the VV's RV keeps the tasks it can serve: unless another RV that can serve as
-    many of them would serve them at a cost lower by HANDOVER_MARGIN_S (where areas overlap)."""
-    best = _best_vehicle(mine, decisions)
+    """Whether the VV's RV keeps the tasks it can serve (``mine`` of ``tasks``, whose mapper's
+    ``decisions`` are in the same order): unless another RV that can serve as many of them
+    would serve them at a cost lower by HANDOVER_MARGIN_S (where areas overlap)."""
+    kept = {id(t) for t in mine}
+    best = _best_vehicle(mine, [d for t, d in zip(tasks, decisions, strict=True) if id(t) in kept])
     if best is None or best.id == host.pk:
         return True
     own = next((c for c in fleet if c.id == host.pk), None)
@@ -266,13 +351,14 @@ def request_of(task: Task) -> TaskRequest:
     return TaskRequest(task.lat, task.lng, task.alt, task.tolerance_m, tuple(task.sensors))
 
 
-def _best_vehicle(tasks: Sequence[Task], decisions: dict[int, MapDecision]) -> VehicleCaps | None:
-    """The active RV serving most of the tasks; among equals the best ranked for the first."""
+def _best_vehicle(tasks: Sequence[Task], decisions: Sequence[MapDecision]) -> VehicleCaps | None:
+    """The active RV serving most of the tasks (``decisions``: the mapper's for each, in the
+    same order); among equals the best ranked for the first."""
     score: dict[int, int] = {}
     rank: dict[int, tuple[int, int]] = {}
     by_id: dict[int, VehicleCaps] = {}
-    for order, task in enumerate(tasks):
-        for position, caps in enumerate(decisions[task.pk].candidates):
+    for order, decision in enumerate(decisions):
+        for position, caps in enumerate(decision.candidates):
             score[caps.id] = score.get(caps.id, 0) + 1
             rank.setdefault(caps.id, (order, position))
             by_id[caps.id] = caps
@@ -282,16 +368,26 @@ def _best_vehicle(tasks: Sequence[Task], decisions: dict[int, MapDecision]) -> V
     return by_id[best]
 
 
-def assign(tasks: Iterable[Task], vehicle: Vehicle, vvm: VVM) -> None:
-    ids = [t.pk for t in tasks if t.vehicle_id != vehicle.pk]
-    if ids:
-        Task.objects.filter(pk__in=ids).update(vehicle=vehicle, assigned_s=vvm.clock.now_s())
+def tasks_assign(*, tasks: Iterable[Task], vehicle: Vehicle, vvm: VVM) -> None:
+    """Put these open tasks on the RV's list (a task not saved yet: its caller saves it so)."""
+    now = vvm.clock.now_s()
+    moved = [t for t in tasks if t.vehicle_id != vehicle.pk]
+    if not moved:
+        return
+    for task in moved:
+        task.vehicle, task.assigned_s = vehicle, now
+    saved = [t.pk for t in moved if t.pk is not None]
+    if saved:
+        Task.objects.filter(pk__in=saved).update(vehicle=vehicle, assigned_s=now)
+    if vvm.local_fleet is None or not vvm.local_fleet.assigned(vehicle.pk, moved):
         vvm.dispatcher.vehicle_changed(vehicle.pk)
 
 
-def release_tasks(vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None = None) -> None:
+def vv_release_tasks(
+    *, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None = None
+) -> None:
     """Take the VV's open tasks off the RVs they were planned on; ``open_tasks``: all of them,
-    as the caller has just read them (in the same transaction)."""
+    as the caller has them (in the same transaction)."""
     if open_tasks is None:
         held = vv.tasks.filter(status=TaskStatus.OPEN, vehicle__isnull=False)
         vehicles = set(held.values_list("vehicle_id", flat=True))
@@ -299,15 +395,25 @@ def release_tasks(vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | Non
     else:
         taken = [t for t in open_tasks if t.vehicle_id is not None]
         vehicles = {t.vehicle_id for t in taken}
-        if taken:
-            Task.objects.filter(pk__in=[t.pk for t in taken]).update(vehicle=None)
+        saved = [t.pk for t in taken if t.pk is not None]
+        if saved:
+            Task.objects.filter(pk__in=saved).update(vehicle=None)
+        for task in taken:
+            task.vehicle = None
     for vehicle_id in sorted(vehicles):
         vvm.dispatcher.vehicle_changed(vehicle_id)
 
 
-def reject(
-    vv: VirtualVehicle, pending: PendingRequest, rejected: list[tuple[Task, MapDecision]], vvm: VVM
+def vv_reject_request(
+    *,
+    vv: VirtualVehicle,
+    pending: PendingRequest,
+    rejected: list[tuple[Task, MapDecision]],
+    vvm: VVM,
+    open_tasks: Sequence[Task] | None = None,
 ) -> None:
+    """Answer the pending request with an error: no RV can serve (the first of) ``rejected``.
+    Every open task of the request ends rejected (``open_tasks``: as the caller has them)."""
     now = vvm.clock.now_s()
     task, decision = rejected[0]
     message = decision.reason or "no vehicle can serve the task"
@@ -316,19 +422,28 @@ def reject(
     journal_append(
         vv, answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message), vvm
     )
-    rejected_now = vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN)
-    if announcing(vvm):
-        for task in rejected_now:
-            task.status, task.done_s = TaskStatus.REJECTED, now
-            vvm.announcer.announce(task_event(task, vv.customer_id))
-    rejected_now.update(status=TaskStatus.REJECTED, message=message, done_s=now)
+    if open_tasks is None:
+        open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN))
+    for task in open_tasks:
+        task.status, task.message, task.done_s = TaskStatus.REJECTED, message, now
+    saved = [t.pk for t in open_tasks if t.pk is not None]
+    if saved:
+        Task.objects.filter(pk__in=saved).update(
+            status=TaskStatus.REJECTED, message=message, done_s=now
+        )
+        vvm.announce(lambda: [task_event(t, vv.customer_id) for t in open_tasks if t.pk])
     vv.pending = None
     logger.info("task rejected", extra={"vv": str(vv.id), "reason": message})
 
 
-def record_migration(
-    vv: VirtualVehicle, *, to: GroundStation | Vehicle, reason: str, vvm: VVM
+def vv_record_migration(
+    *, vv: VirtualVehicle, to: GroundStation | Vehicle, reason: str, vvm: VVM
 ) -> None:
+    """The VV moves to this host (the caller saves the VV): recorded for its track, the map
+    and the customer."""
+    vvm.settle_host(vv.host_rv)  # the track of those aboard either RV, as it was
+    if isinstance(to, Vehicle):
+        vvm.settle_host(to)
     source: GroundStation | Vehicle | None = vv.host_rv or vv.host_gs
     to_kind = HostKind.RV if isinstance(to, Vehicle) else HostKind.GS
     if source is not None:
@@ -347,8 +462,7 @@ def record_migration(
             to_lat=there.lat,
             to_lng=there.lng,
         )
-        if announcing(vvm):
-            vvm.announcer.announce(migration_event(migration, vv.customer_id))
+        vvm.announce(lambda: migration_event(migration, vv.customer_id))
     if isinstance(to, Vehicle):
         vv.host_rv, vv.host_gs = to, None
     else:
@@ -363,12 +477,15 @@ def record_migration(
     )
 
 
-def migrate_to_ground_station(vv: VirtualVehicle, *, reason: str, vvm: VVM) -> None:
+def vv_migrate_to_ground_station(
+    *, vv: VirtualVehicle, reason: str, vvm: VVM, open_tasks: Sequence[Task] | None = None
+) -> None:
+    """Move the VV off its RV to the nearest ground station (the caller saves the VV)."""
     near = vv.host_rv.position if vv.host_rv is not None else None
     gs = ground_station_for(vv, near=near)
     if gs is None:
         return
-    release_tasks(vv, vvm)
-    record_migration(vv, to=gs, reason=reason, vvm=vvm)
+    vv_release_tasks(vv=vv, vvm=vvm, open_tasks=open_tasks)
+    vv_record_migration(vv=vv, to=gs, reason=reason, vvm=vvm)
     vv.status = VVStatus.MIGRATING
     vvm.dispatcher.vv_arrived(vv.id)

@@ -5,7 +5,6 @@ does before it starts."""
 from __future__ import annotations
 
 import hashlib
-import os
 import secrets
 import uuid
 from collections.abc import Callable
@@ -36,8 +35,6 @@ from vvm_worker.scenario import (
 from vvm_worker.services.base import VVM
 from vvm_worker.services.fleet import vehicle_register, vehicle_set_status
 from vvm_worker.services.vvs import vv_submit
-
-PASSWORD_ENV = "CPCC_SCENARIO_PASSWORD"
 
 
 @dataclass
@@ -121,9 +118,8 @@ def _customer_upsert(spec: CustomerSpec) -> Customer:
     return customer
 
 
-def _login_for(customer: Customer) -> tuple[str, str | None]:
+def _login_for(customer: Customer, password: str | None) -> tuple[str, str | None]:
     username = customer.slug
-    password = os.environ.get(PASSWORD_ENV) or None
     user = User.objects.filter(username=username).first()
     if user is None:
         password = password or secrets.token_urlsafe(9)
@@ -138,10 +134,13 @@ def _login_for(customer: Customer) -> tuple[str, str | None]:
     return username, password
 
 
-def scenario_apply(*, scenario: Scenario, logins: bool = True) -> LoadedScenario:
+def scenario_apply(
+    *, scenario: Scenario, logins: bool = True, password: str | None = None
+) -> LoadedScenario:
     """Put the scenario's SDC additions, ground stations, RVs and customers (with a login user
     each, unless ``logins`` is False) into the database. Running it twice changes nothing the
-    second time.
+    second time. A customer's login gets ``password``; without one, a new login gets a
+    generated password and an existing one keeps its own (``logins`` says which).
 
     Raises ScenarioError for a vehicle sensor that is in neither the SDC nor the scenario,
     and for a VV's name with a control or bidirectional formatting character (which
@@ -173,7 +172,7 @@ def scenario_apply(*, scenario: Scenario, logins: bool = True) -> LoadedScenario
             customer = _customer_upsert(customer_spec)
             loaded.customers[customer_spec.name] = customer
             if logins:  # a password costs a third of a second to hash, on purpose
-                loaded.logins.append(_login_for(customer))
+                loaded.logins.append(_login_for(customer, password))
     return loaded
 
 

@@ -7,6 +7,7 @@ import datetime as dt
 import json
 import secrets
 import uuid
+from collections.abc import Sequence
 from typing import Any
 
 from django.core.exceptions import ValidationError
@@ -30,6 +31,7 @@ from missions.models import (
     vv_name_problem,
 )
 from missions.selectors import vv_get_for_user
+from vvm_worker.control import VehicleState
 from vvm_worker.runtime import (
     ErrorKind,
     Outcome,
@@ -47,15 +49,16 @@ from vvm_worker.runtime.v8 import V8Closed
 from vvm_worker.services.base import (
     VVM,
     ProgramRejected,
-    announcing,
     ground_station_for,
     logger,
     pending_json,
     pending_of,
 )
 from vvm_worker.services.customers import customer_limits
+from vvm_worker.services.fleet import vehicle_record_state
 from vvm_worker.services.journal import JournalView, journal_append, journal_full
-from vvm_worker.services.routing import record_migration, release_tasks, route
+from vvm_worker.services.prepared import PreparedRead
+from vvm_worker.services.routing import vv_record_migration, vv_release_tasks, vv_route
 
 
 class NotACustomer(PermissionError):
@@ -161,12 +164,48 @@ def vv_submit(
             submitted_s=now,
         )
     logger.info("vv submitted", extra={"vv": str(vv.id), "customer": customer.slug})
-    if announcing(vvm):
-        vvm.announcer.announce(vv_event(vv))
+    vvm.announce(lambda: vv_event(vv))
     if admit:
-        vv_admit_queued(customer_id=customer.pk, vvm=vvm)
-        vv.refresh_from_db()  # admission changed it through another instance
+        for admitted in _admit(customer.pk, vvm):  # (one is queued: this one)
+            if admitted.pk == vv.pk:  # as admission changed it
+                vv.status, vv.host_gs, vv.started_s = (
+                    admitted.status,
+                    admitted.host_gs,
+                    admitted.started_s,
+                )
+                vv.updated = admitted.updated
     return vv
+
+
+def vvs_queue(
+    *, customer: Customer, named_programs: Sequence[tuple[str, str]], vvm: VVM
+) -> list[VirtualVehicle]:
+    """Queue new VVs of the customer (a name and a checked program each) in the caller's
+    transaction, all at once: one check of the queue quota for all of them (VVQueueFull:
+    none is queued), one read of the customer's catalog, one insert. The caller asks for
+    their admission once it commits (``Dispatcher.customer_slot_freed``)."""
+    for name, _ in named_programs:
+        _check_name(name)
+    _check_queue(customer, adding=len(named_programs))
+    now = vvm.clock.now_s()
+    catalog = customer_catalog(customer=customer)
+    vvs = VirtualVehicle.objects.bulk_create(
+        VirtualVehicle(
+            id=uuid.uuid4(),
+            customer=customer,
+            name=name,
+            program=program,
+            seed=secrets.randbits(31),
+            start_ms=vvm.clock.epoch_ms(now),
+            catalog=catalog,
+            submitted_s=now,
+        )
+        for name, program in named_programs
+    )
+    for vv in vvs:
+        logger.info("vv submitted", extra={"vv": str(vv.id), "customer": customer.slug})
+    vvm.announce(lambda: [vv_event(vv) for vv in vvs])
+    return vvs
 
 
 def _check_name(name: str) -> None:
@@ -187,6 +226,12 @@ def _check_queue(customer: Customer, *, adding: int) -> None:
 
 def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
     """Start the customer's oldest queued VVs while it runs fewer than its quota allows."""
+    if not VirtualVehicle.objects.filter(customer_id=customer_id, status=VVStatus.QUEUED).exists():
+        return []  # nothing waits (a VV that is queued later asks again)
+    return _admit(customer_id, vvm)
+
+
+def _admit(customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
     with transaction.atomic():
         customer = Customer.objects.select_for_update().filter(pk=customer_id).first()
         if customer is None:  # a late message about a customer that was deleted
@@ -206,8 +251,7 @@ def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
             vv.host_gs = gs
             vv.started_s = vvm.clock.now_s()
             vv.save(update_fields=["status", "host_gs", "started_s", "updated"])
-            if announcing(vvm):
-                vvm.announcer.announce(vv_event(vv))
+            vvm.announce(lambda vv=vv: vv_event(vv))
             admitted.append(vv)
             vvm.dispatcher.vv_arrived(vv.id)
         return admitted
@@ -252,7 +296,6 @@ def _run_step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
     vv.last_step_s = result.replay_time(vv.last_step_s)
     if result.outcome is Outcome.SUSPENDED and result.pending is not None:
         vv.pending = pending_json(result.pending)
-        _create_tasks(vv, result.pending, vvm)
     return result
 
 
@@ -374,15 +417,28 @@ def _about(vv: VirtualVehicle) -> dict[str, str | None]:
     return {"vv": str(vv.id), "customer": vv.customer.slug, "vehicle": rv and rv.name}
 
 
-def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None:
-    # A batch's tasks exist from its first suspension on; a single task is new each time.
-    existing = (
-        set(vv.tasks.filter(q=pending.q).values_list("index", flat=True))
-        if pending.kind == "batch"
-        else set()
-    )
+def _new_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> list[Task] | None:
+    """The tasks of a new request, not saved yet (routing decides their RV first, then
+    ``_save_tasks`` saves them): a single task's; None for a batch, whose tasks exist from its
+    first suspension on (they are saved here, and routing reads the open ones)."""
     now = vvm.clock.now_s()
-    created = Task.objects.bulk_create(
+    if pending.kind != "batch":
+        (t,) = pending.tasks
+        return [
+            Task(
+                vv=vv,
+                q=pending.q,
+                index=0,
+                lat=t.lat,
+                lng=t.lng,
+                alt=t.alt,
+                tolerance_m=t.tolerance_m,
+                sensors=list(t.sensors),
+                requested_s=now,
+            )
+        ]
+    existing = set(vv.tasks.filter(q=pending.q).values_list("index", flat=True))
+    new = [
         Task(
             vv=vv,
             q=pending.q,
@@ -396,10 +452,17 @@ def _create_tasks(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> None
         )
         for i, t in enumerate(pending.tasks)
         if i in pending.open and i not in existing
-    )
-    if announcing(vvm):
-        for task in created:
-            vvm.announcer.announce(task_event(task, vv.customer_id))
+    ]
+    _save_tasks(vv, new, vvm)
+    return None
+
+
+def _save_tasks(vv: VirtualVehicle, tasks: list[Task] | None, vvm: VVM) -> None:
+    """Save the new ones of these tasks (as routing left them: on an RV's list, or rejected)."""
+    new = [t for t in tasks or () if t.pk is None]
+    if new:
+        created = Task.objects.bulk_create(new)
+        vvm.announce(lambda: [task_event(task, vv.customer_id) for task in created])
 
 
 def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
@@ -423,32 +486,86 @@ def _advance(vv_id: uuid.UUID, vvm: VVM) -> None:
         vv = _locked_vv(vv_id)
         if vv is None or vv.is_ended or vv.status == VVStatus.QUEUED:
             return
-        if vv.status == VVStatus.MIGRATING:
-            vv.status = VVStatus.RUNNING
-        for _ in range(MAX_STEPS_PER_ADVANCE):
-            if vv.pending is None:
-                result = _step(vv, vvm)
-                if result.outcome is not Outcome.SUSPENDED:
-                    _end(vv, result, vvm)
-                    break
-            if not route(vv, vvm):
+        _advance_locked(vv, vvm)
+
+
+# The columns of a VV row that advancing it may change: it writes those that did change.
+_ADVANCED_FIELDS = (
+    "status",
+    "host_gs_id",
+    "host_rv_id",
+    "pending",
+    "steps",
+    "last_step_s",
+    "effects_applied",
+    "storage_bytes",
+    "journal_length",
+    "journal_bytes",
+    "error",
+    "error_line",
+    "error_column",
+    "finished_s",
+    "finished",
+)
+
+
+def _row(vv: VirtualVehicle) -> tuple[Any, ...]:
+    return tuple(getattr(vv, name) for name in _ADVANCED_FIELDS)
+
+
+def _save_changed(vv: VirtualVehicle, before: tuple[Any, ...]) -> None:
+    """One UPDATE of the VV's row: the advanced columns that changed, and ``updated``."""
+    changed = [
+        name.removesuffix("_id")
+        for name, old, new in zip(_ADVANCED_FIELDS, before, _row(vv), strict=True)
+        if old != new
+    ]
+    vv.save(update_fields=[*changed, "updated"])
+
+
+def _advance_locked(vv: VirtualVehicle, vvm: VVM, *, before: tuple[Any, ...] | None = None) -> None:
+    """Step the VV (held in this transaction) and route its pending request, as often as it
+    needs, then write its row once. ``before``: the row as read, when the caller has changed
+    the VV since (an answer)."""
+    if before is None:
+        before = _row(vv)
+    if vv.status == VVStatus.MIGRATING:
+        vv.status = VVStatus.RUNNING
+    for _ in range(MAX_STEPS_PER_ADVANCE):
+        tasks = None
+        if vv.pending is None:
+            result = _step(vv, vvm)
+            if result.outcome is not Outcome.SUSPENDED:
+                _end(vv, result, vvm)
                 break
-        else:
-            # A program that keeps asking for tasks nobody can serve: let the host's other
-            # work go first, then carry on (the tasks-per-VV quota bounds it).
-            vvm.dispatcher.vv_arrived(vv.pk)
-        vv.save()
-        if announcing(vvm):
-            vvm.announcer.announce(vv_event(vv))
+            pending = pending_of(vv)
+            assert pending is not None
+            tasks = _new_tasks(vv, pending, vvm)
+        again = vv_route(vv=vv, vvm=vvm, open_tasks=tasks)
+        _save_tasks(vv, tasks, vvm)
+        if not again:
+            break
+    else:
+        # A program that keeps asking for tasks nobody can serve: let the host's other
+        # work go first, then carry on (the tasks-per-VV quota bounds it).
+        vvm.dispatcher.vv_arrived(vv.pk)
+    _save_changed(vv, before)
+    vvm.announce(lambda: vv_event(vv))
 
 
-def _locked_vv(vv_id: uuid.UUID) -> VirtualVehicle | None:
-    return (
+_LOCKED_VV = PreparedRead(
+    lambda vv_id: (
         VirtualVehicle.objects.select_for_update(of=("self",))
         .select_related("customer", "host_gs", "host_rv")
         .filter(pk=vv_id)
-        .first()
-    )
+    ),
+    sample=uuid.UUID(int=0),
+)
+
+
+def _locked_vv(vv_id: uuid.UUID) -> VirtualVehicle | None:
+    """The VV's row with its customer and hosts, held until the transaction ends."""
+    return _LOCKED_VV.first(vv_id)
 
 
 def _end_broken(*, vv_id: uuid.UUID, cause: Exception, vvm: VVM) -> None:
@@ -463,17 +580,17 @@ def _end_broken(*, vv_id: uuid.UUID, cause: Exception, vvm: VVM) -> None:
         message = f"the platform could not run or apply this VV's step ({type(cause).__name__})"
         _end(vv, StepResult(Outcome.FAILED, error=VVError(ErrorKind.PLATFORM, message)), vvm)
         vv.save()
-        if announcing(vvm):
-            vvm.announcer.announce(vv_event(vv))
+        vvm.announce(lambda: vv_event(vv))
 
 
 def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
     now = vvm.clock.now_s()
+    vvm.settle_host(vv.host_rv)  # it leaves those aboard
     if vv.host_rv is not None:
         gs = ground_station_for(vv, near=vv.host_rv.position)
         reason = "finished" if result.outcome is Outcome.FINISHED else str(result.outcome)
         if gs is not None:
-            record_migration(vv, to=gs, reason=reason, vvm=vvm)
+            vv_record_migration(vv=vv, to=gs, reason=reason, vvm=vvm)
     vv.status = {
         Outcome.FINISHED: VVStatus.FINISHED,
         Outcome.FAILED: VVStatus.FAILED,
@@ -486,7 +603,6 @@ def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
         vv.error_column = result.error.column
     vv.finished_s = now
     vv.finished = dt.datetime.fromtimestamp(vvm.clock.epoch_ms(now) / 1000, tz=dt.UTC)
-    release_tasks(vv, vvm)
     _cancel_open_tasks(vv, vvm)
     logger.info(
         "vv ended",
@@ -496,12 +612,15 @@ def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
 
 
 def _cancel_open_tasks(vv: VirtualVehicle, vvm: VVM) -> None:
-    open_tasks = vv.tasks.filter(status=TaskStatus.OPEN)
-    if announcing(vvm):
-        for task in open_tasks:
-            task.status = TaskStatus.CANCELLED
-            vvm.announcer.announce(task_event(task, vv.customer_id))
-    open_tasks.update(status=TaskStatus.CANCELLED)
+    """Cancel the VV's open tasks and take them off the RVs they were planned on."""
+    open_tasks = list(vv.tasks.filter(status=TaskStatus.OPEN))
+    if not open_tasks:
+        return
+    vv_release_tasks(vv=vv, vvm=vvm, open_tasks=open_tasks)
+    vv.tasks.filter(pk__in=[t.pk for t in open_tasks]).update(status=TaskStatus.CANCELLED)
+    for task in open_tasks:
+        task.status = TaskStatus.CANCELLED
+    vvm.announce(lambda: [task_event(task, vv.customer_id) for task in open_tasks])
 
 
 # --- task completion (the task executor's answer) -------------------------------------------
@@ -514,46 +633,109 @@ def task_complete(
     vvm: VVM,
     vehicle_id: int | None = None,
     vv_id: uuid.UUID | None = None,
+    arrival: VehicleState | None = None,
 ) -> bool:
-    """Record an RV's readings as the answer to a task and resume the VV on that RV.
+    """Record an RV's readings as the answer to a task and resume the VV on that RV: one unit
+    of work (one transaction) with the VV's step and the routing of its next request, and
+    with ``arrival``, the RV's report of where it stopped to serve it (``vehicle_id``'s state,
+    on the track of the VVs aboard), which is recorded only if the answer is.
 
     Returns False (and changes nothing) when the task is no longer open or no longer this
     vehicle's (``vehicle_id``): a duplicate delivery, or a VV that was cancelled or moved on
     meanwhile, e.g. because this RV's worker was taken for gone. A reading is never taken
-    twice.
+    twice. A step the platform cannot run or apply ends the VV ``failed`` (False: its task is
+    cancelled with it).
     """
-    with transaction.atomic():
-        # Lock the VV before its task, in the same order as vv_advance, so two workers
-        # cannot deadlock.
-        if vv_id is None:
-            vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
-        vv = VirtualVehicle.objects.select_for_update().defer("program", "catalog").get(pk=vv_id)
-        task = Task.objects.select_for_update().get(pk=task_id)
-        pending = pending_of(vv)
-        if task.status != TaskStatus.OPEN or pending is None or pending.q != task.q:
+    if vv_id is None:
+        vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
+    try:
+        with transaction.atomic():
+            return _answer_and_advance(task_id, readings, vvm, vehicle_id, vv_id, arrival)
+    except _StepBroke as broke:
+        # Retried, the step would break again and again. The transaction is rolled back, so
+        # nothing of the step is half-applied: the answer is recorded again on its own, and
+        # the VV ends, in a transaction of its own.
+        with transaction.atomic():
+            answered = _answer_and_advance(
+                task_id, readings, vvm, vehicle_id, vv_id, arrival, advance=False
+            )
+        _end_broken(vv_id=vv_id, cause=broke.cause, vvm=vvm)
+        return answered
+
+
+def _answer_and_advance(
+    task_id: int,
+    readings: list[dict[str, Any]],
+    vvm: VVM,
+    vehicle_id: int | None,
+    vv_id: uuid.UUID,
+    arrival: VehicleState | None,
+    *,
+    advance: bool = True,
+) -> bool:
+    # The VV first (held until the end of the transaction), then its task: the order every
+    # service takes them in, so two workers cannot deadlock.
+    vv = _locked_vv(vv_id)
+    if vv is None or vv.is_ended or vv.status == VVStatus.QUEUED:
+        return False
+    pending = pending_of(vv)
+    if pending is None or (vehicle_id is not None and vv.host_rv_id != vehicle_id):
+        return False
+    # The task is answered only while it is open, of this request, and (``vehicle_id``) on
+    # this RV's list: the update says whether it was.
+    fenced = Task.objects.filter(pk=task_id, vv_id=vv.pk, q=pending.q, status=TaskStatus.OPEN)
+    if vehicle_id is not None:
+        fenced = fenced.filter(vehicle_id=vehicle_id)
+    index, served_by = 0, vehicle_id
+    if pending.kind == "batch" or vehicle_id is None:
+        row = fenced.values_list("index", "vehicle_id").first()
+        if row is None:
             return False
-        if vehicle_id is not None and (
-            task.vehicle_id != vehicle_id or vv.host_rv_id != vehicle_id
-        ):
-            return False
-        now = vvm.clock.now_s()
-        time_ms = vvm.clock.epoch_ms(now)
-        if pending.kind == "batch":
-            entry = answer_part(pending, index=task.index, time_ms=time_ms, data=readings)
-        else:
-            entry = answer_task(pending, time_ms=time_ms, data=readings)
-        task.status = TaskStatus.DONE
-        task.done_s = now
-        task.readings = readings
-        task.save(update_fields=["status", "done_s", "readings"])
-        if announcing(vvm):
-            vvm.announcer.announce(task_event(task, vv.customer_id))
-        if task.vehicle_id is not None:
-            Vehicle.objects.filter(pk=task.vehicle_id).update(tasks_done=F("tasks_done") + 1)
-        journal_append(vv, entry, vvm)
-        vv.pending = None
-        vv.save(update_fields=["journal_length", "journal_bytes", "pending", "updated"])
-    vv_advance(vv_id=vv.pk, vvm=vvm)
+        index, served_by = row
+    now = vvm.clock.now_s()
+    if not fenced.update(status=TaskStatus.DONE, done_s=now, readings=readings):
+        return False
+    before = _row(vv)
+    time_ms = vvm.clock.epoch_ms(now)
+    if pending.kind == "batch":
+        entry = answer_part(pending, index=index, time_ms=time_ms, data=readings)
+    else:
+        entry = answer_task(pending, time_ms=time_ms, data=readings)
+    vvm.announce(lambda: task_event(Task.objects.get(pk=task_id), vv.customer_id))
+    settled = (
+        vvm.local_fleet.settle(vehicle_id, tasks_done=1)
+        if vvm.local_fleet is not None and vehicle_id is not None
+        else None
+    )
+    if settled is not None:  # its reports (its arrival here) and the task it served
+        host = vv.host_rv
+        if host is not None and settled.position is not None:
+            here = settled.position
+            host.lat, host.lng, host.alt = here.lat, here.lng, here.alt
+    elif arrival is not None and vehicle_id is not None:
+        vehicle_record_state(
+            vehicle_id=vehicle_id,
+            t_s=arrival.t_s,
+            position=arrival.position,
+            phase=arrival.phase,
+            distance_m=arrival.distance_m,
+            flight_s=arrival.flight_s,
+            planner_state=arrival.planner_state,
+            track_aboard=True,
+            tasks_done=1,
+        )
+        host = vv.host_rv
+        if host is not None:  # as read before the report: where the VV leaves from
+            here = arrival.position
+            host.lat, host.lng, host.alt = here.lat, here.lng, here.alt
+    elif served_by is not None:
+        Vehicle.objects.filter(pk=served_by).update(tasks_done=F("tasks_done") + 1)
+    journal_append(vv, entry, vvm)
+    vv.pending = None
+    if advance:
+        _advance_locked(vv, vvm, before=before)
+    else:
+        _save_changed(vv, before)
     return True
 
 
@@ -572,12 +754,12 @@ def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
         if vv.is_ended:
             return False
         now = vvm.clock.now_s()
-        release_tasks(vv, vvm)
+        vvm.settle_host(vv.host_rv)  # it leaves those aboard
         _cancel_open_tasks(vv, vvm)
         if vv.host_rv is not None:
             gs = ground_station_for(vv, near=vv.host_rv.position)
             if gs is not None:
-                record_migration(vv, to=gs, reason="cancelled", vvm=vvm)
+                vv_record_migration(vv=vv, to=gs, reason="cancelled", vvm=vvm)
         was_queued = vv.status == VVStatus.QUEUED
         vv.status = VVStatus.CANCELLED
         vv.pending = None
@@ -585,8 +767,7 @@ def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
         vv.finished_s = now
         vv.finished = dt.datetime.fromtimestamp(vvm.clock.epoch_ms(now) / 1000, tz=dt.UTC)
         vv.save()
-        if announcing(vvm):
-            vvm.announcer.announce(vv_event(vv))
+        vvm.announce(lambda: vv_event(vv))
         vvm.runtime.forget(str(vv.pk))
         if not was_queued:
             vvm.dispatcher.customer_slot_freed(vv.customer_id)
@@ -613,18 +794,11 @@ def _submit_copies(
     if problem is not None:
         raise ProgramRejected(problem)
     with transaction.atomic():
-        _check_queue(customer, adding=copies)  # all of them or none (vv_submit checks each)
-        vvs = [
-            vv_submit(
-                customer=customer,
-                name=copy_name,
-                program=program,
-                vvm=vvm,
-                refuse_syntax_errors=False,  # checked above, once for all copies
-                admit=False,
-            )
-            for copy_name in copy_names(name=name, copies=copies)
-        ]
+        vvs = vvs_queue(  # all of them or none
+            customer=customer,
+            named_programs=[(n, program) for n in copy_names(name=name, copies=copies)],
+            vvm=vvm,
+        )
         vvm.dispatcher.customer_slot_freed(customer.pk)
     return vvs
 
@@ -716,8 +890,7 @@ def vv_update_program_for_user(
         locked.name = name
         locked.program = program
         locked.save(update_fields=["name", "program", "updated"])
-        if announcing(vvm):
-            vvm.announcer.announce(vv_event(locked))
+        vvm.announce(lambda: vv_event(locked))
     logger.info("vv program changed", extra={"vv": str(vv.pk), "user": user.username})
     return vv_get_for_user(user=user, vv_id=vv.pk)
 

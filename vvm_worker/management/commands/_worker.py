@@ -1,8 +1,10 @@
-"""What the gsworker and rvworker commands share: the broker, and running Celery."""
+"""What the gsworker and rvworker commands share: the broker, the hosts by name, and running
+Celery."""
 
 from __future__ import annotations
 
 import signal
+from collections.abc import Sequence
 from types import FrameType
 from typing import Any
 
@@ -44,11 +46,23 @@ def run_celery(*, queues: list[str], node: str, loglevel: str) -> None:
 
 def host_named(model: type[Model], name: str, what: str) -> Any:
     """The ground station or vehicle of that name; CommandError listing the names there are."""
-    try:
-        return model._default_manager.get(name=name)
-    except model.DoesNotExist:  # type: ignore[attr-defined]
-        known = ", ".join(model._default_manager.values_list("name", flat=True)) or "none"
-        raise CommandError(f"no {what} named {name!r} ({what}s: {known})") from None
+    return hosts_named(model, [name], what)[0]
+
+
+def hosts_named(model: type[Model], names: Sequence[str], what: str) -> list[Any]:
+    """The ground stations or vehicles of these names, in their order; a CommandError names
+    every unknown one (and one named twice) and lists the names there are."""
+    twice = sorted({name for name in names if names.count(name) > 1})
+    if twice:
+        raise CommandError(f"{what} named more than once: {', '.join(map(repr, twice))}")
+    found = {row.name: row for row in model._default_manager.filter(name__in=names)}
+    unknown = [name for name in names if name not in found]
+    if unknown:
+        known = ", ".join(model._default_manager.order_by("name").values_list("name", flat=True))
+        missing = ", ".join(map(repr, unknown))
+        plural = "s" if len(unknown) > 1 else ""
+        raise CommandError(f"no {what}{plural} named {missing} ({what}s: {known or 'none'})")
+    return [found[name] for name in names]
 
 
 def serve(
@@ -57,18 +71,19 @@ def serve(
     """Run a host's worker: take up its work, then serve its queues until told to stop.
 
     SIGTERM or SIGINT stops it with exit status 0 at any time: before Celery runs (while the
-    host takes up its work) the signal ends the command at once; then Celery's warm shutdown
-    lets the task in progress finish. Either way the host stops before the process ends, and
-    V8 is shut down last (vvm_worker.runtime.v8, at exit).
+    host takes up its work) the signal ends the command at once, once the piece of work in
+    progress on the host thread is done; then Celery's warm shutdown lets the task in progress
+    finish. Either way the host stops before the process ends, and V8 is shut down last
+    (vvm_worker.runtime.v8, at exit).
     """
     ensure_broker()
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, _stop_now)
     set_host(host)
-    host.start()
-    command.stdout.write(f"{command_name(host)} {host.name}: queues {', '.join(queues)}")
-    command.stdout.flush()
     try:
+        host.start()
+        command.stdout.write(f"{command_name(host)} {host.name}: queues {', '.join(queues)}")
+        command.stdout.flush()
         run_celery(queues=queues, node=node, loglevel=loglevel)
     finally:
         host.stop()

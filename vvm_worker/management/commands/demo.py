@@ -1,9 +1,12 @@
 """``manage.py demo``: the whole local system in the foreground, stopped cleanly by Ctrl-C.
 
 Starts the embedded Redis (unless REDIS_URL is set), loads the scenario, and runs the web
-server (daphne, ASGI), one ground-station worker per GS and one worker per RV as processes of
-their own, exactly as they would run on separate machines. Fleet events of the scenario are
-applied at their (accelerated) time. Everything keeps running after the scenario ends.
+server (daphne, ASGI), one ground-station worker per GS and one RV worker hosting all the
+scenario's RVs, as processes of their own, exactly as they would run on separate machines (a
+server of simulated vehicles; with ``--mavlink``, each with its simulated autopilot, a
+``mavsim`` process of its own). Fleet events of the scenario are applied at their
+(accelerated) time; a vehicle added by one gets an RV worker of its own. Everything keeps
+running after the scenario ends.
 """
 
 from __future__ import annotations
@@ -31,7 +34,6 @@ from vvm_worker.platform import platform_vvm
 from vvm_worker.scenario import FleetEvent, Scenario, ScenarioError, load_scenario
 from vvm_worker.services import user_set_login, vehicle_update
 from vvm_worker.services.scenarios import (
-    PASSWORD_ENV,
     demo_reset,
     scenario_apply,
     scenario_event_apply,
@@ -125,7 +127,7 @@ def _wait_for_port(host: str, port: int, processes: Processes) -> None:
 
 
 class Command(BaseCommand):
-    help = "Run the whole local system (web, Redis, a worker per GS and RV) until Ctrl-C."
+    help = "Run the whole local system (web, Redis, a worker per GS, one for the RVs) until Ctrl-C."
 
     def add_arguments(self, parser: CommandParser) -> None:
         parser.add_argument("--scenario", default=str(DEFAULT_SCENARIO), help="scenario file")
@@ -161,16 +163,17 @@ class Command(BaseCommand):
         redis = EmbeddedRedis(settings.EMBEDDED_REDIS_SOCKET) if not settings.REDIS_URL else None
         redis_url = settings.REDIS_URL or f"unix://{settings.EMBEDDED_REDIS_SOCKET}"
         env = {**os.environ, "REDIS_URL": redis_url, "CPCC_SIM_SPEED": str(speed)}
-        env.setdefault(PASSWORD_ENV, _demo_password("customer"))
         processes = Processes(env)
         try:
             if redis is not None:
                 redis.start()
-            os.environ[PASSWORD_ENV] = env[PASSWORD_ENV]
-            admin_password = os.environ.get("CPCC_ADMIN_PASSWORD") or _demo_password("admin")
+            admin_password = settings.CPCC_ADMIN_PASSWORD or _demo_password("admin")
             user_set_login(username="admin", password=admin_password, staff=True)
             demo_reset(reason="cancelled: demo restarted")
-            loaded = scenario_apply(scenario=scenario)
+            loaded = scenario_apply(
+                scenario=scenario,
+                password=settings.CPCC_SCENARIO_PASSWORD or _demo_password("customer"),
+            )
             manage = str(Path(settings.BASE_DIR) / "manage.py")
             processes.start(
                 "web",
@@ -185,8 +188,7 @@ class Command(BaseCommand):
             _wait_for_port(options["host"], options["port"], processes)
             for name in loaded.ground_stations:
                 processes.start(f"gsworker {name}", manage, "gsworker", name)
-            for vehicle in loaded.vehicles.values():
-                self._start_vehicle(vehicle, processes, manage)
+            rv_workers = self._start_vehicles(list(loaded.vehicles.values()), processes, manage)
             vvs = scenario_submit_all(scenario=scenario, loaded=loaded, vvm=platform_vvm())
             url = f"http://{options['host']}:{options['port']}/"
             self.stdout.write(self.style.SUCCESS(f"CPCC is running at {url}"))
@@ -195,7 +197,8 @@ class Command(BaseCommand):
                 self.stdout.write(f"  customer: {username} / {password or '(unchanged)'}")
             self.stdout.write(
                 f"Running {scenario.name!r} at speed {speed:g} with {len(loaded.ground_stations)} "
-                f"ground-station and {len(loaded.vehicles)} vehicle worker(s). Ctrl-C stops everything."
+                f"ground-station and {len(loaded.vehicles)} vehicle worker(s), the vehicles' in "
+                f"{rv_workers} process(es). Ctrl-C stops everything."
             )
             self._follow(scenario, [vv.pk for vv in vvs], speed, processes, manage)
             self.stdout.write(
@@ -238,25 +241,32 @@ class Command(BaseCommand):
                 return
             time.sleep(0.25)
 
-    def _start_vehicle(self, vehicle: Vehicle, processes: Processes, manage: str) -> None:
-        """Start an RV's worker; with --mavlink, first its simulated copter, which the worker
-        reaches over a loopback UDP port."""
-        if self.mavlink:
-            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-                probe.bind(("127.0.0.1", 0))
-                port = probe.getsockname()[1]
-            vehicle = vehicle_update(
-                vehicle=vehicle,
-                config={"driver": Driver.MAVLINK, "driver_url": f"udpout:127.0.0.1:{port}"},
-                sensors=None,
-                vvm=platform_vvm(),
-            )
-            processes.start(f"mavsim {vehicle.name}", manage, "mavsim", vehicle.name)
-        processes.start(f"rvworker {vehicle.name}", manage, "rvworker", vehicle.name)
+    def _start_vehicles(self, vehicles: list[Vehicle], processes: Processes, manage: str) -> int:
+        """Start one RV worker for these vehicles; with --mavlink, first each one's simulated
+        copter, which the worker reaches over a loopback UDP port. Returns how many worker
+        processes it started (none for no vehicles)."""
+        if not vehicles:
+            return 0
+        names = []
+        for vehicle in vehicles:
+            if self.mavlink:
+                with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                    probe.bind(("127.0.0.1", 0))
+                    port = probe.getsockname()[1]
+                vehicle = vehicle_update(
+                    vehicle=vehicle,
+                    config={"driver": Driver.MAVLINK, "driver_url": f"udpout:127.0.0.1:{port}"},
+                    sensors=None,
+                    vvm=platform_vvm(),
+                )
+                processes.start(f"mavsim {vehicle.name}", manage, "mavsim", vehicle.name)
+            names.append(vehicle.name)
+        processes.start(f"rvworker {', '.join(names)}", manage, "rvworker", *names)
+        return 1
 
     def _apply(self, event: FleetEvent, processes: Processes, manage: str) -> None:
         def start_worker(vehicle: Vehicle) -> None:
-            self._start_vehicle(vehicle, processes, manage)
+            self._start_vehicles([vehicle], processes, manage)
 
         vehicle = scenario_event_apply(event=event, vvm=platform_vvm(), on_added=start_worker)
         self.stdout.write(f"  event: {vehicle.name} {event.action}")

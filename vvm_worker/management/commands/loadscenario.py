@@ -4,17 +4,18 @@ from __future__ import annotations
 
 from typing import Any
 
+from django.conf import settings
 from django.core.management.base import BaseCommand, CommandError, CommandParser
 
 from vvm_worker.platform import platform_vvm
 from vvm_worker.scenario import ScenarioError, load_scenario
-from vvm_worker.services.scenarios import PASSWORD_ENV, scenario_apply, scenario_submit_all
+from vvm_worker.services.scenarios import scenario_apply, scenario_submit_all
 
 
 class Command(BaseCommand):
     help = (
         "Put a scenario's SDC additions, ground stations, vehicles and customers (with a login "
-        f"user each; password from {PASSWORD_ENV} or generated) into the configured database "
+        "user each; password from CPCC_SCENARIO_PASSWORD or generated) into the configured database "
         "(idempotent) and submit its VVs."
     )
 
@@ -27,7 +28,9 @@ class Command(BaseCommand):
     def handle(self, *args: Any, **options: Any) -> None:
         try:
             scenario = load_scenario(options["scenario"])
-            loaded = scenario_apply(scenario=scenario)
+            loaded = scenario_apply(
+                scenario=scenario, password=settings.CPCC_SCENARIO_PASSWORD or None
+            )
         except ScenarioError as exc:
             raise CommandError(f"scenario error: {exc}") from None
         self.stdout.write(

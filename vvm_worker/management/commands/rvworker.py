@@ -1,4 +1,5 @@
-"""``manage.py rvworker NAME``: the worker of one real vehicle (its queue and control loop)."""
+"""``manage.py rvworker NAME [NAME ...]``: the worker of one or more real vehicles in one
+process (their Celery queues and control loops, one host thread and one V8 runtime)."""
 
 from __future__ import annotations
 
@@ -7,33 +8,41 @@ from typing import Any
 from django.conf import settings
 from django.core.management.base import BaseCommand, CommandError, CommandParser
 
-from fleet.mavlink.errors import MavlinkError
 from fleet.models import Vehicle
 from vvm_worker.dispatch import rv_queue
-from vvm_worker.hosts import RVHost
-from vvm_worker.management.commands._worker import host_named, serve
+from vvm_worker.hosts import CannotFly, RVHost
+from vvm_worker.management.commands._worker import hosts_named, serve
 from vvm_worker.planning import DEFAULT_PLANNER, PLANNER_NAMES
 
 
 class Command(BaseCommand):
-    help = "Run the worker of one real vehicle: its Celery queue and its control loop."
+    help = (
+        "Run the worker of one or more real vehicles in one process: their Celery queues "
+        "and control loops."
+    )
 
     def add_arguments(self, parser: CommandParser) -> None:
-        parser.add_argument("name", help="the vehicle's name")
+        parser.add_argument(
+            "names",
+            nargs="+",
+            metavar="NAME",
+            help="the vehicles' names (one on a vehicle's own computer, several on a server)",
+        )
         parser.add_argument("--planner", choices=PLANNER_NAMES, default=DEFAULT_PLANNER)
         parser.add_argument("--loglevel", default="WARNING")
 
     def handle(self, *args: Any, **options: Any) -> None:
-        vehicle = host_named(Vehicle, options["name"], "vehicle")
+        vehicles: list[Vehicle] = hosts_named(Vehicle, options["names"], "vehicle")
         try:
-            host = RVHost(vehicle, speed=settings.CPCC_SIM_SPEED, planner=options["planner"])
-        except (MavlinkError, ValueError) as exc:
-            where = f" at {vehicle.driver_url}" if vehicle.driver_url else ""
-            raise CommandError(f"{vehicle.name}: cannot fly its vehicle{where}: {exc}") from None
+            host = RVHost(vehicles, speed=settings.CPCC_SIM_SPEED, planner=options["planner"])
+        except CannotFly as exc:
+            raise CommandError(str(exc)) from None
+        ids = [vehicle.pk for vehicle in vehicles]
         serve(
             self,
             host,
-            queues=[rv_queue(vehicle.pk)],
-            node=f"rv{vehicle.pk}",
+            queues=[rv_queue(pk) for pk in ids],
+            # One vehicle's worker is rv<id>, as ever; a group's is named by its first.
+            node=f"rv{ids[0]}" if len(ids) == 1 else f"rv{ids[0]}+{len(ids) - 1}",
             loglevel=options["loglevel"],
         )

@@ -1,0 +1,226 @@
+"""One RV worker process hosting several RVs (issue 23): ``manage.py rvworker NAME [NAME ...]``.
+
+A VV that migrates between two RVs of one process keeps its warm V8 context (its next step
+reads only the new answer from the journal, and no message goes through the broker); such a
+process stopped with SIGTERM mid-mission exits with status 0, and every VV finishes once it is
+started again. Run on SQLite and on PostgreSQL (CI's second pass).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from django.core.management import CommandError, call_command
+
+from fleet.models import Vehicle
+from missions.models import Migration, Task, TaskStatus, VirtualVehicle, VVStatus
+from tests.broker import queued
+from tests.factories import (
+    AREA_ONE,
+    AREA_TWO,
+    CustomerFactory,
+    GroundStationFactory,
+    VehicleFactory,
+)
+from tests.live import Workers, wait_for
+from tests.vvm_worker.test_distributed import all_ended, assert_paper_results, load
+from tests.vvm_worker.test_distributed_faults import (
+    TASKS,
+    TWO_AREAS,
+    counter_program,
+    ended,
+    outcome,
+    visits_logged,
+)
+from vvm_worker.dispatch import rv_queue
+from vvm_worker.hosts import RVHost
+from vvm_worker.platform import platform_vvm
+from vvm_worker.runtime import StepInput, StepResult
+from vvm_worker.services import vv_advance, vv_submit
+
+pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True)]
+
+# A task in Heli One's area, then one in Heli Two's: the VV migrates between them.
+ACROSS = """
+var co2 = VV.sensor.get('CO2');
+function at(lng) {
+  return {type: 'point', position: new VV.types.LatLngAlt(48.111, lng, 20), tolerance: 2,
+          sensors: [co2]};
+}
+var visits = 0;
+VV.task.execute(at(12.861), function (d) { visits += 1; VV.storage.store('one', visits); });
+VV.task.execute(at(12.866), function (d) { visits += 1; VV.storage.store('two', visits); });
+"""
+
+
+@pytest.fixture
+def two_rvs_one_process(broker) -> Iterator[tuple[RVHost, list[StepResult]]]:
+    """Heli One and Heli Two hosted by one RV worker's host in this process (instant flights),
+    with every step its runtime runs recorded."""
+    GroundStationFactory(name="GS Base")
+    one = VehicleFactory(name="Heli One", area=AREA_ONE)
+    two = VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.866)
+    host = RVHost([one, two], speed=0)
+    steps: list[StepResult] = []
+    runtime_step = host.vvm.runtime.step
+
+    def step(step: StepInput) -> StepResult:
+        result = runtime_step(step)
+        steps.append(result)
+        return result
+
+    host.vvm.runtime.step = step  # type: ignore[method-assign]
+    host.start()
+    try:
+        yield host, steps
+    finally:
+        host.stop()
+
+
+def test_a_vv_migrating_between_two_rvs_of_one_process_resumes_its_warm_context(
+    two_rvs_one_process, broker
+) -> None:
+    host, steps = two_rvs_one_process
+    one, two = Vehicle.objects.get(name="Heli One"), Vehicle.objects.get(name="Heli Two")
+    assert host.vvm.local_rvs == {one.pk, two.pk}
+    assert host.is_vehicle(one.pk) and host.is_vehicle(two.pk)
+    CustomerFactory(name="Customer B")
+    customer = CustomerFactory(name="Customer A")
+    ground = platform_vvm()  # the ground station's side, in another "process" of its own
+    vv = vv_submit(customer=customer, name="Across", program=ACROSS, vvm=ground, seed=1)
+    vv_advance(vv_id=vv.pk, vvm=ground)  # its first step, routed to Heli One
+    vv.refresh_from_db()
+    assert vv.host_rv_id == one.pk
+    host.advance(vv.pk)  # what the message to rv.<Heli One> makes the worker do
+
+    def ended() -> bool:
+        vv.refresh_from_db()
+        return vv.is_ended
+
+    wait_for(ended, timeout=60, what="the VV to end")
+    assert vv.status == VVStatus.FINISHED, vv.error
+    path = list(Migration.objects.filter(vv=vv).values_list("from_name", "to_name"))
+    assert path == [("GS Base", "Heli One"), ("Heli One", "Heli Two"), ("Heli Two", "GS Base")]
+    # On Heli One the VV came from a ground station: its program ran again from its first
+    # line with the one answer of its journal. On Heli Two, in the same process, it resumed
+    # where it waited: it read only the new answer.
+    assert [(s.replayed, s.answers_read) for s in steps] == [(True, 1), (False, 1)]
+    assert {d.key: d.value for d in vv.storage.all()} == {"one": 1, "two": 2}
+    # The handover went without a message: nothing waits on Heli Two's queue, while the
+    # ground station sent the VV to Heli One's (this test did that worker's part).
+    assert queued(broker, rv_queue(two.pk)) == []
+    assert ("cpcc.vv_advance", [str(vv.pk)]) in queued(broker, rv_queue(one.pk))
+
+
+def test_rvworker_names_every_unknown_vehicle_and_the_known_ones() -> None:
+    VehicleFactory(name="Heli One")
+    VehicleFactory(name="Heli Two")
+    with pytest.raises(CommandError) as refused:
+        call_command("rvworker", "Heli One", "Heli Three", "Heli Four")
+    assert str(refused.value) == (
+        "no vehicles named 'Heli Three', 'Heli Four' (vehicles: Heli One, Heli Two)"
+    )
+    with pytest.raises(CommandError, match="no vehicle named 'Nope' \\(vehicles: Heli One"):
+        call_command("rvworker", "Nope")
+    with pytest.raises(CommandError, match="named more than once: 'Heli One'"):
+        call_command("rvworker", "Heli One", "Heli Two", "Heli One")
+
+
+@pytest.mark.slow
+def test_a_worker_of_several_rvs_stopped_with_sigterm_mid_mission_exits_0_and_its_vvs_finish(
+    workers: Workers, tmp_path: Path, monkeypatch
+) -> None:
+    """The paper's Figure 3 (each VV flies with Heli One, then with Heli Two) with both RVs in
+    one process: stopped by SIGTERM mid-mission, then started again."""
+    load("paper-fig3.json", tmp_path, monkeypatch)
+    workers.start("rvworker", "Heli One", "Heli Two")
+    wait_for(
+        lambda: not Vehicle.objects.filter(worker_seen__isnull=True).exists(),
+        timeout=60,
+        what="both RVs to report",
+        details=workers.logs,
+    )
+    workers.start("gsworker", "GS Base")
+    wait_for(
+        lambda: (
+            Task.objects.filter(status=TaskStatus.DONE).count() >= 2
+            and VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
+        ),
+        timeout=120,
+        what="VVs aboard the RVs, tasks done",
+        details=workers.logs,
+    )
+    status = workers.terminate("Heli One")
+    logs = workers.logs()
+    assert status == 0, logs
+    assert "Fatal Python error" not in logs
+    assert not all_ended(), "the mission ended before the stop: it tested nothing"
+    workers.start("rvworker", "Heli One", "Heli Two")
+    wait_for(all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs)
+    assert_paper_results()
+    for vv in VirtualVehicle.objects.all():
+        path = [(m.from_name, m.to_name) for m in Migration.objects.filter(vv=vv)]
+        assert ("Heli One", "Heli Two") in path, path
+    assert {v.name: v.tasks_done for v in Vehicle.objects.all()} == {"Heli One": 6, "Heli Two": 6}
+    assert workers.terminate("Heli One") == 0
+    assert workers.terminate("GS Base") == 0
+
+
+@pytest.mark.slow
+def test_a_worker_of_several_rvs_stopped_with_sigterm_in_the_middle_of_steps_exits_0(
+    broker_url, tmp_path
+) -> None:
+    """Instant flights and steps that compute for a while, VVs of both RVs and VVs moving
+    between them: the stop comes while V8 runs, three times; nothing is done twice."""
+    GroundStationFactory(name="GS Base")
+    VehicleFactory(name="Heli One", area=AREA_ONE)
+    VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.866)
+    customers = [CustomerFactory(name="Customer A"), CustomerFactory(name="Customer B")]
+    vvm = platform_vvm()
+    counters = [
+        vv_submit(customer=c, name=f"Counter {k}", program=counter_program(), vvm=vvm, seed=k)
+        for c in customers
+        for k in range(2)
+    ]
+    across = [
+        vv_submit(customer=c, name="Across", program=TWO_AREAS, vvm=vvm, seed=7) for c in customers
+    ]
+    vvs = counters + across
+    pool = Workers(tmp_path, broker_url, speed=0)
+    try:
+        pool.start("gsworker", "GS Base")
+        for stop in range(3):
+            logged = visits_logged(counters)
+            pool.start("rvworker", "Heli One", "Heli Two")
+            # With instant flights the worker steps VVs without a pause: once it has gone on
+            # since its start, a stop comes in the middle of its work.
+            wait_for(
+                lambda logged=logged: visits_logged(counters) > logged or ended(*vvs),
+                timeout=60,
+                what="the worker of Heli One and Heli Two to go on",
+                details=pool.logs,
+            )
+            assert pool.terminate("Heli One") == 0, (stop, pool.logs())
+            assert stop > 0 or not ended(*vvs), "the VVs ended before the stop: it tested nothing"
+        pool.start("rvworker", "Heli One", "Heli Two")
+        wait_for(lambda: ended(*vvs), timeout=180, what="the VVs to end", details=pool.logs)
+        assert pool.terminate("Heli One") == 0
+        assert pool.terminate("GS Base") == 0
+        logs = pool.logs()
+    finally:
+        pool.stop_all()
+    assert "Fatal Python error" not in logs
+    for vv in counters:
+        vv.refresh_from_db()
+        assert vv.status == VVStatus.FINISHED, vv.error
+        storage, log = outcome(vv)
+        assert storage["count"] == TASKS
+        assert len([line for line in log if line.startswith("visit ")]) == TASKS, log
+    for vv in across:
+        vv.refresh_from_db()
+        assert vv.status == VVStatus.FINISHED, vv.error
+        assert set(vv.storage.values_list("key", flat=True)) == {"p0", "p1"}
+        path = list(Migration.objects.filter(vv=vv).values_list("from_name", "to_name"))
+        assert ("Heli One", "Heli Two") in path, path
