@@ -204,14 +204,7 @@ class DatabaseStore:
             with transaction.atomic():
                 self.settle()
                 vehicle_record_state(
-                    vehicle_id=self.vehicle_id,
-                    t_s=latest.t_s,
-                    position=latest.position,
-                    phase=latest.phase,
-                    distance_m=latest.distance_m,
-                    flight_s=latest.flight_s,
-                    planner_state=latest.planner_state,
-                    tasks_done=self._tasks_done,
+                    vehicle_id=self.vehicle_id, state=latest, tasks_done=self._tasks_done
                 )
             self._latest, self._tasks_done = None, 0
         elif self._tasks_done:
@@ -235,15 +228,10 @@ class DatabaseStore:
             self._aboard = self._read_aboard()
         vehicle_record_state(
             vehicle_id=self.vehicle_id,
-            t_s=state.t_s,
+            state=state,
             # The end of a straight leg is on the track of every VV aboard.
             carrying=[vv["id"] for vv in self._aboard] if moved and self.live else [],
             track_aboard=moved and not self.live,
-            position=state.position,
-            phase=state.phase,
-            distance_m=state.distance_m,
-            flight_s=state.flight_s,
-            planner_state=state.planner_state,
         )
 
     def area(self) -> Area:

@@ -53,7 +53,7 @@ from vvm_worker.services import (
     vv_advance,
     vvs_reroute_waiting,
 )
-from vvm_worker.services.base import announcing, db_time_ago
+from vvm_worker.services.base import db_time_ago
 from vvm_worker.services.routing import online_vehicles
 
 logger = logging.getLogger("cpcc.hosts")
@@ -348,7 +348,7 @@ class HostedRV:
             scale=scale,
             driver=driver,
             plan_time_limit_s=settings.CPCC_PLAN_TIME_LIMIT_S,
-            live=announcing(vvm),
+            live=vvm.listened,
         )
         self.driver = self.rig.driver
         self.loop = self.rig.loop

@@ -180,8 +180,3 @@ def sensor_entries(names: Sequence[str], *, field: str) -> list[SensorType]:
         return sensors_by_name(names=names)
     except UnknownSensors as exc:
         raise ValidationError({field: str(exc)}) from None
-
-
-def announcing(vvm: VVM) -> bool:
-    """Whether anyone listens for changes (the map), so that nobody pays for events unheard."""
-    return vvm.listened

@@ -7,7 +7,7 @@ import contextlib
 import dataclasses
 import time
 from collections.abc import Sequence
-from typing import Any, TypedDict
+from typing import TypedDict
 
 from django.core.exceptions import ValidationError
 from django.db import connection, transaction
@@ -25,6 +25,7 @@ from missions.models import (
     VirtualVehicle,
     VVStatus,
 )
+from vvm_worker.control import VehicleState
 from vvm_worker.services.base import VVM, logger, sensor_entries
 from vvm_worker.services.routing import (
     fleet_caps,
@@ -319,48 +320,38 @@ def ground_station_delete(*, station: GroundStation) -> None:
 def vehicle_record_state(
     *,
     vehicle_id: int,
-    t_s: float,
-    position: Position,
-    phase: str,
-    distance_m: float,
-    flight_s: float,
-    planner_state: Any,
+    state: VehicleState,
     carrying: Sequence[str] = (),
     track_aboard: bool = False,
     tasks_done: int = 0,
 ) -> None:
-    """What an RV's control loop reports of its vehicle at ``t_s``: where it is, its flight
-    phase, its odometer and flight time, and the planner's state (kept for a restarted worker);
-    ``carrying`` names the VVs aboard whose track gets this point, or ``track_aboard``: every
-    VV aboard now gets it (found by the database in the same statement); ``tasks_done``: the
-    RV served that many more tasks. Inside the caller's transaction when there is one."""
+    """What an RV's control loop reports of its vehicle (``state``): where it is at its time,
+    its flight phase, its odometer and flight time, and the planner's state (kept for a
+    restarted worker); ``carrying`` names the VVs aboard whose track gets this point, or
+    ``track_aboard``: every VV aboard now gets it (found by the database in the same
+    statement); ``tasks_done``: the RV served that many more tasks. Inside the caller's
+    transaction when there is one."""
+    here = state.position
     # One commit for the track points and the row (a lone UPDATE commits by itself).
     alone = (carrying or track_aboard) and connection.get_autocommit()
     with transaction.atomic() if alone else contextlib.nullcontext():
         if carrying:
             TrackPoint.objects.bulk_create(
-                TrackPoint(
-                    vv_id=vv_id, t_s=t_s, lat=position.lat, lng=position.lng, alt=position.alt
-                )
+                TrackPoint(vv_id=vv_id, t_s=state.t_s, lat=here.lat, lng=here.lng, alt=here.alt)
                 for vv_id in carrying
             )
         elif track_aboard:
-            _track_aboard(vehicle_id, t_s, position)
+            _track_points_aboard(vehicle_id, [(state.t_s, here)])
         Vehicle.objects.filter(pk=vehicle_id).update(
-            lat=position.lat,
-            lng=position.lng,
-            alt=position.alt,
-            phase=phase,
-            distance_m=distance_m,
-            flight_s=flight_s,
-            planner_state=planner_state,
+            lat=here.lat,
+            lng=here.lng,
+            alt=here.alt,
+            phase=state.phase,
+            distance_m=state.distance_m,
+            flight_s=state.flight_s,
+            planner_state=state.planner_state,
             **({"tasks_done": F("tasks_done") + tasks_done} if tasks_done else {}),
         )
-
-
-def _track_aboard(vehicle_id: int, t_s: float, position: Position) -> None:
-    """A track point at ``position`` for every VV aboard the RV."""
-    _track_points_aboard(vehicle_id, [(t_s, position)])
 
 
 def _track_points_aboard(vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:

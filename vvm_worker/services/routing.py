@@ -263,7 +263,7 @@ def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None 
         # no other RV's area overlaps its own. (Its area, altitudes and sensors are the
         # shape's, of the version just read.)
         caps = shape.caps.get(host.pk) or vehicle_caps(host)
-        mine = [t for t in open_tasks if caps.can_serve(request_of(t))]
+        mine = _servable(caps, open_tasks)
         if mine and not shape.overlaps.get(host.pk):
             tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
             return False

@@ -713,17 +713,7 @@ def _answer_and_advance(
             here = settled.position
             host.lat, host.lng, host.alt = here.lat, here.lng, here.alt
     elif arrival is not None and vehicle_id is not None:
-        vehicle_record_state(
-            vehicle_id=vehicle_id,
-            t_s=arrival.t_s,
-            position=arrival.position,
-            phase=arrival.phase,
-            distance_m=arrival.distance_m,
-            flight_s=arrival.flight_s,
-            planner_state=arrival.planner_state,
-            track_aboard=True,
-            tasks_done=1,
-        )
+        vehicle_record_state(vehicle_id=vehicle_id, state=arrival, track_aboard=True, tasks_done=1)
         host = vv.host_rv
         if host is not None:  # as read before the report: where the VV leaves from
             here = arrival.position
