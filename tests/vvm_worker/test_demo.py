@@ -124,3 +124,25 @@ def test_demo_flies_the_papers_figure_3_over_mavlink(tmp_path: Path) -> None:
     assert sorted(d[:2] for d in drivers) == [("Heli One", "mavlink"), ("Heli Two", "mavlink")]
     assert all(url.startswith("udpout:127.0.0.1:") for _, _, url in drivers)
     assert sorted(flown) == [("Heli One",), ("Heli Two",)]
+
+
+def test_a_second_ctrl_c_right_after_the_first_hurries_the_stop_instead_of_breaking_it() -> None:
+    """Two Ctrl-C in quick succession (CI saw the second land before the demo had printed that
+    it was stopping): the first interrupts, the second only asks to kill what is left."""
+    from vvm_worker.management.commands.demo import Processes
+
+    handlers = {each: signal.getsignal(each) for each in (signal.SIGINT, signal.SIGTERM)}
+    processes = Processes({})
+    try:
+        processes.catch_interrupts()
+        try:
+            os.kill(os.getpid(), signal.SIGINT)  # its handler runs before the next bytecode
+            raise AssertionError("the first Ctrl-C did not interrupt")
+        except KeyboardInterrupt:
+            os.kill(os.getpid(), signal.SIGINT)  # at once, inside the handling of the first
+            os.kill(os.getpid(), signal.SIGTERM)
+        assert processes.hurry.wait(timeout=5)
+        assert processes.stop() == []
+    finally:
+        for each, handler in handlers.items():
+            signal.signal(each, handler)

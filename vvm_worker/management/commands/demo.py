@@ -58,16 +58,29 @@ def _demo_password(name: str) -> str:
     return password
 
 
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
-
-
 class Processes:
     """The demo's child processes, each in a process group of its own."""
 
     def __init__(self, env: dict[str, str]) -> None:
         self.env = env
         self.children: dict[str, subprocess.Popen[bytes]] = {}
+        self.hurry = threading.Event()
+
+    def catch_interrupts(self) -> None:
+        """The first Ctrl-C (or SIGTERM, as a service manager stops) raises KeyboardInterrupt
+        and, before it does, makes the next one set ``hurry``: a second Ctrl-C that comes at
+        once, even before the demo has printed that it is stopping, kills what is left."""
+
+        def again(signum: int, frame: object) -> None:
+            self.hurry.set()
+
+        def first(signum: int, frame: object) -> None:
+            for each in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(each, again)
+            raise KeyboardInterrupt
+
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, first)
 
     def start(self, label: str, *args: str) -> subprocess.Popen[bytes]:
         process = subprocess.Popen(
@@ -87,13 +100,8 @@ class Processes:
     def stop(self) -> list[str]:
         """SIGTERM every child, then wait for each (STOP_S at most; a second Ctrl-C or SIGTERM
         kills what is left at once). Returns a line for each child that did not exit 0."""
-        hurry = threading.Event()
-
-        def again(signum: int, frame: object) -> None:
-            hurry.set()
-
         for signum in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signum, again)
+            signal.signal(signum, lambda signum, frame: self.hurry.set())
         for process in self.children.values():
             if process.poll() is None:
                 with contextlib.suppress(ProcessLookupError):
@@ -102,7 +110,7 @@ class Processes:
         problems = []
         for label, process in self.children.items():
             while process.poll() is None:
-                if hurry.is_set() or time.monotonic() > deadline:
+                if self.hurry.is_set() or time.monotonic() > deadline:
                     with contextlib.suppress(ProcessLookupError):
                         os.killpg(process.pid, signal.SIGKILL)
                     process.wait()
@@ -159,11 +167,11 @@ class Command(BaseCommand):
         # For the web server's WhiteNoise when DEBUG is off (with DEBUG on it serves the
         # files where they are); copies only what changed since the last run.
         call_command("collectstatic", verbosity=0, interactive=False)
-        signal.signal(signal.SIGTERM, _interrupt)  # a service manager stops with SIGTERM
         redis = EmbeddedRedis(settings.EMBEDDED_REDIS_SOCKET) if not settings.REDIS_URL else None
         redis_url = settings.REDIS_URL or f"unix://{settings.EMBEDDED_REDIS_SOCKET}"
         env = {**os.environ, "REDIS_URL": redis_url, "CPCC_SIM_SPEED": str(speed)}
         processes = Processes(env)
+        processes.catch_interrupts()
         try:
             if redis is not None:
                 redis.start()
