@@ -67,11 +67,13 @@ class DatabaseStore:
     """An RV's work as the platform keeps it (``vvm_worker.control.Store``)."""
 
     def __init__(
-        self, *, vehicle_id: int, vvm: VVM, live: bool = False, defer_reports: bool = False
+        self, *, vehicle_id: int, vvm: VVM, ticks: bool = False, defer_reports: bool = False
     ) -> None:
         self.vehicle_id = vehicle_id
         self.vvm = vvm
-        self.live = live
+        # ``ticks`` (the RV workers): the host calls ``write_waiting`` at every map tick, so a
+        # report that does not move the vehicle may wait for it (see ``record_state``).
+        self.ticks = ticks
         # ``defer_reports`` (``simulate``, where the process is the platform and the services
         # ask the loops, not the rows): the reports wait, and are written (``settle``) by the
         # transaction that next changes who is aboard, before it does (an answer here, a VV
@@ -90,6 +92,9 @@ class DatabaseStore:
         # Where the vehicle stopped, to be recorded with the first task it serves there (one
         # transaction), or on its own by the next record.
         self._arrival: VehicleState | None = None
+        # A report that did not move the vehicle (a new plan, a phase): it waits for the next
+        # write, which supersedes it, or for the host's next ``write_waiting`` (a map tick).
+        self._waiting: VehicleState | None = None
 
     def changed(self) -> None:
         """The RV's tasks or status may have changed: read them again when next asked."""
@@ -168,13 +173,27 @@ class DatabaseStore:
                 self._points.append(state)
             self._latest = state
             return
+        if not moved and self.ticks:
+            self._waiting = state
+            return
         if self._arrival is not None:  # no task was served where it stopped
             arrival, self._arrival = self._arrival, None
             self._write(arrival, moved=True)
-        if moved and not self.live and self._serves_here(state.position):
-            self._arrival = state
+        if moved and self._serves_here(state.position):
+            self._arrival, self._waiting = state, None
             return
         self._write(state, moved=moved)
+
+    def write_waiting(self) -> None:
+        """Write the report that waits, if any (the host's map tick: a row is never more than
+        a tick behind what its loop said). Where it stopped to serve a task waits for the
+        answer, which writes it."""
+        if self._waiting is not None:
+            self._write(self._waiting, moved=False)
+
+    def seen_aboard(self, vvs: list[dict[str, Any]]) -> None:
+        """The VVs aboard as the host read them for the map (see ``read_aboard``)."""
+        self._aboard = vvs
 
     def settle(self, *, tasks_done: int = 0) -> Settled:
         """Write the track points that wait (``defer_reports``), in the caller's transaction,
@@ -224,15 +243,9 @@ class DatabaseStore:
         )
 
     def _write(self, state: VehicleState, *, moved: bool) -> None:
-        if self.live:  # the map shows the VVs aboard
-            self._aboard = self._read_aboard()
-        vehicle_record_state(
-            vehicle_id=self.vehicle_id,
-            state=state,
-            # The end of a straight leg is on the track of every VV aboard.
-            carrying=[vv["id"] for vv in self._aboard] if moved and self.live else [],
-            track_aboard=moved and not self.live,
-        )
+        self._waiting = None  # said by this report, or by an earlier one than this
+        # The end of a straight leg is on the track of every VV aboard.
+        vehicle_record_state(vehicle_id=self.vehicle_id, state=state, track_aboard=moved)
 
     def area(self) -> Area:
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
@@ -241,15 +254,18 @@ class DatabaseStore:
     def aboard(self) -> list[dict[str, Any]]:
         return self._aboard
 
-    def _read_aboard(self) -> list[dict[str, Any]]:
-        return [
-            {"id": str(pk), "name": name, "customer": customer_id}
-            for pk, name, customer_id in VirtualVehicle.objects.filter(
-                host_rv_id=self.vehicle_id, status__in=ACTIVE_STATUSES
-            )
-            .order_by("submitted_s", "id")
-            .values_list("pk", "name", "customer_id")
-        ]
+
+def read_aboard(vehicle_ids: Sequence[int]) -> dict[int, list[dict[str, Any]]]:
+    """The VVs aboard these RVs, for the live map: one read for all of them."""
+    aboard: dict[int, list[dict[str, Any]]] = {pk: [] for pk in vehicle_ids}
+    rows = (
+        VirtualVehicle.objects.filter(host_rv_id__in=vehicle_ids, status__in=ACTIVE_STATUSES)
+        .order_by("submitted_s", "id")
+        .values_list("host_rv_id", "pk", "name", "customer_id")
+    )
+    for vehicle_id, pk, name, customer_id in rows:
+        aboard[vehicle_id].append({"id": str(pk), "name": name, "customer": customer_id})
+    return aboard
 
 
 @dataclass(frozen=True)
@@ -319,20 +335,20 @@ class RigFleet:
         self._wake = wake
         # Alone (`simulate`): every change of an RV is made in this process, so what its loop
         # knows is what its row says. Otherwise another process may have changed its status
-        # a moment ago (its message still on the way): the mapper reads the rows.
+        # a moment ago (its message still on the way): the mapper reads the statuses.
         self.alone = alone
         self._settled: list[tuple[DatabaseStore, _Waiting]] = []
 
     def live(self, vehicle_id: int) -> LocalRV | None:
         rig = self.rigs.get(vehicle_id)
-        if rig is None or not self.alone:
+        if rig is None:
             return None
         store, state = rig.store, rig.loop.last_state
         if state is None:  # it has reported nothing yet: its row says where it is
             return None
         items = [(t.id, t.position) for t in store.open_tasks()]
         return LocalRV(
-            status=store.status(),
+            status=store.status() if self.alone else None,
             position=state.position,
             route=planned_order(items, state.planner_state),
         )
@@ -376,6 +392,7 @@ def build_rig(
     driver: Driver | None = None,
     plan_time_limit_s: float | None = None,
     live: bool = False,
+    ticks: bool = False,
     defer_reports: bool = False,
     sensing: PlatformSensing | None = None,
 ) -> VehicleRig:
@@ -385,7 +402,7 @@ def build_rig(
     spec = kinematics(vehicle, scale=scale)
     if driver is None:
         driver = SimVehicle(spec, vehicle.depot, now_s=vvm.clock.now_s())
-    store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, live=live, defer_reports=defer_reports)
+    store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, ticks=ticks, defer_reports=defer_reports)
     loop = ControlLoop(
         name=vehicle.name,
         driver=driver,

@@ -37,7 +37,7 @@ from fleet.models import Driver, GroundStation, Vehicle, VehicleStatus
 from missions.events import VEHICLE_STALE_S
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle, VVStatus
 from vvm_worker.clock import Clock
-from vvm_worker.executor import RigFleet, build_rig, kinematics
+from vvm_worker.executor import RigFleet, build_rig, kinematics, read_aboard
 from vvm_worker.live import publish_vehicle
 from vvm_worker.planning import DEFAULT_PLANNER
 from vvm_worker.platform import platform_vvm
@@ -234,6 +234,10 @@ class RVHost:
     def _run(self) -> None:
         try:
             self.scheduler.run()
+            try:  # what the loops said last, for the next start and the API
+                self._each(lambda rv: rv.rig.store.write_waiting(), "report")
+            except Exception:
+                logger.warning("the vehicles' last reports are lost: the database is away")
         finally:
             self.vvm.runtime.close()
             self._close_drivers()
@@ -301,7 +305,13 @@ class RVHost:
         self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
 
     def _beacon(self) -> None:
+        """The map tick: the reports that wait are written, then the live maps are told
+        where each vehicle is and what it carries."""
         now = self.clock.now_s()
+        self._each(lambda rv: rv.rig.store.write_waiting(), "report")
+        if self.vvm.listened:
+            aboard = read_aboard(list(self.rvs))
+            self._each(lambda rv: rv.rig.store.seen_aboard(aboard[rv.vehicle_id]), "map")
         self._each(lambda rv: rv.beacon(now), "map beacon")
         self.scheduler.call_at(now + settings.CPCC_MAP_TICK_S, self._beacon)
 
@@ -349,6 +359,7 @@ class HostedRV:
             driver=driver,
             plan_time_limit_s=settings.CPCC_PLAN_TIME_LIMIT_S,
             live=vvm.listened,
+            ticks=True,
         )
         self.driver = self.rig.driver
         self.loop = self.rig.loop

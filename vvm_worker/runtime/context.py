@@ -153,6 +153,9 @@ class VVContext:
         journal is not a prefix of the step's (the caller makes a new context).
         """
         texts = self._new_entries(step.journal)
+        # More than the one answer the program waits for: it made steps on another host
+        # since it ran here, which a resumed run goes through again (a replay's allowance).
+        catches_up = len(texts) > 1
         entries = "[" + ",".join(texts) + "]"
         if len(entries) > _APPEND_WITH_STEP_CHARS:
             self._host("append", entries)
@@ -184,7 +187,7 @@ class VVContext:
                 arguments,
                 run_json,
                 heap_bytes=limits.heap_bytes,
-                resume_timeout=limits.cpu_s,
+                resume_timeout=replay if catches_up else limits.cpu_s,
                 replay_timeout=replay if len(step.journal) else limits.cpu_s,
             )
         )

@@ -941,12 +941,15 @@
     // at a `yield*` call site between steps, and the next step resumes it there instead of
     // replaying, when nothing the replay would see has changed: the same VV and limits, and
     // every effect of the run applied by the host (else the host lost some, and a new run
-    // reports them again).
+    // reports them again). A VV that comes back after steps on another host has more
+    // effects applied than this run made: resumed, the program reads the answers of those
+    // steps from the journal, as a replay would, and does their effects again unreported
+    // (`effect`), then goes on with the new work.
     let steps = null;
     let parked = false;
     state.isParked = function () { return parked; };
     state.canResume = function (next) {
-      return parked && fatal === null && next.effectsApplied === effectSeq && runSignature(next) === signature;
+      return parked && fatal === null && next.effectsApplied >= effectSeq && runSignature(next) === signature;
     };
     state.resume = function (next) {
       effects.length = 0;

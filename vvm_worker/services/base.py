@@ -36,10 +36,11 @@ logger = logging.getLogger("cpcc.vvm")
 @dataclass(frozen=True)
 class LocalRV:
     """What the process that hosts an RV knows of it now, as its row would say once written:
-    its status, its last reported position, its open tasks in the order its planner last
-    meant to serve them."""
+    its status (None: its row's, which another process may have changed a moment ago), its
+    last reported position, its open tasks in the order its planner last meant to serve
+    them."""
 
-    status: str
+    status: str | None
     position: Position
     route: tuple[Position, ...]
 
@@ -56,7 +57,7 @@ class LocalFleet(Protocol):
     directly instead of through the database and the dispatcher."""
 
     def live(self, vehicle_id: int) -> LocalRV | None:
-        """The RV as it is now, if this process hosts it and knows all of it (else None:
+        """The RV as it is now, if this process hosts it and its loop has reported (else None:
         read its row)."""
         ...
 

@@ -167,12 +167,17 @@ def fleet_caps_and_rows(
     rows: dict[int, Vehicle] = {}
     routes: dict[int, tuple[Position, ...]] = {}
     online: dict[int, bool] = {}
+    unsure = sorted(pk for pk, live in known.items() if live.status is None)
+    statuses = (
+        dict(Vehicle.objects.filter(pk__in=unsure).values_list("pk", "status")) if unsure else {}
+    )
     for pk, live in known.items():
-        if live.status == VehicleStatus.REMOVED or pk not in shape.rows:
+        status = live.status if live.status is not None else statuses.get(pk)
+        if status is None or status == VehicleStatus.REMOVED or pk not in shape.rows:
             continue
         row = copy.copy(shape.rows[pk])
         row._state = copy.copy(row._state)
-        row.status = live.status
+        row.status = status
         row.lat, row.lng, row.alt = live.position.lat, live.position.lng, live.position.alt
         rows[pk], routes[pk], online[pk] = row, live.route, True  # its worker is this process
     remote = sorted(wanted - set(known))
@@ -467,10 +472,9 @@ def vv_record_migration(
         vv.host_rv, vv.host_gs = to, None
     else:
         vv.host_rv, vv.host_gs = None, to
-    # The VV's warm context stays with the host it left: the new host resumes it by replay
-    # (unless both are in this process, sharing one runtime).
-    if not vvm.keeps_context(to.pk if isinstance(to, Vehicle) else None):
-        vvm.runtime.forget(str(vv.pk))
+    # The VV's warm context stays here, also when the VV leaves this process: should it come
+    # back, the context catches up on the steps made elsewhere (the runtime's resume reads
+    # their answers from the journal) instead of replaying from the program's first line.
     logger.info(
         "vv migrated",
         extra={"vv": str(vv.id), "from": getattr(source, "name", None), "to": to.name},

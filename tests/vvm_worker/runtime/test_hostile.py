@@ -1,10 +1,11 @@
 """Hostile and merely unusual programs keep the runtime's promises (issue 21).
 
-Each program runs three ways: resumed in one warm context ("warm"), replayed in a new context
-at every step ("replay", as after a migration at every task), and in a warm context that is
-dropped every other step ("mixed"). What the platform applies (storage, log, outcome, error)
-must be the same in all three, and what the database could not hold (a lone surrogate, U+0000,
-a value nested thousands deep) never leaves the runtime.
+Each program runs four ways: resumed in one warm context ("warm"), replayed in a new context
+at every step ("replay", as after a migration at every task), in a warm context that is
+dropped every other step ("mixed"), and moved at every step between two hosts that keep its
+context ("between": it catches up on the other host's step). What the platform applies
+(storage, log, outcome, error) must be the same in all four, and what the database could not
+hold (a lone surrogate, U+0000, a value nested thousands deep) never leaves the runtime.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import pytest
 from tests.vvm_worker.runtime.harness import CATALOG, START_MS, answer_with_readings
 from vvm_worker.runtime import Limits, Outcome, Runtime, StepInput, StepResult, run_step
 
-MODES = ("warm", "replay", "mixed")
+MODES = ("warm", "replay", "mixed", "between")
 GPS_TASK = (
     "{type: 'point', position: new VV.types.LatLngAlt(1, 2, 3), tolerance: 1,"
     " sensors: [VV.sensor.get('GPS')]}"
@@ -38,7 +39,8 @@ class Applied:
 
 
 def drive(source: str, mode: str, *, limits: Limits | None = None, steps: int = 50) -> Applied:
-    runtime = Runtime()
+    hosts = [Runtime(), Runtime()]
+    runtime = hosts[0]
     journal: list[dict[str, Any]] = []
     applied = 0
     storage: dict[str, Any] = {}
@@ -61,6 +63,8 @@ def drive(source: str, mode: str, *, limits: Limits | None = None, steps: int = 
         else:
             if mode == "mixed" and n % 2:
                 runtime.forget("vv-h")
+            if mode == "between":
+                runtime = hosts[n % 2]
             result = runtime.step(step)
         for e in result.effects:
             # What the database will hold: text that encodes as UTF-8, without U+0000.
@@ -79,7 +83,8 @@ def drive(source: str, mode: str, *, limits: Limits | None = None, steps: int = 
             break
         assert result.pending is not None
         journal.append(answer_with_readings(result.pending, START_MS + 1000 * (n + 1)))
-    runtime.close()
+    for each in hosts:
+        each.close()
     assert result is not None
     error = result.error
     return Applied(
@@ -95,7 +100,7 @@ def drive(source: str, mode: str, *, limits: Limits | None = None, steps: int = 
 def same_everywhere(source: str, **kw: Any) -> Applied:
     """The program's result, the same in every mode."""
     runs = {mode: drive(source, mode, **kw) for mode in MODES}
-    assert runs["warm"] == runs["replay"] == runs["mixed"], runs
+    assert runs["warm"] == runs["replay"] == runs["mixed"] == runs["between"], runs
     return runs["warm"]
 
 

@@ -5,9 +5,10 @@ loops with a counter, ``if`` on a reading or on ``Math.random()``, ``try``/``cat
 around waiting calls (catch with a name, a pattern or no binding), helper functions declared at
 the top level that wait, callbacks that store, ``VV.log``, ``VV.storage.store`` with computed
 keys, and the semicolon at a line's end sometimes left out. Each program runs resumed in one
-warm context, replayed in a new context at every step, and as written (not made suspendable);
-every request is answered with the harness's readings, or some rejected. All three must end
-the same: outcome, error (message, line and column), storage, log and the requests made.
+warm context, replayed in a new context at every step, moved back and forth between two hosts
+that keep its context (catching up there), and as written (not made suspendable); every
+request is answered with the harness's readings, or some rejected. All four must end the
+same: outcome, error (message, line and column), storage, log and the requests made.
 """
 
 from __future__ import annotations
@@ -186,6 +187,6 @@ def _rejecting(every: int) -> Answer:
 def test_resumed_replayed_and_as_written_end_the_same(source: str, reject_every: int) -> None:
     answer = _rejecting(reject_every) if reject_every else answer_with_readings
     plain = drive(source, "plain", answer=answer).ending
-    for way in ("warm", "replay"):
+    for way in ("warm", "replay", "between"):
         ending = drive(source, way, answer=answer).ending
         assert ending == plain, f"{way} differs from the program as written:\n{source}"

@@ -143,6 +143,33 @@ def test_a_vv_that_moves_replays_once_on_its_new_host_then_resumes_there() -> No
     assert host.storage["seen"] == 60
 
 
+def test_a_vv_that_comes_back_catches_up_in_the_context_it_left_instead_of_replaying() -> None:
+    """Between two hosts (two worker processes) and back: the context the VV left reads the
+    answers of the steps made elsewhere, does their effects again unreported and goes on,
+    with the same effects, requests and storage as replaying every step in a new context."""
+    host = Host(LOOP)
+    here, there = host.runtime, Runtime()
+    reads = []
+    for k in range(60):
+        host.runtime = here if (k // 3) % 2 == 0 else there  # three steps each, back and forth
+        reads.append(host.step().answers_read)
+    assert host.run().outcome is Outcome.FINISHED
+    # Back on a host it left three steps ago: the three answers of the steps made elsewhere
+    # and the one it waits for (a replay would read them all: 7, 10, ...). The second host's
+    # first step is a replay in a new context (3).
+    assert reads[:10] == [0, 1, 1, 3, 1, 1, 4, 1, 1, 4]
+    assert max(reads[6:]) == 4
+    assert not any(r.replayed for r in host.results[6:])
+    replayed = Run(LOOP, seed=5)
+    replayed.run()
+    assert host.storage == replayed.storage
+    assert [(r.outcome, r.pending, r.effects, r.effects_total, r.requests, r.storage_bytes)
+            for r in host.results] == [
+        (r.outcome, r.pending, r.effects, r.effects_total, r.requests, r.storage_bytes)
+        for r in replayed.results
+    ]  # fmt: skip
+
+
 def test_effects_the_host_did_not_apply_are_reported_again_by_a_replay() -> None:
     host = Host(LOOP)
     for _ in range(10):

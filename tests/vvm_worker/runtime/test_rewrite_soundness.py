@@ -1,11 +1,12 @@
 """The rewrite of a program (instrument.py) changes nothing the program can observe.
 
-Each program here runs four ways and must end the same (outcome, error with its place,
+Each program here runs five ways and must end the same (outcome, error with its place,
 storage, log, the requests it made): resumed in one warm context (``warm``), replayed in a new
 context at every step (``replay``), warm but moved to another host now and then (``mixed``:
-it replays once there, then resumes), and not made suspendable at all (``plain``: compiled as
-the plain function it was written as, only its catch and finally clauses instrumented, and
-replayed at every step).
+it replays once there, then resumes), moved back and forth between two hosts that keep its
+context (``between``: back on a host, it catches up on the steps made on the other), and not
+made suspendable at all (``plain``: compiled as the plain function it was written as, only its
+catch and finally clauses instrumented, and replayed at every step).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ TASK = (
     "{type: 'point', position: new VV.types.LatLngAlt(1, 2, 3), tolerance: 1,"
     " sensors: [VV.sensor.get('GPS')]}"
 )
-WAYS = ("warm", "replay", "mixed", "plain")
+WAYS = ("warm", "replay", "mixed", "between", "plain")
 
 
 @dataclass(frozen=True)
@@ -100,7 +101,8 @@ def drive(
 ) -> Driven:
     """Step the VV to its end the given way (see the module docstring), answering each
     request with ``answer``, applying effects as the VVM does."""
-    runtime = Runtime() if way in ("warm", "mixed") else None
+    runtime = Runtime() if way in ("warm", "mixed", "between") else None
+    hosts = [runtime, Runtime()] if way == "between" else []
     journal: list[dict[str, Any]] = []
     applied = 0
     storage: dict[str, Any] = {}
@@ -115,6 +117,8 @@ def drive(
                     assert runtime is not None
                     runtime.close()
                     runtime = Runtime()  # moved to another host
+                if way == "between":
+                    runtime = hosts[(n // move_every) % 2]
                 step = StepInput(
                     vv_id="vv-s",
                     vv_name="vv-s",
@@ -155,8 +159,8 @@ def drive(
                 requests.append(result.pending)
                 journal.append(answer(result.pending, START_MS + 1000 * (n + 1)))
     finally:
-        if runtime is not None:
-            runtime.close()
+        for each in {id(r): r for r in [runtime, *hosts] if r is not None}.values():
+            each.close()
     raise AssertionError("the program did not end")
 
 
@@ -165,7 +169,7 @@ def every_way(source: str, *, answer: Answer = answer_with_readings) -> dict[str
     program resumed in its warm context."""
     driven = {way: drive(source, way, answer=answer) for way in WAYS}
     plain = driven["plain"].ending
-    for way in ("warm", "replay", "mixed"):
+    for way in ("warm", "replay", "mixed", "between"):
         assert driven[way].ending == plain, f"{way} differs from the program as written"
     warm = driven["warm"]
     if warm.generator and len(warm.answers_read) > 2:
