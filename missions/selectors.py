@@ -13,6 +13,7 @@ from django.db.models import Count, Model, Q, QuerySet, TextField
 from django.db.models.functions import Cast
 
 from accounts.models import User
+from cpcc_site.prepared import PreparedRead
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.events import event_for, migration_event, task_event, vv_event
 from missions.models import (
@@ -65,31 +66,54 @@ def with_task_counts(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
     )
 
 
+def _visible_vvs() -> QuerySet[VirtualVehicle]:
+    return VirtualVehicle.objects.select_related("customer", "host_gs", "host_rv").order_by()
+
+
+# The read of every API request about one VV (``vv_get_for_user``), compiled once: staff's,
+# and a customer's user's (the customer in the WHERE, as ``vv_list_for_user`` scopes it).
+_ANY_VV = PreparedRead(lambda pk: _visible_vvs().filter(pk=pk), samples=[("pk", uuid.UUID(int=0))])
+_CUSTOMERS_VV = PreparedRead(
+    lambda pk, customer_id: _visible_vvs().filter(pk=pk, customer_id=customer_id),
+    samples=[("pk", uuid.UUID(int=0)), ("customer_id", -1)],
+)
+
+
 def vv_get_for_user(*, user: User, vv_id: uuid.UUID | str) -> VirtualVehicle:
-    """One VV the user may see; VVNotFound both for a missing VV and another customer's, and
-    for an id that is no UUID at all."""
+    """One VV the user may see (``vv_list_for_user``); VVNotFound both for a missing VV and
+    another customer's, and for an id that is no UUID at all."""
     try:
-        return vv_list_for_user(user=user).get(pk=uuid.UUID(str(vv_id)))
-    except (VirtualVehicle.DoesNotExist, ValueError, TypeError):
+        pk = uuid.UUID(str(vv_id))
+    except (ValueError, TypeError):
         raise VVNotFound(str(vv_id)) from None
+    if user.is_staff:
+        vv = _ANY_VV.first(pk)
+    elif user.customer_id is not None:
+        vv = _CUSTOMERS_VV.first(pk, user.customer_id)
+    else:
+        vv = None
+    if vv is None:
+        raise VVNotFound(str(vv_id))
+    return vv
 
 
 def vv_tasks_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[Task]:
     """The VV's tasks in the order it asked for them (request, then index in a batch)."""
     vv = vv_get_for_user(user=user, vv_id=vv_id)
-    return Task.objects.filter(vv=vv).select_related("vv", "vehicle").order_by("q", "index")
+    # Through the VV's manager: each task's ``vv`` is this VV, without a join.
+    return vv.tasks.select_related("vehicle").order_by("q", "index")
 
 
 def vv_log_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[LogEntry]:
     """The VV's log lines, oldest first."""
     vv = vv_get_for_user(user=user, vv_id=vv_id)
-    return LogEntry.objects.filter(vv=vv).select_related("vv").order_by("at_s", "seq", "id")
+    return vv.log.order_by("at_s", "seq", "id")  # each line's ``vv`` is this VV
 
 
 def vv_storage_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[StorageDocument]:
     """The VV's storage documents, by key."""
     vv = vv_get_for_user(user=user, vv_id=vv_id)
-    return StorageDocument.objects.filter(vv=vv).select_related("vv").order_by("key")
+    return vv.storage.order_by("key")  # each document's ``vv`` is this VV
 
 
 def vv_storage_get_for_user(*, user: User, vv_id: uuid.UUID | str, key: str) -> StorageDocument:

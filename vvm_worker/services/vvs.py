@@ -18,6 +18,7 @@ from accounts.models import Customer, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
 from cpcc_site.json_depth import MAX_VALUE_DEPTH  # how deeply a stored value may nest
+from cpcc_site.prepared import PreparedRead
 from fleet.models import Vehicle
 from missions.events import task_event, vv_event
 from missions.models import (
@@ -57,7 +58,6 @@ from vvm_worker.services.base import (
 from vvm_worker.services.customers import customer_limits
 from vvm_worker.services.fleet import vehicle_record_state
 from vvm_worker.services.journal import JournalView, journal_append, journal_full
-from vvm_worker.services.prepared import PreparedRead
 from vvm_worker.services.routing import vv_record_migration, vv_release_tasks, vv_route
 
 
@@ -559,7 +559,7 @@ _LOCKED_VV = PreparedRead(
         .select_related("customer", "host_gs", "host_rv")
         .filter(pk=vv_id)
     ),
-    sample=uuid.UUID(int=0),
+    samples=[("pk", uuid.UUID(int=0))],
 )
 
 

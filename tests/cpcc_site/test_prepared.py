@@ -7,9 +7,9 @@ import uuid
 import pytest
 from django.db import transaction
 
+from cpcc_site.prepared import PreparedRead
 from missions.models import VirtualVehicle
 from tests.factories import CustomerFactory, GroundStationFactory, VehicleFactory
-from vvm_worker.services.prepared import PreparedRead
 
 pytestmark = pytest.mark.django_db
 
@@ -36,7 +36,7 @@ def test_it_reads_each_key_as_the_queryset_does_with_its_related_rows() -> None:
             .filter(pk=key)
         )
 
-    read = PreparedRead(build, sample=uuid.UUID(int=0))
+    read = PreparedRead(build, samples=[("pk", uuid.UUID(int=0))])
     on_rv = _vv(host_rv=VehicleFactory(name="Heli One"))
     on_gs = _vv(host_gs=GroundStationFactory(name="GS One"))
     with transaction.atomic():
@@ -50,3 +50,30 @@ def test_it_reads_each_key_as_the_queryset_does_with_its_related_rows() -> None:
             assert (got.host_rv and got.host_rv.name) == (want.host_rv and want.host_rv.name)
             assert (got.host_gs and got.host_gs.name) == (want.host_gs and want.host_gs.name)
         assert read.first(uuid.uuid4()) is None
+
+
+def test_several_keys_each_in_its_place_another_customers_row_is_not_read() -> None:
+    def build(key, customer):
+        return (
+            VirtualVehicle.objects.select_related("customer", "host_gs", "host_rv")
+            .filter(pk=key, customer_id=customer)
+            .order_by()
+        )
+
+    read = PreparedRead(build, samples=[("pk", uuid.UUID(int=0)), ("customer_id", -1)])
+    mine, theirs = _vv(), _vv()
+    got = read.first(mine.pk, mine.customer_id)
+    assert got == build(mine.pk, mine.customer_id).get()
+    assert got is not None and got.customer.name == mine.customer.name
+    assert read.first(theirs.pk, mine.customer_id) is None
+    assert read.first(mine.pk, theirs.customer_id) is None
+    assert read.first(theirs.pk, theirs.customer_id) == theirs
+
+
+def test_a_sample_the_query_holds_twice_is_refused() -> None:
+    read = PreparedRead(
+        lambda key: VirtualVehicle.objects.filter(pk=key) | VirtualVehicle.objects.filter(pk=key),
+        samples=[("pk", uuid.UUID(int=0))],
+    )
+    with pytest.raises(ValueError, match="must appear once"):
+        read.first(uuid.uuid4())
