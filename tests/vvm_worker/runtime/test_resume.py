@@ -101,6 +101,14 @@ class Host:
                 return result
 
 
+def observed(results: list[StepResult]) -> list[tuple[Any, ...]]:
+    """What the VVM takes from each step: outcome, pending request, effects, requests, storage."""
+    return [
+        (r.outcome, r.pending, r.effects, r.effects_total, r.requests, r.storage_bytes)
+        for r in results
+    ]
+
+
 def test_a_warm_step_reads_only_its_new_answer_however_long_the_journal() -> None:
     host = Host(LOOP)
     last = host.run()
@@ -122,11 +130,7 @@ def test_resuming_gives_what_replaying_every_step_in_a_new_context_gives() -> No
     # run_step makes a new context for every step: it re-runs the program from its start.
     assert [r.answers_read for r in replayed.results][:5] == [0, 1, 2, 3, 4]
     assert host.storage == replayed.storage
-    assert [(r.outcome, r.pending, r.effects, r.effects_total, r.requests, r.storage_bytes)
-            for r in host.results] == [
-        (r.outcome, r.pending, r.effects, r.effects_total, r.requests, r.storage_bytes)
-        for r in replayed.results
-    ]  # fmt: skip
+    assert observed(host.results) == observed(replayed.results)
 
 
 def test_a_vv_that_moves_replays_once_on_its_new_host_then_resumes_there() -> None:
@@ -163,11 +167,7 @@ def test_a_vv_that_comes_back_catches_up_in_the_context_it_left_instead_of_repla
     replayed = Run(LOOP, seed=5)
     replayed.run()
     assert host.storage == replayed.storage
-    assert [(r.outcome, r.pending, r.effects, r.effects_total, r.requests, r.storage_bytes)
-            for r in host.results] == [
-        (r.outcome, r.pending, r.effects, r.effects_total, r.requests, r.storage_bytes)
-        for r in replayed.results
-    ]  # fmt: skip
+    assert observed(host.results) == observed(replayed.results)
 
 
 def test_effects_the_host_did_not_apply_are_reported_again_by_a_replay() -> None:
