@@ -321,26 +321,19 @@ def vehicle_record_state(
     *,
     vehicle_id: int,
     state: VehicleState,
-    carrying: Sequence[str] = (),
     track_aboard: bool = False,
     tasks_done: int = 0,
 ) -> None:
     """What an RV's control loop reports of its vehicle (``state``): where it is at its time,
     its flight phase, its odometer and flight time, and the planner's state (kept for a
-    restarted worker); ``carrying`` names the VVs aboard whose track gets this point, or
-    ``track_aboard``: every VV aboard now gets it (found by the database in the same
-    statement); ``tasks_done``: the RV served that many more tasks. Inside the caller's
-    transaction when there is one."""
+    restarted worker); ``track_aboard``: every VV aboard now gets this point on its track
+    (found by the database in the same statement); ``tasks_done``: the RV served that many
+    more tasks. Inside the caller's transaction when there is one."""
     here = state.position
     # One commit for the track points and the row (a lone UPDATE commits by itself).
-    alone = (carrying or track_aboard) and connection.get_autocommit()
+    alone = track_aboard and connection.get_autocommit()
     with transaction.atomic() if alone else contextlib.nullcontext():
-        if carrying:
-            TrackPoint.objects.bulk_create(
-                TrackPoint(vv_id=vv_id, t_s=state.t_s, lat=here.lat, lng=here.lng, alt=here.alt)
-                for vv_id in carrying
-            )
-        elif track_aboard:
+        if track_aboard:
             _track_points_aboard(vehicle_id, [(state.t_s, here)])
         Vehicle.objects.filter(pk=vehicle_id).update(
             lat=here.lat,
