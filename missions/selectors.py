@@ -47,9 +47,14 @@ def with_active_vv_count(queryset: QuerySet[M], *, name: str) -> QuerySet[M]:
     return queryset.annotate(**{name: Count("vvs", filter=~Q(vvs__status__in=ENDED_STATUSES))})
 
 
+def _with_hosts() -> QuerySet[VirtualVehicle]:
+    """VVs with their customer and hosts, as every read for a user gets them."""
+    return VirtualVehicle.objects.select_related("customer", "host_gs", "host_rv")
+
+
 def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:
     """The VVs a user may see: staff see every VV, a customer's user their customer's."""
-    qs = VirtualVehicle.objects.select_related("customer", "host_gs", "host_rv")
+    qs = _with_hosts()
     if user.is_staff:
         return qs
     if user.customer_id is None:
@@ -66,15 +71,13 @@ def with_task_counts(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
     )
 
 
-def _visible_vvs() -> QuerySet[VirtualVehicle]:
-    return VirtualVehicle.objects.select_related("customer", "host_gs", "host_rv").order_by()
-
-
 # The read of every API request about one VV (``vv_get_for_user``), compiled once: staff's,
 # and a customer's user's (the customer in the WHERE, as ``vv_list_for_user`` scopes it).
-_ANY_VV = PreparedRead(lambda pk: _visible_vvs().filter(pk=pk), samples=[("pk", uuid.UUID(int=0))])
+_ANY_VV = PreparedRead(
+    lambda pk: _with_hosts().order_by().filter(pk=pk), samples=[("pk", uuid.UUID(int=0))]
+)
 _CUSTOMERS_VV = PreparedRead(
-    lambda pk, customer_id: _visible_vvs().filter(pk=pk, customer_id=customer_id),
+    lambda pk, customer_id: _with_hosts().order_by().filter(pk=pk, customer_id=customer_id),
     samples=[("pk", uuid.UUID(int=0)), ("customer_id", -1)],
 )
 
