@@ -6,10 +6,11 @@ Redis database of the bench's own (``--redis``, flushed), ``migrate`` and ``coll
 the scenario's fleet (``--scenario``, the paper's Figure 3 by default: two RVs and a ground
 station) with ``--customers`` customers instead of the scenario's, each with ``--history``
 earlier VVs (so that its list is a full page, as on a platform in use), one worker per RV and
-per ground station, and ``--web`` daphne processes sharing one listening socket (``daphne
---fd``, as a process manager such as supervisord or systemd socket activation runs them;
-``--http gunicorn``: gunicorn's sync workers answer HTTP and one daphne the map's sockets),
-with ``DEBUG=0``, plain HTTP (``CPCC_HTTPS=0``), instant flights (``CPCC_SIM_SPEED=0``) and
+per ground station, and the web tier as in production: gunicorn's sync workers answer HTTP
+(``--web`` of them, with cpcc_site/gunicorn_conf.py) and one daphne the map's sockets, as a
+proxy in front routes ``/ws/`` (``--http daphne``: ``--web`` daphne processes answer both,
+sharing one listening socket, ``daphne --fd``, as supervisord or systemd socket activation
+runs them), with ``DEBUG=0``, plain HTTP (``CPCC_HTTPS=0``), instant flights (``CPCC_SIM_SPEED=0``) and
 the API's throttles raised far above the load (``CPCC_API_RATE_USER`` and
 ``CPCC_API_RATE_ADDRESS``: every client comes from 127.0.0.1, each customer's from one user).
 ``--settings`` tries a settings change without editing cpcc_site: a module on PYTHONPATH that
@@ -583,14 +584,19 @@ def main() -> None:
     )
     parser.add_argument("--subscribers", type=int, default=20, help="live map sockets")
     parser.add_argument(
-        "--web", type=int, default=2, help="web processes (daphne; with gunicorn: its workers)"
+        "--web",
+        type=int,
+        default=0,
+        help="web processes: gunicorn's workers (default: cpcc_site/gunicorn_conf.py's, two "
+        "a core), or daphne processes (default 2)",
     )
     parser.add_argument(
         "--http",
-        choices=("daphne", "gunicorn"),
-        default="daphne",
-        help="who answers HTTP: daphne (ASGI, also the map's sockets), or gunicorn's sync "
-        "workers (WSGI) with one daphne for the sockets",
+        choices=("gunicorn", "daphne"),
+        default="gunicorn",
+        help="who answers HTTP: gunicorn's sync workers (WSGI) with one daphne for the "
+        "sockets, as in production (cpcc_site/gunicorn_conf.py), or daphne alone (ASGI, "
+        "HTTP and the map's sockets)",
     )
     parser.add_argument("--scenario", default=str(DEFAULT_SCENARIO), help="the fleet")
     parser.add_argument("--speed", type=float, default=0.0, help="CPCC_SIM_SPEED (0: instant)")
@@ -603,6 +609,8 @@ def main() -> None:
         "PYTHONPATH that imports cpcc_site.settings and overrides)",
     )
     args = parser.parse_args()
+    if args.web <= 0:
+        args.web = 2 * (os.cpu_count() or 1) if args.http == "gunicorn" else 2
 
     from rich.console import Console
     from rich.table import Table
@@ -656,6 +664,8 @@ def main() -> None:
                     [
                         "-m",
                         "gunicorn",
+                        "-c",
+                        "python:cpcc_site.gunicorn_conf",
                         "--workers",
                         str(args.web),
                         "--bind",
@@ -686,7 +696,7 @@ def main() -> None:
             for answering in sorted({port, ws_port}):
                 _wait_until_ready(children, setup, answering)
         console.print(
-            f"platform up: {len(setup.workers)} workers, {args.web} daphne processes on "
+            f"platform up: {len(setup.workers)} workers, {args.web} {args.http} processes on "
             f"http://127.0.0.1:{port}/, logs in {logs}"
         )
 
@@ -911,6 +921,23 @@ def _report(
     for r in rows:
         table.add_row(*(c.replace("`", "").replace("**", "") for c in r))
     console.print(table)
+    # How the run went over time, warm-up included: a backlog the clients built (lateness
+    # behind their schedule) and how long it took to clear.
+    step = 5.0
+    console.print(f"over time ({step:g} s steps from the clients' start; the window starts at "
+                  f"{w0 - run.started:.0f} s): requests/s, p99 latency, max lateness behind schedule")  # fmt: skip
+    by_step: dict[int, list[Sample]] = defaultdict(list)
+    for s in run.samples:
+        by_step[int((s.sent - run.started) // step)].append(s)
+    for k in sorted(by_step):
+        group = by_step[k]
+        lat = sorted((s.done - s.sent) * 1000 for s in group)
+        late = max((s.sent - s.sched) * 1000 for s in group)
+        posts = sorted((s.done - s.sent) * 1000 for s in group if s.endpoint == "POST /vvs/")
+        console.print(
+            f"  {k * step:5.0f} s  {len(group) / step:6.1f}/s  p99 {_pct(lat, 99):7.1f} ms  "
+            f"late {late:8.1f} ms  POSTs {len(posts)}, slowest {max(posts, default=0):7.1f} ms"
+        )
 
     ms = sorted((s.done - s.sent) * 1000 for s in samples)
     rate = len(samples) / seconds

@@ -290,10 +290,7 @@ REST_FRAMEWORK = {
     ],
     # Per user (token or session) and per client address, counted for all web processes
     # together (in Redis); 429 with Retry-After beyond.
-    "DEFAULT_THROTTLE_CLASSES": [
-        "cpcc_site.throttling.UserRateThrottle",
-        "cpcc_site.throttling.AddressRateThrottle",
-    ],
+    "DEFAULT_THROTTLE_CLASSES": ["cpcc_site.throttling.RequestRateThrottle"],
     "DEFAULT_THROTTLE_RATES": {
         "user": env_str("CPCC_API_RATE_USER", "1200/minute"),
         "address": env_str("CPCC_API_RATE_ADDRESS", "2400/minute"),

@@ -24,7 +24,7 @@ import redis
 from django.conf import settings
 from redis.commands.core import Script
 from rest_framework.request import Request
-from rest_framework.throttling import SimpleRateThrottle
+from rest_framework.throttling import BaseThrottle, SimpleRateThrottle
 from rest_framework.throttling import UserRateThrottle as DRFUserRateThrottle
 
 logger = logging.getLogger("cpcc.web")
@@ -33,21 +33,26 @@ KEY_PREFIX = "cpcc:"  # before DRF's key (throttle_SCOPE_IDENT)
 RETRY_S = 5.0  # how long a process counts alone after Redis failed it
 _TIMEOUT_S = 0.5  # a request waits no longer than this for Redis
 
-# KEYS[1]: the client's request times; ARGV: now, duration (s), limit, a unique member.
-# Returns {1, count} when the request is allowed (and counted), {0, count, oldest time} when
-# it is not.
+# KEYS: the request times of each (client, scope); ARGV: now, then for each key its duration
+# (s), limit and a unique member. Returns for each key {1, count} when the request is allowed
+# there (and counted), {0, count, oldest time} when it is not.
 _HIT = """
 local now = tonumber(ARGV[1])
-local duration = tonumber(ARGV[2])
-redis.call('ZREMRANGEBYSCORE', KEYS[1], '-inf', now - duration)
-local count = redis.call('ZCARD', KEYS[1])
-if count < tonumber(ARGV[3]) then
-  redis.call('ZADD', KEYS[1], now, ARGV[4])
-  redis.call('PEXPIRE', KEYS[1], math.ceil(duration * 1000))
-  return {1, count + 1}
+local answers = {}
+for i, key in ipairs(KEYS) do
+  local duration = tonumber(ARGV[3 * i - 1])
+  redis.call('ZREMRANGEBYSCORE', key, '-inf', now - duration)
+  local count = redis.call('ZCARD', key)
+  if count < tonumber(ARGV[3 * i]) then
+    redis.call('ZADD', key, now, ARGV[3 * i + 1])
+    redis.call('PEXPIRE', key, math.ceil(duration * 1000))
+    answers[i] = {1, count + 1}
+  else
+    local oldest = redis.call('ZRANGE', key, 0, 0, 'WITHSCORES')
+    answers[i] = {0, count, oldest[2]}
+  end
 end
-local oldest = redis.call('ZRANGE', KEYS[1], 0, 0, 'WITHSCORES')
-return {0, count, oldest[2]}
+return answers
 """
 
 
@@ -96,11 +101,19 @@ def hit(
 ) -> tuple[bool, float | None]:
     """Count a request against ``limit`` requests in ``duration`` seconds: (allowed, time of
     the oldest request counted when refused). Raises redis.RedisError."""
-    member = f"{now!r}:{os.urandom(6).hex()}"
-    answer = _script(keys=[KEY_PREFIX + key], args=[now, duration, limit, member], client=client)
-    if int(answer[0]) == 1:
-        return True, None
-    return False, float(answer[2])
+    return hit_all(client, [(key, duration, limit)], now=now)[0]
+
+
+def hit_all(
+    client: redis.Redis, limits: list[tuple[str, float, int]], *, now: float
+) -> list[tuple[bool, float | None]]:
+    """``hit`` for each (key, duration, limit), in one round trip to Redis."""
+    args: list[Any] = [now]
+    for _, duration, limit in limits:
+        args += [duration, limit, f"{now!r}:{os.urandom(6).hex()}"]
+    keys = [KEY_PREFIX + key for key, _, _ in limits]
+    answers = _script(keys=keys, args=args, client=client)
+    return [(True, None) if int(a[0]) == 1 else (False, float(a[2])) for a in answers]
 
 
 def forget_all(client: redis.Redis) -> None:
@@ -152,3 +165,41 @@ class AddressRateThrottle(SharedRateThrottle):
 
     def get_cache_key(self, request: Request, view: Any) -> str:
         return self.cache_format % {"scope": self.scope, "ident": self.get_ident(request)}  # type: ignore[no-any-return]
+
+
+class RequestRateThrottle(BaseThrottle):
+    """The "user" and the "address" rates (``UserRateThrottle``, ``AddressRateThrottle``),
+    counted in one round trip to Redis: a request is refused when either rate refuses it, and
+    it counts against each rate that allows it, as DRF counts with several throttles."""
+
+    rates = (UserRateThrottle, AddressRateThrottle)
+
+    def __init__(self) -> None:
+        self.throttles = [rate() for rate in self.rates]
+        self._refused: list[SharedRateThrottle] = []
+
+    def allow_request(self, request: Request, view: Any) -> bool:
+        counted = [t for t in self.throttles if t.rate is not None]
+        keys = [t.get_cache_key(request, view) for t in counted]
+        shared = [(t, key) for t, key in zip(counted, keys, strict=True) if key is not None]
+        answers = None
+        if shared and not OUTAGE.skip():
+            now = self.throttles[0].timer()
+            limits = [(key, t.duration, t.num_requests) for t, key in shared]
+            try:
+                answers = hit_all(throttle_client(), limits, now=now)
+            except redis.RedisError as exc:
+                OUTAGE.failed(exc)
+        if answers is None:  # each on its own (counted in this process while Redis is out)
+            self._refused = [t for t in self.throttles if not t.allow_request(request, view)]
+        else:
+            self._refused = []
+            for (t, key), (allowed, oldest) in zip(shared, answers, strict=True):
+                t.key, t.now, t._oldest = key, now, oldest
+                if not allowed:
+                    self._refused.append(t)
+        return not self._refused
+
+    def wait(self) -> float | None:
+        waits = [w for w in (t.wait() for t in self._refused) if w is not None]
+        return max(waits, default=None)

@@ -7,8 +7,10 @@ both for a missing VV and for another customer's, so a caller cannot tell them a
 from __future__ import annotations
 
 import uuid
+from collections.abc import Sequence
 from typing import Any, TypeVar
 
+from django.db import connection
 from django.db.models import Count, Model, Q, QuerySet, TextField
 from django.db.models.functions import Cast
 
@@ -62,13 +64,49 @@ def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:
     return qs.filter(customer_id=user.customer_id)
 
 
-def with_task_counts(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
-    """The VVs with ``tasks_done`` and ``tasks_open`` counted in the same query, and without
-    the columns a list does not show (program, catalog, pending request)."""
-    return vvs.defer("program", "catalog", "pending").annotate(
-        tasks_done=Count("tasks", filter=Q(tasks__status=TaskStatus.DONE)),
-        tasks_open=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)),
+# What a list of VVs shows (the API's VVSerializer): only these columns are read.
+_LISTED = (
+    "id", "customer_id", "name", "status", "host_gs_id", "host_rv_id", "error", "error_line",
+    "error_column", "created", "finished", "host_gs__name", "host_rv__name",
+)  # fmt: skip
+
+
+def vvs_listed(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
+    """The VVs with only the columns a list shows (the hosts' names, not the customer, the
+    program or the journal). Their task counts come for one page at a time
+    (``with_task_counts``): counted in the same query, a page would join every task of every
+    VV of the customer, and so would the count of its VVs."""
+    return vvs.select_related(None).select_related("host_gs", "host_rv").only(*_LISTED)
+
+
+def with_task_counts(vvs: Sequence[VirtualVehicle]) -> Sequence[VirtualVehicle]:
+    """The VVs, each with ``tasks_done`` and ``tasks_open``: one statement for all of them."""
+    counts = task_counts(vv_ids=[vv.pk for vv in vvs])
+    for vv in vvs:
+        vv.tasks_done, vv.tasks_open = counts.get(vv.pk, (0, 0))  # type: ignore[attr-defined]
+    return vvs
+
+
+def task_counts(*, vv_ids: Sequence[uuid.UUID]) -> dict[uuid.UUID, tuple[int, int]]:
+    """The tasks done and open of each of these VVs (none: not in the answer), counted in one
+    statement written once (not compiled by the ORM at every request)."""
+    if not vv_ids:
+        return {}
+    quote = connection.ops.quote_name
+    status, vv = Task._meta.get_field("status").column, Task._meta.get_field("vv").column
+    sql = (
+        f"SELECT {quote(vv)}, COUNT(*) FILTER (WHERE {quote(status)} = %s),"
+        f" COUNT(*) FILTER (WHERE {quote(status)} = %s)"
+        f" FROM {quote(Task._meta.db_table)}"
+        f" WHERE {quote(vv)} IN ({', '.join(['%s'] * len(vv_ids))}) GROUP BY {quote(vv)}"
     )
+    pk = VirtualVehicle._meta.pk
+    keys = [pk.get_db_prep_value(vv_id, connection) for vv_id in vv_ids]  # type: ignore[union-attr]
+    with connection.cursor() as cursor:
+        cursor.execute(sql, [TaskStatus.DONE.value, TaskStatus.OPEN.value, *keys])
+        rows = cursor.fetchall()
+    to_python = pk.to_python  # type: ignore[union-attr]
+    return {to_python(key): (int(done), int(open_)) for key, done, open_ in rows}
 
 
 # The read of every API request about one VV (``vv_get_for_user``), compiled once: staff's,

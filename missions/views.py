@@ -23,7 +23,7 @@ from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.exceptions import PermissionDenied, ValidationError
 from django.core.paginator import Page, Paginator
-from django.db.models import Count, Q, QuerySet
+from django.db.models import Count
 from django.http import Http404, HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import redirect, render
 from django.urls import reverse
@@ -39,7 +39,6 @@ from missions.models import (
     PROGRAM_MAX_CHARS,
     PROGRAM_TOO_LONG,
     Task,
-    TaskStatus,
     VirtualVehicle,
     VVStatus,
 )
@@ -52,6 +51,7 @@ from missions.selectors import (
     vv_log_for_user,
     vv_storage_for_user,
     vv_tasks_for_user,
+    with_task_counts,
 )
 from vvm_worker.platform import platform_vvm
 from vvm_worker.runtime import SyntaxProblem, check_syntax
@@ -107,14 +107,6 @@ def _vv_or_404(request: HttpRequest, vv_id: uuid.UUID | str) -> VirtualVehicle:
 
 
 # --- how a VV is shown --------------------------------------------------------------------
-
-
-def with_task_counts(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
-    """The (already scoped) VVs, each with ``tasks_done`` and ``tasks_open``."""
-    return vvs.annotate(
-        tasks_done=Count("tasks", filter=Q(tasks__status=TaskStatus.DONE)),
-        tasks_open=Count("tasks", filter=Q(tasks__status=TaskStatus.OPEN)),
-    )
 
 
 def where(vv: VirtualVehicle, *, staff: bool) -> str:
@@ -265,10 +257,10 @@ def _dashboard(request: HttpRequest) -> dict[str, Any]:
         wanted = "all"
     statuses = FILTERS[wanted][1]
     shown_vvs = mine.filter(status__in=statuses) if statuses else mine
-    ordered = with_task_counts(shown_vvs).order_by("-created", "-submitted_s", "id")
+    ordered = shown_vvs.order_by("-created", "-submitted_s", "id")
     page: Page[VirtualVehicle] = Paginator(ordered, VVS_PER_PAGE).get_page(request.GET.get("page"))
     return {
-        "rows": _rows(page.object_list, staff=staff),
+        "rows": _rows(with_task_counts(list(page.object_list)), staff=staff),
         "page": page,
         "show": wanted,
         "filters": [(key, label) for key, (label, _) in FILTERS.items()],
@@ -494,8 +486,8 @@ def vv_detail(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
     user = request.user
     staff = bool(user.is_staff)
     try:
-        vv = with_task_counts(vv_list_for_user(user=user)).get(pk=vv_id)  # type: ignore[arg-type]
-    except VirtualVehicle.DoesNotExist:
+        (vv,) = with_task_counts([vv_get_for_user(user=user, vv_id=vv_id)])  # type: ignore[arg-type]
+    except VVNotFound:
         raise Http404("No such virtual vehicle.") from None
     tasks = list(vv_tasks_for_user(user=user, vv_id=vv.pk))  # type: ignore[arg-type]
     storage = vv_storage_for_user(user=user, vv_id=vv.pk)  # type: ignore[arg-type]

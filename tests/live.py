@@ -178,12 +178,16 @@ def collect_static(var_dir: Path) -> Path:
 
 
 class Web:
-    """The web server as a provider runs it (daphne, ASGI, DEBUG off) in a process of its own,
+    """The web server as a provider runs it (daphne, ASGI, or gunicorn, WSGI; DEBUG off) in a
+    process of its own,
     on a free port of 127.0.0.1, with the test database and broker; ``var_dir`` holds the
     collected static files (``collect_static``)."""
 
     def __init__(self, tmp: Path, redis_url: str, var_dir: Path) -> None:
         self.tmp = tmp
+        # "daphne" (HTTP and the map's sockets), or "gunicorn": its WSGI workers for HTTP
+        # with the production settings (cpcc_site/gunicorn_conf.py).
+        self.server = "daphne"
         self.port = free_port()
         self.env = {
             **production_env(var_dir),
@@ -201,9 +205,28 @@ class Web:
     def start(self) -> None:
         """Start it; returns once it answers."""
         log = self.log.open("ab")
+        command = {
+            "daphne": [
+                "daphne",
+                "-b",
+                "127.0.0.1",
+                "-p",
+                str(self.port),
+                "cpcc_site.asgi:application",
+            ],
+            "gunicorn": [
+                "gunicorn",
+                "-c",
+                "python:cpcc_site.gunicorn_conf",
+                "--workers",
+                "2",
+                "--bind",
+                f"127.0.0.1:{self.port}",
+                "cpcc_site.wsgi",
+            ],
+        }[self.server]
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "daphne", "-b", "127.0.0.1", "-p", str(self.port),
-             "cpcc_site.asgi:application"],
+            [sys.executable, "-m", *command],
             cwd=ROOT,
             env=self.env,
             stdout=log,

@@ -55,6 +55,7 @@ from missions.selectors import (
     vv_storage_for_user,
     vv_storage_get_for_user,
     vv_tasks_for_user,
+    vvs_listed,
     with_task_counts,
 )
 from vvm_worker.platform import platform_vvm
@@ -176,7 +177,7 @@ class VirtualVehicleViewSet(
     lookup_value_regex = UUID_PATTERN
 
     def get_queryset(self) -> QuerySet[VirtualVehicle]:
-        vvs = with_task_counts(vv_list_for_user(user=self.request.user)).order_by("-created")  # type: ignore[arg-type]
+        vvs = vvs_listed(vv_list_for_user(user=self.request.user)).order_by("-created")  # type: ignore[arg-type]
         wanted = self.request.query_params.get("status")
         if wanted is not None and wanted not in VVStatus.values:
             raise ValidationError(
@@ -186,6 +187,12 @@ class VirtualVehicleViewSet(
 
     def get_object(self) -> VirtualVehicle:
         return vv_get_for_user(user=self.request.user, vv_id=self.kwargs["pk"])  # type: ignore[arg-type]
+
+    def list(self, request: Request, *args: Any, **kwargs: Any) -> Response:
+        page = self.paginate_queryset(self.filter_queryset(self.get_queryset()))
+        assert page is not None, "the API paginates every list"
+        with_task_counts(page)  # the page's VVs' tasks, counted at once
+        return self.get_paginated_response(self.get_serializer(page, many=True).data)
 
     @extend_schema(
         request=SUBMISSIONS,

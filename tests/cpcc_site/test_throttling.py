@@ -96,3 +96,34 @@ def test_without_redis_each_process_counts_alone_and_says_so(
         assert [a.get(URL).status_code for _ in range(4)] == [200, 200, 200, 429]
     warnings = [r.getMessage() for r in caplog.records if r.name == "cpcc.web"]
     assert len(warnings) == 1 and "counted in this process alone" in warnings[0]
+
+
+def test_a_request_counts_against_both_rates_in_one_round_trip(
+    user_a, processes, monkeypatch
+) -> None:
+    monkeypatch.setattr(SimpleRateThrottle, "THROTTLE_RATES", {"user": "3/min", "address": "9/min"})
+    calls: list[list[str]] = []
+    script = throttling._script
+
+    def counting(*, keys, args, client):
+        calls.append(list(keys))
+        return script(keys=keys, args=args, client=client)
+
+    monkeypatch.setattr(throttling, "_script", counting)
+    a = token_client(user_a)
+    assert [a.get(URL).status_code for _ in range(4)] == [200, 200, 200, 429]
+    assert len(calls) == 4, "one call to Redis a request"
+    assert all(len(keys) == 2 for keys in calls), calls
+    assert {k.rsplit("_", 1)[0] for k in calls[0]} == {
+        "cpcc:throttle_user",
+        "cpcc:throttle_address",
+    }
+    # The refused request counted against the address (which allowed it), not the user.
+    other, _ = processes
+    now = SimpleRateThrottle.timer()
+    assert throttling.hit(other, calls[0][1].removeprefix("cpcc:"), now=now, duration=60, limit=5)[
+        0
+    ]
+    assert not throttling.hit(
+        other, calls[0][1].removeprefix("cpcc:"), now=now, duration=60, limit=5
+    )[0]

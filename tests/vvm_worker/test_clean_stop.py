@@ -104,6 +104,23 @@ def test_daphne_answers_every_concurrent_submission_and_stops_cleanly(web, token
     assert "Fatal Python error" not in web.log.read_text()
 
 
+def test_gunicorn_answers_every_concurrent_submission_and_stops_cleanly(web, tokens) -> None:
+    # Production's HTTP (cpcc_site/gunicorn_conf.py): each worker process checks programs
+    # with V8 and closes it when SIGTERM stops it.
+    web.server = "gunicorn"
+    web.start()
+    assert_every_submission_answered(burst(web.url(""), tokens))
+    with ThreadPoolExecutor(4) as pool:
+        pending = [pool.submit(burst_one, web.url(""), tokens[k], k) for k in range(4)]
+        status = web.terminate()
+        for future in pending:
+            future.result()
+    log = web.log.read_text()
+    assert status == 0, log[-3000:]
+    assert "Fatal Python error" not in log and "was sent" not in log, log[-3000:]
+    assert "exited with code" not in log or "exited with code 0" in log, log[-3000:]
+
+
 def burst_one(url: str, token: str, k: int) -> None:
     """Submissions until the server is gone (its stop may cut one short)."""
     api = requests.Session()

@@ -126,3 +126,86 @@ def test_a_submission_beyond_the_queue_quota_answers_429_for_that_customer(
     assert api_a.post(f"/api/v1/vvs/{first.pk}/cancel/").status_code == 200
     again = api_a.post("/api/v1/vvs/", {"name": "q2", "program": PROGRAM}, format="json")
     assert again.status_code == 201
+
+
+def test_a_vv_reads_as_its_declared_fields_say_in_one_and_in_a_list(
+    api_a, api_staff, customer_a, fleet_one
+) -> None:
+    # VVSerializer writes its representation out (speed): it must stay what DRF's generic
+    # ModelSerializer makes of the declared fields, counts and hosts included.
+    from django.utils import timezone
+    from rest_framework import serializers
+
+    from missions.api.serializers import VVSerializer
+    from missions.models import Task, TaskStatus
+
+    vv = VirtualVehicle.objects.create(
+        customer=customer_a,
+        name="Seen",
+        seed=1,
+        start_ms=0,
+        submitted_s=0.0,
+        program=PROGRAM,
+        status=VVStatus.FAILED,
+        host_rv=fleet_one,
+        error="TypeError: x is not a function",
+        error_line=3,
+        error_column=7,
+        finished=timezone.now(),
+    )
+    for q, status in enumerate([TaskStatus.DONE, TaskStatus.DONE, TaskStatus.OPEN, "rejected"]):
+        Task.objects.create(
+            vv=vv, q=q, lat=47.0, lng=13.0, alt=10.0, tolerance_m=1.0, sensors=[], requested_s=q,
+            status=status,
+        )  # fmt: skip
+    for api, host in [(api_a, "vehicle"), (api_staff, fleet_one.name)]:
+        request = api.get("/api/v1/vvs/").wsgi_request
+        one, listed = api.get(f"/api/v1/vvs/{vv.pk}/").json(), api.get("/api/v1/vvs/").json()
+        vv.refresh_from_db()
+        generic = serializers.ModelSerializer.to_representation(
+            VVSerializer(vv, context={"request": request}), vv
+        )
+        assert one == listed["results"][0] == dict(generic)
+        assert (one["host"], one["tasks_done"], one["tasks_open"]) == (host, 2, 1)
+
+
+def test_a_list_counts_each_pages_tasks_in_one_statement(api_a, customer_a) -> None:
+    from django.db import connection
+    from django.test.utils import CaptureQueriesContext
+
+    from missions.models import Task, TaskStatus
+
+    def vv(n: int) -> VirtualVehicle:
+        return VirtualVehicle(
+            customer=customer_a, name=f"vv {n}", program=PROGRAM, seed=n, start_ms=0,
+            submitted_s=0.0,
+        )  # fmt: skip
+
+    vvs = VirtualVehicle.objects.bulk_create([vv(n) for n in range(55)])
+    Task.objects.bulk_create(
+        Task(
+            vv=v,
+            q=q,
+            lat=47.0,
+            lng=13.0,
+            alt=10.0,
+            tolerance_m=1.0,
+            sensors=[],
+            requested_s=q,
+            status=TaskStatus.DONE if q < n % 4 else TaskStatus.OPEN,
+        )
+        for n, v in enumerate(vvs)
+        for q in range(n % 4 + 1)
+    )
+    expected = {f"vv {n}": (n % 4, 1) for n in range(55)}
+    api_a.get("/api/v1/vvs/")  # the token, remembered
+    with CaptureQueriesContext(connection) as first:
+        page1 = api_a.get("/api/v1/vvs/").json()
+    statements = [q["sql"] for q in first.captured_queries]  # (the next request clears them)
+    page2 = api_a.get("/api/v1/vvs/?page=2").json()
+    seen = {
+        v["name"]: (v["tasks_done"], v["tasks_open"]) for v in page1["results"] + page2["results"]
+    }
+    assert page1["count"] == 55 and len(page1["results"]) == 50 and seen == expected
+    # The count, the page, the page's task counts: none per VV, none joins every task.
+    assert len(statements) == 3, statements
