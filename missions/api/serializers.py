@@ -82,7 +82,7 @@ class VVSerializer(serializers.ModelSerializer):
         return _task_counts(vv)[1]
 
     def to_representation(self, instance: VirtualVehicle) -> dict[str, Any]:
-        # What the declared fields give (tests/missions/test_api.py compares the two), written
+        # What the declared fields give (tests/missions/api/test_vvs.py compares the two), written
         # out: a ModelSerializer builds its fields from the model anew for every instance it
         # is given, which cost an API request about a millisecond.
         vv = instance
