@@ -609,8 +609,10 @@ def main() -> None:
         "PYTHONPATH that imports cpcc_site.settings and overrides)",
     )
     args = parser.parse_args()
-    if args.web <= 0:
-        args.web = 2 * (os.cpu_count() or 1) if args.http == "gunicorn" else 2
+    if args.web <= 0:  # production's number of gunicorn workers, or two daphne processes
+        from cpcc_site import gunicorn_conf
+
+        args.web = gunicorn_conf.workers if args.http == "gunicorn" else 2
 
     from rich.console import Console
     from rich.table import Table

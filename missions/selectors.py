@@ -66,8 +66,8 @@ def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:
 
 # What a list of VVs shows (the API's VVSerializer): only these columns are read.
 _LISTED = (
-    "id", "customer_id", "name", "status", "host_gs_id", "host_rv_id", "error", "error_line",
-    "error_column", "created", "finished", "host_gs__name", "host_rv__name",
+    "id", "name", "status", "host_gs_id", "host_rv_id", "error", "error_line", "error_column",
+    "created", "finished", "host_gs__name", "host_rv__name",
 )  # fmt: skip
 
 
