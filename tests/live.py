@@ -107,7 +107,20 @@ class Workers:
         (negative: the signal that ended it)."""
         process = self.processes.pop(name)
         os.killpg(process.pid, signal.SIGTERM)
-        return process.wait(timeout=timeout)
+        try:
+            return process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            # Where it hangs: faulthandler (PYTHONFAULTHANDLER) writes every thread's stack to
+            # the log on SIGABRT.
+            os.kill(process.pid, signal.SIGABRT)
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+            raise AssertionError(
+                f"{name} still ran {timeout:g} s after SIGTERM\n{self.logs()}"
+            ) from None
 
     def stop_all(self) -> None:
         for process in self.processes.values():

@@ -9,6 +9,7 @@ finishes once the workers are back. Run on SQLite and on PostgreSQL (CI's second
 from __future__ import annotations
 
 import json
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
@@ -206,3 +207,20 @@ def test_an_rv_worker_stopped_with_sigterm_in_the_middle_of_steps_exits_0(
     for vv in vvs:
         vv.refresh_from_db()
         assert vv.status == VVStatus.FINISHED, vv.error
+
+
+@pytest.mark.parametrize("after_s", [0.0, 0.2, 0.5])
+def test_a_worker_stopped_with_sigterm_while_celery_starts_exits_0(
+    broker_url, tmp_path, after_s
+) -> None:
+    """A stop that comes as the worker has taken up its work and Celery is starting (before
+    Celery's own signal handlers, or just after) ends it like any other."""
+    VehicleFactory(name="Heli One", area=AREA_ONE)
+    VehicleFactory(name="Heli Two", area=AREA_ONE, depot_lng=12.862)
+    pool = Workers(tmp_path, broker_url, speed=0)
+    try:
+        pool.start("rvworker", "Heli One", "Heli Two")  # returns as Celery starts
+        time.sleep(after_s)  # the moment of the stop is what is tested, not a wait for it
+        assert pool.terminate("Heli One", timeout=20) == 0
+    finally:
+        pool.stop_all()

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from types import FrameType
 from typing import Any
 
+from celery.worker import state as celery_state
 from django.conf import settings
 from django.core.management.base import BaseCommand, CommandError
 from django.db.models import Model
@@ -72,8 +73,8 @@ def serve(
 
     SIGTERM or SIGINT stops it with exit status 0 at any time: before Celery runs (while the
     host takes up its work) the signal ends the command at once, once the piece of work in
-    progress on the host thread is done; then Celery's warm shutdown lets the task in progress
-    finish. Either way the host stops before the process ends, and V8 is shut down last
+    progress on the host thread is done; from then on Celery's warm shutdown lets the task in
+    progress finish (a stop while Celery starts, before its own handlers, asks for the same). Either way the host stops before the process ends, and V8 is shut down last
     (vvm_worker.runtime.v8, at exit).
     """
     ensure_broker()
@@ -84,6 +85,8 @@ def serve(
         host.start()
         command.stdout.write(f"{command_name(host)} {host.name}: queues {', '.join(queues)}")
         command.stdout.flush()
+        for signum in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(signum, _stop_celery)
         run_celery(queues=queues, node=node, loglevel=loglevel)
     finally:
         host.stop()
@@ -92,6 +95,12 @@ def serve(
 
 def _stop_now(signum: int, frame: FrameType | None) -> None:
     raise SystemExit(0)
+
+
+def _stop_celery(signum: int, frame: FrameType | None) -> None:
+    """A stop while Celery starts (before its own handlers, which do the same): its warm
+    shutdown, as soon as its loop runs, rather than an exception raised into its start-up."""
+    celery_state.should_stop = 0
 
 
 def command_name(host: GSHost | RVHost) -> str:
