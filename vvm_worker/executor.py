@@ -179,11 +179,10 @@ class DatabaseStore:
         if self._arrival is not None:  # no task was served where it stopped
             arrival, self._arrival = self._arrival, None
             self._write(arrival, moved=True)
-        # Where it stops to serve, the arrival goes with the first answer (simulate), but not
-        # in an RV worker: the answer holds its VV's row, and the arrival's track points lock
-        # (as keys) every VV aboard, which another process may hold in another order (an RV
-        # coming into service takes VVs over): written on its own, they lock in that order.
-        if moved and not self.ticks and self._serves_here(state.position):
+        # Where it stops to serve, the arrival goes with the first answer, in its transaction
+        # (the arrival's track points refer to every VV aboard, which other processes may hold:
+        # they hold them FOR NO KEY UPDATE, which such references do not wait for).
+        if moved and self._serves_here(state.position):
             self._arrival = state
             return
         self._write(state, moved=moved)

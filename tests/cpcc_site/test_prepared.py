@@ -5,9 +5,9 @@ from __future__ import annotations
 import uuid
 
 import pytest
-from django.db import transaction
+from django.db import DatabaseError, transaction
 
-from cpcc_site.prepared import PreparedRead
+from cpcc_site.prepared import PreparedRead, save_fields
 from missions.models import VirtualVehicle
 from tests.factories import CustomerFactory, GroundStationFactory, VehicleFactory
 
@@ -77,3 +77,25 @@ def test_a_sample_the_query_holds_twice_is_refused() -> None:
     )
     with pytest.raises(ValueError, match="must appear once"):
         read.first(uuid.uuid4())
+
+
+def test_save_fields_writes_those_fields_as_save_does_and_leaves_the_others() -> None:
+    vv = _vv(host_rv=VehicleFactory(name="Heli One"))
+    other = _vv()
+    stale = VirtualVehicle.objects.get(pk=vv.pk)
+    stale.name = "changed elsewhere"  # not among the fields: not written
+    stale.host_rv = None
+    stale.host_gs = GroundStationFactory(name="GS One")
+    stale.pending = {"q": 4, "kind": "single", "tasks": [{"lat": 1.5}]}
+    stale.steps = 9
+    before = vv.updated
+    save_fields(stale, ["host_rv", "host_gs", "pending", "steps", "updated"])
+    got = VirtualVehicle.objects.get(pk=vv.pk)
+    assert (got.host_rv_id, got.host_gs_id) == (None, stale.host_gs.pk)
+    assert got.pending == {"q": 4, "kind": "single", "tasks": [{"lat": 1.5}]}
+    assert got.steps == 9 and got.name == "VV"
+    assert got.updated > before  # auto_now sets itself, as in save
+    assert VirtualVehicle.objects.get(pk=other.pk).steps == other.steps
+    stale.delete()
+    with pytest.raises(DatabaseError, match="no row to update"):
+        save_fields(stale, ["steps"])

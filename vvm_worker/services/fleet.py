@@ -142,7 +142,7 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
         if vehicle.pk in fleet:  # where it is now (its host may know better than its row)
             newcomer = dataclasses.replace(newcomer, position=fleet[vehicle.pk].position)
         aboard_others = (
-            VirtualVehicle.objects.select_for_update(of=("self",))
+            VirtualVehicle.objects.select_for_update(of=("self",), no_key=True)
             .filter(status=VVStatus.RUNNING, host_rv__isnull=False, pending__isnull=False)
             .exclude(host_rv=vehicle)
             .select_related("customer", "host_rv")
@@ -204,7 +204,7 @@ def vehicles_check_leases(*, vvm: VVM) -> list[str]:
             raise LeasesUnsure(", ".join(v.name for v in stale))
         for vehicle in stale:
             stranded = (
-                VirtualVehicle.objects.select_for_update(of=("self",))
+                VirtualVehicle.objects.select_for_update(of=("self",), no_key=True)
                 .filter(host_rv=vehicle, status__in=ACTIVE_STATUSES)
                 .select_related("customer", "host_gs", "host_rv")
             )

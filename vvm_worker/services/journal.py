@@ -37,14 +37,29 @@ def _remember(vv_id: str, seq: int, text: str) -> None:
             _recent.popitem(last=False)
 
 
-def _stored_text(entry: dict[str, Any]) -> str | None:
-    """The entry's text exactly as the database gives it back, where that is known without
-    reading it: SQLite keeps the JSON text Django wrote (keys in the order they were made).
-    None for PostgreSQL, whose jsonb orders keys and numbers its own way: there, the text is
-    read back, so that a warm context and a replay see the same objects."""
-    if connection.vendor != "sqlite":
-        return None
-    return json.dumps(entry)
+def _insert(vv: VirtualVehicle, seq: int, entry: dict[str, Any]) -> str:
+    """Insert the entry; its text exactly as the database gives it back, so that a warm
+    context and a replay see the same objects. SQLite keeps the JSON text Django wrote (keys
+    in the order they were made); PostgreSQL's jsonb orders keys and writes numbers its own
+    way, and says how in the INSERT itself (no second statement to read it back)."""
+    if connection.vendor == "sqlite":
+        JournalEntry.objects.create(vv=vv, seq=seq, entry=entry)
+        return json.dumps(entry)
+    meta, quote = JournalEntry._meta, connection.ops.quote_name
+    vv_field, seq_field, entry_field = (meta.get_field(name) for name in ("vv", "seq", "entry"))
+    with connection.cursor() as cursor:
+        cursor.execute(
+            f"INSERT INTO {quote(meta.db_table)} ({quote(vv_field.column)}, "
+            f"{quote(seq_field.column)}, {quote(entry_field.column)}) VALUES (%s, %s, %s) "
+            f"RETURNING CAST({quote(entry_field.column)} AS text)",
+            [
+                vv_field.get_db_prep_value(vv.pk, connection),
+                seq,
+                entry_field.get_db_prep_save(entry, connection),
+            ],
+        )
+        (text,) = cursor.fetchone()
+    return text
 
 
 class JournalView(Sequence[str]):
@@ -96,11 +111,9 @@ class JournalView(Sequence[str]):
 def journal_append(vv: VirtualVehicle, entry: dict[str, Any], vvm: VVM) -> None:
     """Add an answer to the VV's journal (the caller saves the VV in the same transaction)."""
     seq = vv.journal_length
-    JournalEntry.objects.create(vv=vv, seq=seq, entry=entry)
-    text = _stored_text(entry)
-    if text is not None:
-        vv.__dict__.setdefault("_journal_fresh", {})[seq] = text
-        transaction.on_commit(lambda: _remember(str(vv.pk), seq, text))
+    text = _insert(vv, seq, entry)
+    vv.__dict__.setdefault("_journal_fresh", {})[seq] = text
+    transaction.on_commit(lambda: _remember(str(vv.pk), seq, text))
     vv.journal_length += 1
     vv.journal_bytes += len(json.dumps(entry, separators=(",", ":")))
     if vv.journal_length == settings.CPCC_JOURNAL_WARN_ENTRIES:

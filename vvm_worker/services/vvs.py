@@ -11,14 +11,14 @@ from collections.abc import Sequence
 from typing import Any
 
 from django.core.exceptions import ValidationError
-from django.db import transaction
+from django.db import connection, transaction
 from django.db.models import F
 
 from accounts.models import Customer, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
 from cpcc_site.json_depth import MAX_VALUE_DEPTH  # how deeply a stored value may nest
-from cpcc_site.prepared import PreparedRead
+from cpcc_site.prepared import PreparedRead, save_fields
 from fleet.models import Vehicle
 from missions.events import task_event, vv_event
 from missions.models import (
@@ -520,7 +520,7 @@ def _save_changed(vv: VirtualVehicle, before: tuple[Any, ...]) -> None:
         for name, old, new in zip(_ADVANCED_FIELDS, before, _row(vv), strict=True)
         if old != new
     ]
-    vv.save(update_fields=[*changed, "updated"])
+    save_fields(vv, [*changed, "updated"])  # no VV signals: compiled once, not at every step
 
 
 def _advance_locked(vv: VirtualVehicle, vvm: VVM, *, before: tuple[Any, ...] | None = None) -> None:
@@ -553,9 +553,13 @@ def _advance_locked(vv: VirtualVehicle, vvm: VVM, *, before: tuple[Any, ...] | N
     vvm.announce(lambda: vv_event(vv))
 
 
+# Every service holds a VV's row FOR NO KEY UPDATE (no_key): it never changes the row's key,
+# and the lock does not conflict with the key-share locks that rows referring to the VV take
+# (an RV's track points for every VV aboard, written in an answer's transaction while another
+# process holds some of those VVs).
 _LOCKED_VV = PreparedRead(
     lambda vv_id: (
-        VirtualVehicle.objects.select_for_update(of=("self",))
+        VirtualVehicle.objects.select_for_update(of=("self",), no_key=True)
         .select_related("customer", "host_gs", "host_rv")
         .filter(pk=vv_id)
     ),
@@ -681,27 +685,18 @@ def _answer_and_advance(
     pending = pending_of(vv)
     if pending is None or (vehicle_id is not None and vv.host_rv_id != vehicle_id):
         return False
-    # The task is answered only while it is open, of this request, and (``vehicle_id``) on
-    # this RV's list: the update says whether it was.
-    fenced = Task.objects.filter(pk=task_id, vv_id=vv.pk, q=pending.q, status=TaskStatus.OPEN)
-    if vehicle_id is not None:
-        fenced = fenced.filter(vehicle_id=vehicle_id)
-    index, served_by = 0, vehicle_id
-    if pending.kind == "batch" or vehicle_id is None:
-        row = fenced.values_list("index", "vehicle_id").first()
-        if row is None:
-            return False
-        index, served_by = row
     now = vvm.clock.now_s()
-    if not fenced.update(status=TaskStatus.DONE, done_s=now, readings=readings):
+    task = _answer_task(task_id, vv, q=pending.q, vehicle_id=vehicle_id, now=now, readings=readings)
+    if task is None:
         return False
+    served_by = task.vehicle_id
     before = _row(vv)
     time_ms = vvm.clock.epoch_ms(now)
     if pending.kind == "batch":
-        entry = answer_part(pending, index=index, time_ms=time_ms, data=readings)
+        entry = answer_part(pending, index=task.index, time_ms=time_ms, data=readings)
     else:
         entry = answer_task(pending, time_ms=time_ms, data=readings)
-    vvm.announce(lambda: task_event(Task.objects.get(pk=task_id), vv.customer_id))
+    vvm.announce(lambda: task_event(task, vv.customer_id))
     settled = (
         vvm.local_fleet.settle(vehicle_id, tasks_done=1)
         if vvm.local_fleet is not None and vehicle_id is not None
@@ -729,6 +724,65 @@ def _answer_and_advance(
     return True
 
 
+def _answer_task(
+    task_id: int,
+    vv: VirtualVehicle,
+    *,
+    q: int,
+    vehicle_id: int | None,
+    now: float,
+    readings: list[dict[str, Any]],
+) -> Task | None:
+    """Mark the task done with its readings, if it is still open, of the VV's request ``q``
+    and (``vehicle_id``) on this RV's list: a fenced UPDATE, which gives back what the answer
+    and the map need of the task (no read before or after it). None if it was not so."""
+    meta, quote = Task._meta, connection.ops.quote_name
+
+    def column(name: str) -> str:
+        return quote(meta.get_field(name).column)
+
+    fence = [
+        (column("id"), task_id),
+        (column("vv"), meta.get_field("vv").get_db_prep_value(vv.pk, connection)),
+        (column("q"), q),
+        (column("status"), TaskStatus.OPEN.value),
+    ]
+    if vehicle_id is not None:
+        fence.append((column("vehicle"), vehicle_id))
+    returned = ("index", "vehicle", "lat", "lng", "alt", "requested_s")
+    with connection.cursor() as cursor:
+        cursor.execute(
+            f"UPDATE {quote(meta.db_table)} SET {column('status')} = %s, "
+            f"{column('done_s')} = %s, {column('readings')} = %s "
+            f"WHERE {' AND '.join(f'{name} = %s' for name, _ in fence)} "
+            f"RETURNING {', '.join(column(name) for name in returned)}",
+            [
+                TaskStatus.DONE.value,
+                now,
+                meta.get_field("readings").get_db_prep_save(readings, connection),
+                *(value for _, value in fence),
+            ],
+        )
+        row = cursor.fetchone()
+    if row is None:
+        return None
+    index, served_by, lat, lng, alt, requested_s = row
+    return Task(
+        id=task_id,
+        vv_id=vv.pk,
+        q=q,
+        index=index,
+        lat=lat,
+        lng=lng,
+        alt=alt,
+        status=TaskStatus.DONE,
+        vehicle_id=served_by,
+        requested_s=requested_s,
+        done_s=now,
+        readings=readings,
+    )
+
+
 def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
     """Stop a VV at the customer's request: its open tasks are dropped, what it stored stays.
 
@@ -737,7 +791,7 @@ def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
     """
     with transaction.atomic():
         vv = (
-            VirtualVehicle.objects.select_for_update(of=("self",))
+            VirtualVehicle.objects.select_for_update(of=("self",), no_key=True)
             .select_related("customer", "host_gs", "host_rv")
             .get(pk=vv_id)
         )
@@ -874,7 +928,7 @@ def vv_update_program_for_user(
         # the VV's, in admission's order) means a VV starts either before the change, which is
         # then refused, or after it, with the new program.
         Customer.objects.select_for_update().filter(pk=vv.customer_id).first()
-        locked = VirtualVehicle.objects.select_for_update(of=("self",)).get(pk=vv.pk)
+        locked = VirtualVehicle.objects.select_for_update(of=("self",), no_key=True).get(pk=vv.pk)
         if locked.status != VVStatus.QUEUED:
             raise VVNotQueued(locked)
         locked.name = name
