@@ -71,9 +71,15 @@ class Announcer(Protocol):
 
     def announce(self, event: dict[str, Any]) -> None: ...
 
+    def flush(self) -> None:
+        """Publish what waits (an announcer that batches the changes of a host's work)."""
+
 
 class Silent:
     """The announcer of `simulate` and of tests: nobody listens."""
 
     def announce(self, event: dict[str, Any]) -> None:
+        pass
+
+    def flush(self) -> None:
         pass

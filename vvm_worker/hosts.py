@@ -81,8 +81,9 @@ class RealTimeScheduler:
     idle, it wakes for timers only, however many vehicles it serves.
     """
 
-    def __init__(self, clock: Clock) -> None:
+    def __init__(self, clock: Clock, *, after_each: Callable[[], None] | None = None) -> None:
         self.clock = clock
+        self._after_each = after_each  # after each piece of work (its changes published)
         self._timers: list[tuple[float, int, Callable[[], None]]] = []
         self._seq = 0
         self._inbox: queue.SimpleQueue[tuple[Callable[[], Any], concurrent.futures.Future[Any]]] = (
@@ -140,6 +141,8 @@ class RealTimeScheduler:
         else:
             if future is not None:
                 future.set_result(result)
+        if self._after_each is not None:
+            self._after_each()
 
 
 class CannotFly(Exception):
@@ -175,7 +178,7 @@ class RVHost:
         self.vvm.runtime = Runtime(max_contexts=min(WARM_CONTEXTS * len(vehicles), MAX_CONTEXTS))
         self.vvm.local_rvs = {vehicle.pk for vehicle in vehicles}
         self.clock = self.vvm.clock
-        self.scheduler = RealTimeScheduler(self.clock)
+        self.scheduler = RealTimeScheduler(self.clock, after_each=self.vvm.announcer.flush)
         # The loops here, as the services tell them of work routed to them (no message).
         self.fleet = RigFleet(lambda rig, wake: self.scheduler.submit(wake), alone=False)
         self.vvm.local_fleet = self.fleet
@@ -238,6 +241,7 @@ class RVHost:
                 self._each(lambda rv: rv.rig.store.write_waiting(), "report")
             except Exception:
                 logger.warning("the vehicles' last reports are lost: the database is away")
+            self.vvm.announcer.flush()
         finally:
             self.vvm.runtime.close()
             self._close_drivers()

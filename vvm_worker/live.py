@@ -39,21 +39,39 @@ def _client_for(url: str) -> redis.Redis:
 
 
 class FeedAnnouncer:
-    """Publishes announced changes after their transaction commits (at once outside one)."""
+    """Publishes announced changes after their transaction commits (at once outside one).
 
-    def __init__(self, client: redis.Redis | None = None) -> None:
+    ``batched`` (an RV worker's host thread): what commits is kept until ``flush``, which the
+    host calls after each piece of work, and then published in one round trip to Redis
+    however many changes the piece made (a task's answer makes three to five)."""
+
+    def __init__(self, client: redis.Redis | None = None, *, batched: bool = False) -> None:
         self._client = client
+        self._batched = batched
+        self._committed: list[str] = []
 
     def announce(self, event: dict[str, Any]) -> None:
         data = json.dumps(event, separators=(",", ":"))
-        transaction.on_commit(lambda: self._publish(data), robust=True)
+        if self._batched:
+            # Each change its own hook: one rolled back with a savepoint is never kept.
+            transaction.on_commit(lambda: self._committed.append(data))
+        else:
+            transaction.on_commit(lambda: self._publish([data]), robust=True)
 
-    def _publish(self, data: str) -> None:
-        client = self._client or feed_client()
+    def flush(self) -> None:
+        """Publish the changes that committed since the last flush, in one pipeline."""
+        if self._committed:
+            committed, self._committed = self._committed, []
+            self._publish(committed)
+
+    def _publish(self, events: list[str]) -> None:
+        pipe = (self._client or feed_client()).pipeline(transaction=False)
+        for data in events:
+            pipe.xadd(EVENTS_STREAM, {"e": data}, maxlen=STREAM_MAXLEN, approximate=True)
         try:
-            client.xadd(EVENTS_STREAM, {"e": data}, maxlen=STREAM_MAXLEN, approximate=True)
+            pipe.execute()
         except redis.RedisError as exc:
-            logger.warning("live map: change not published: %s", exc)
+            logger.warning("live map: %d change(s) not published: %s", len(events), exc)
 
 
 def publish_vehicle(state: dict[str, Any], client: redis.Redis | None = None) -> None:

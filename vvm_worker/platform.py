@@ -15,11 +15,12 @@ from vvm_worker.services import VVM
 
 def platform_vvm(*, local: LocalHost | None = None) -> VVM:
     """A VVM for a request of the web application, an admin action or a host's worker
-    (``local``: the RV whose own work skips the broker). Each has a runtime of its own."""
+    (``local``: the RVs whose own work skips the broker, whose host publishes the changes
+    of each piece of its work at once). Each has a runtime of its own."""
     return VVM(
         clock=SystemClock(),
         dispatcher=CeleryDispatcher(local=local),
         field=SensorField(0),
         lease_s=settings.CPCC_RV_LEASE_S,
-        announcer=FeedAnnouncer(),
+        announcer=FeedAnnouncer(batched=local is not None),
     )

@@ -1,0 +1,97 @@
+"""The live map's feed from an RV worker's host: the changes a piece of work committed reach
+Redis together, in one round trip, in the order they were made; a change rolled back (with its
+savepoint or its transaction) never does."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import redis
+from django.db import transaction
+
+from missions.events import EVENTS_STREAM
+from vvm_worker.live import FeedAnnouncer
+
+pytestmark = pytest.mark.django_db
+
+
+class CountingRedis(redis.Redis):
+    """The test run's Redis, counting the pipelines sent to it."""
+
+    pipelines = 0
+
+    def pipeline(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        pipe = super().pipeline(*args, **kwargs)
+        execute = pipe.execute
+
+        def counted(*a, **k):  # type: ignore[no-untyped-def]
+            type(self).pipelines += 1
+            return execute(*a, **k)
+
+        pipe.execute = counted  # type: ignore[method-assign]
+        return pipe
+
+
+@pytest.fixture
+def client(broker, broker_url):
+    broker.delete(EVENTS_STREAM)
+    CountingRedis.pipelines = 0
+    client = CountingRedis.from_url(broker_url)
+    yield client
+    client.close()
+    broker.delete(EVENTS_STREAM)
+
+
+def published(client: redis.Redis) -> list[int]:
+    return [json.loads(fields[b"e"])["n"] for _, fields in client.xrange(EVENTS_STREAM)]
+
+
+def test_a_pieces_committed_changes_go_out_in_one_round_trip_at_its_flush(
+    client, django_capture_on_commit_callbacks
+) -> None:
+    feed = FeedAnnouncer(client, batched=True)
+    with django_capture_on_commit_callbacks(execute=True), transaction.atomic():
+        feed.announce({"n": 1})
+        try:
+            with transaction.atomic():  # a savepoint, rolled back
+                feed.announce({"n": 2})
+                raise ValueError("rolled back")
+        except ValueError:
+            pass
+        feed.announce({"n": 3})
+    with django_capture_on_commit_callbacks(execute=True):
+        feed.announce({"n": 4})  # outside a transaction: committed at once
+    assert published(client) == []  # nothing before the flush
+    feed.flush()
+    assert published(client) == [1, 3, 4]
+    assert CountingRedis.pipelines == 1
+    feed.flush()  # nothing waits: no round trip
+    assert CountingRedis.pipelines == 1
+
+
+def test_a_change_whose_transaction_rolls_back_is_never_published(
+    client, django_capture_on_commit_callbacks
+) -> None:
+    feed = FeedAnnouncer(client, batched=True)
+    with django_capture_on_commit_callbacks(execute=True):
+        try:
+            with transaction.atomic():
+                feed.announce({"n": 1})
+                raise ValueError("rolled back")
+        except ValueError:
+            pass
+    feed.flush()
+    assert published(client) == []
+
+
+def test_unbatched_each_change_is_published_as_its_transaction_commits(
+    client, django_capture_on_commit_callbacks
+) -> None:
+    feed = FeedAnnouncer(client)
+    with django_capture_on_commit_callbacks(execute=True):
+        with transaction.atomic():
+            feed.announce({"n": 1})
+            feed.announce({"n": 2})
+        assert published(client) == []
+    assert published(client) == [1, 2]
