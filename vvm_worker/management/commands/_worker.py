@@ -74,7 +74,8 @@ def serve(
     SIGTERM or SIGINT stops it with exit status 0 at any time: before Celery runs (while the
     host takes up its work) the signal ends the command at once, once the piece of work in
     progress on the host thread is done; from then on Celery's warm shutdown lets the task in
-    progress finish (a stop while Celery starts, before its own handlers, asks for the same). Either way the host stops before the process ends, and V8 is shut down last
+    progress finish (a stop while Celery starts, before its own handlers, asks for the same).
+    Either way the host stops before the process ends, and V8 is shut down last
     (vvm_worker.runtime.v8, at exit).
     """
     ensure_broker()
