@@ -74,6 +74,26 @@ class TravelTime:
         )
 
 
+def _exact_block(
+    cost: CostFn, positions: Sequence[Position], values: FloatArray, known: TaskCosts | None
+) -> None:
+    """The task block of `values`, one call of `cost` per unordered pair not `known`."""
+    n = len(positions)
+    old = [-1] * n if known is None else [known.index.get(p, -1) for p in positions]
+    seen = [k for k in range(n) if old[k] >= 0]
+    if len(seen) > 1 and known is not None:
+        at = np.array([old[k] for k in seen])
+        rows = np.array(seen) + 1
+        values[np.ix_(rows, rows)] = known.block[np.ix_(at, at)]
+    for i in range(n):
+        for j in range(i + 1, n):
+            if old[i] < 0 or old[j] < 0:
+                # Symmetric in theory; mirroring keeps the matrix exactly so.
+                values[i + 1, j + 1] = values[j + 1, i + 1] = cost(positions[i], positions[j])
+    if known is not None:
+        known.keep(positions, values[1:, 1:].copy())
+
+
 def costs_from(cost: CostFn, origin: Position, positions: Sequence[Position]) -> FloatArray:
     """The cost from `origin` to each position, one call of `cost` per position.
 
@@ -86,19 +106,44 @@ def costs_from(cost: CostFn, origin: Position, positions: Sequence[Position]) ->
     return values
 
 
-def build_cost_matrix(cost: CostFn, origin: Position, positions: Sequence[Position]) -> CostMatrix:
+class TaskCosts:
+    """The task block of the last matrix `build_cost_matrix` built for one planner, by
+    position: a vehicle re-plans over mostly the same tasks (one served, one new), so the next
+    matrix copies the pairs it already knows instead of computing them again. Only for the
+    default costs, which depend on the two positions alone: the values are the same."""
+
+    def __init__(self) -> None:
+        self.index: dict[Position, int] = {}
+        self.block: FloatArray = np.zeros((0, 0), dtype=np.float64)
+
+    def keep(self, positions: Sequence[Position], block: FloatArray) -> None:
+        self.index = {p: k for k, p in enumerate(positions)}
+        self.block = block
+
+
+def build_cost_matrix(
+    cost: CostFn,
+    origin: Position,
+    positions: Sequence[Position],
+    *,
+    known: TaskCosts | None = None,
+) -> CostMatrix:
     """The cost matrix over `origin` followed by `positions`.
 
     Row 0 always comes from `cost` itself, so the first step of every planner is judged with
     the true cost. The task block calls `cost` once per ordered pair (n * (n - 1) calls) for a
     custom cost; `distance_m` and `TravelTime` are evaluated once per unordered pair up to
-    `EXACT_DEFAULT_LIMIT` tasks, and from a vectorised approximation of the ground distance
+    `EXACT_DEFAULT_LIMIT` tasks (pairs `known` from the caller's last matrix are copied from
+    it, and it keeps this one), and from a vectorised approximation of the ground distance
     above that (error below 1e-6 relative for legs under 50 km). Raises ValueError when a cost
     is negative or not finite.
     """
     n = len(positions)
     values = np.zeros((n + 1, n + 1), dtype=np.float64)
     values[0, 1:] = costs_from(cost, origin, positions)
+    if (cost is distance_m or isinstance(cost, TravelTime)) and n <= EXACT_DEFAULT_LIMIT:
+        _exact_block(cost, positions, values, known)
+        return CostMatrix(values, symmetric=True)
     if cost is distance_m or isinstance(cost, TravelTime):
         if n > EXACT_DEFAULT_LIMIT:
             ground = approximate_ground_matrix(positions)
@@ -110,11 +155,6 @@ def build_cost_matrix(cost: CostFn, origin: Position, positions: Sequence[Positi
                 values[1:, 1:] = np.maximum(ground, dalt, out=ground)
             else:
                 values[1:, 1:] = np.hypot(ground, dalt, out=ground)
-        else:
-            for i in range(n):
-                for j in range(i + 1, n):
-                    # Symmetric in theory; mirroring keeps the matrix exactly so.
-                    values[i + 1, j + 1] = values[j + 1, i + 1] = cost(positions[i], positions[j])
         return CostMatrix(values, symmetric=True)
     block = np.zeros((n, n), dtype=np.float64)
     for i, a in enumerate(positions):

@@ -18,7 +18,7 @@ from typing import Any
 from fleet.geo import Position, distance_m
 
 from .base import CostFn, Planner, PlanTask, canonical_order
-from .costs import TravelTime, build_cost_matrix, costs_from
+from .costs import TaskCosts, TravelTime, build_cost_matrix, costs_from
 from .exact import HELD_KARP_LIMIT, NODE_LIMIT, solve_open_path
 from .heuristics import (
     first_cheapest,
@@ -370,6 +370,7 @@ class LatencyPlanner:
         self.time_limit_s = time_limit_s
         self._route: list[int] = []
         self._last: tuple[Any, list[int]] | None = None
+        self._known = TaskCosts()
 
     def weight(self, age_s: float) -> float:
         """How much one second of a request's completion counts, by the request's age."""
@@ -412,7 +413,9 @@ class LatencyPlanner:
     def _plan(self, current: Position, tasks: Sequence[PlanTask], now_s: float | None) -> list[int]:
         deadline = None if self.time_limit_s is None else time.perf_counter() + self.time_limit_s
         now = max(task.requested_s for task in tasks) if now_s is None else now_s
-        matrix = build_cost_matrix(self.cost, current, [task.position for task in tasks])
+        matrix = build_cost_matrix(
+            self.cost, current, [task.position for task in tasks], known=self._known
+        )
         group_ids: dict[Any, int] = {}
         groups = [-1] + [
             group_ids.setdefault(

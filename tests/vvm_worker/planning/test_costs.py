@@ -9,6 +9,8 @@ from fleet.geo import Position, distance_m
 from tests.vvm_worker.planning.support import ORIGIN, random_tasks
 from vvm_worker.planning.costs import (
     EXACT_DEFAULT_LIMIT,
+    TaskCosts,
+    TravelTime,
     approximate_distance_matrix,
     build_cost_matrix,
 )
@@ -42,3 +44,28 @@ def test_custom_costs_are_used_in_both_directions() -> None:
         for j, b in enumerate(positions):
             if i != j:
                 assert matrix.values[i + 1, j + 1] == uphill_costs_more(a, b)
+
+
+def test_a_replan_copies_the_pairs_it_knows_and_gets_the_same_matrix() -> None:
+    calls: list[tuple[Position, Position]] = []
+
+    class CountedTravel(TravelTime):
+        def __call__(self, a: Position, b: Position) -> float:
+            calls.append((a, b))
+            return super().__call__(a, b)
+
+    travel = CountedTravel(max_speed_mps=12.0)
+    pool = [t.position for t in random_tasks(30, seed=8)]
+    known = TaskCosts()
+    # One task served, one new, one twice at the same place, the order shuffled.
+    rounds = [pool[:20], pool[1:21], [pool[21], *pool[2:21], pool[5]], pool[25:30]]
+    computed = []
+    for positions in rounds:
+        fresh = build_cost_matrix(travel, ORIGIN, positions)
+        calls.clear()
+        reused = build_cost_matrix(travel, ORIGIN, positions, known=known)
+        computed.append(len(calls) - len(positions))  # less the vehicle's row
+        assert reused.symmetric
+        assert np.array_equal(reused.values, fresh.values)
+    # The first time every pair; then only the pairs with a task not seen the time before.
+    assert computed == [20 * 19 // 2, 19, 20, 5 * 4 // 2]
