@@ -158,6 +158,16 @@ else:
     # A database server that does not answer is unavailable after 5 s, not after the
     # operating system's TCP timeout (minutes).
     DATABASES["default"].setdefault("OPTIONS", {})["connect_timeout"] = 5
+    # A statement a connection has run CPCC_DB_PREPARE_AFTER times is prepared on the server
+    # (psycopg's prepare_threshold, with parameters bound on the server): PostgreSQL parses
+    # and plans it once per connection, not at each run. A worker runs the same dozen
+    # statements at every task: measured, a third of PostgreSQL's CPU a task less
+    # (docs/benchmarks.md). 0: never prepared (PgBouncer before 1.21 in transaction mode,
+    # which cannot keep a connection's prepared statements).
+    _prepare_after = int(env_float("CPCC_DB_PREPARE_AFTER", 5, minimum=0))
+    if _prepare_after and DATABASES["default"]["ENGINE"] == "django.db.backends.postgresql":
+        DATABASES["default"]["OPTIONS"]["server_side_binding"] = True
+        DATABASES["default"]["OPTIONS"]["prepare_threshold"] = _prepare_after
 # PostgreSQL through a pool of at most CPCC_DB_POOL_SIZE connections per process (psycopg's
 # pool; 0: none, each thread opens its own as CPCC_DB_CONN_MAX_AGE says). The web server has
 # one by default (asgi.py): under ASGI each request runs in a thread of its own, which would
