@@ -11,8 +11,8 @@ from collections.abc import Sequence
 from typing import Any, TypeVar
 
 from django.db import connection
-from django.db.models import Count, Model, Q, QuerySet, TextField
-from django.db.models.functions import Cast
+from django.db.models import Count, F, Model, Q, QuerySet, TextField, Window
+from django.db.models.functions import Cast, RowNumber
 
 from accounts.models import User
 from cpcc_site.prepared import PreparedRead
@@ -21,9 +21,11 @@ from missions.events import event_for, migration_event, task_event, vv_event
 from missions.models import (
     ENDED_STATUSES,
     LogEntry,
+    Migration,
     StorageDocument,
     Task,
     TaskStatus,
+    TrackPoint,
     VirtualVehicle,
 )
 from missions.readings import IMAGE_FILE, image_file, image_references
@@ -206,6 +208,46 @@ MAP_TASKS_PER_VV = 2_000
 MAP_TRACK_PER_VV = 2_000
 
 
+# VVs whose rows one statement of a snapshot reads at most (SQLite's limit of parameters).
+_SNAPSHOT_CHUNK = 500
+
+
+def _vv_of(row: Any) -> Any:
+    return row[0] if isinstance(row, tuple) else row.vv_id
+
+
+def _by_vv(rows: QuerySet[Any], ids: Sequence[Any]) -> dict[Any, list[Any]]:
+    """The rows of these VVs, by VV, in the query's order: one statement per chunk of VVs."""
+    found: dict[Any, list[Any]] = {}
+    for start in range(0, len(ids), _SNAPSHOT_CHUNK):
+        for row in rows.filter(vv_id__in=ids[start : start + _SNAPSHOT_CHUNK]):
+            found.setdefault(_vv_of(row), []).append(row)
+    return found
+
+
+def _latest_per_vv(
+    rows: QuerySet[Any],
+    ids: Sequence[Any],
+    order: tuple[str, ...],
+    limit: int,
+    *,
+    fields: tuple[str, ...] = (),
+) -> dict[Any, list[Any]]:
+    """The last ``limit`` rows of each of these VVs by ``order``, oldest first, by VV (only
+    ``fields``, the VV's id first, when given): a window over each VV's rows, for all of them
+    at once."""
+    latest = rows.annotate(
+        rank=Window(
+            RowNumber(),
+            partition_by=[F("vv_id")],
+            order_by=[F(name).desc() for name in order],
+        )
+    ).filter(rank__lte=limit)
+    if fields:
+        latest = latest.values_list(*fields)
+    return _by_vv(latest.order_by("vv_id", *order), ids)
+
+
 def map_snapshot_for_user(*, user: User, vv_id: uuid.UUID | str | None = None) -> dict[str, Any]:
     """The live map's state as this user may see it, from the database: operation areas,
     ground stations, and VVs with their tasks, migrations and tracks (the vehicles' live
@@ -225,18 +267,26 @@ def map_snapshot_for_user(*, user: User, vv_id: uuid.UUID | str | None = None) -
     def shown(event: dict[str, Any]) -> dict[str, Any] | None:
         return event_for(event, customer_id=customer_id, staff=staff)
 
+    ids = [vv.pk for vv in chosen]
+    tasks = _latest_per_vv(Task.objects.all(), ids, ("q", "index"), MAP_TASKS_PER_VV)
+    track = _latest_per_vv(
+        TrackPoint.objects.all(),
+        ids,
+        ("t_s", "id"),
+        MAP_TRACK_PER_VV,
+        fields=("vv_id", "t_s", "lat", "lng"),
+    )
+    migrations = _by_vv(Migration.objects.order_by("vv_id", "at_s", "id"), ids)
     listed = []
     for vv in chosen:
-        tasks = vv.tasks.order_by("-q", "-index")[:MAP_TASKS_PER_VV]
-        track = vv.track.order_by("-t_s", "-id").values_list("t_s", "lat", "lng")
         listed.append(
             shown(vv_event(vv))
             | {
-                "tasks": [shown(task_event(t, vv.customer_id)) for t in reversed(list(tasks))],
+                "tasks": [shown(task_event(t, vv.customer_id)) for t in tasks.get(vv.pk, ())],
                 "migrations": [
-                    shown(migration_event(m, vv.customer_id)) for m in vv.migrations.all()
+                    shown(migration_event(m, vv.customer_id)) for m in migrations.get(vv.pk, ())
                 ],
-                "track": [[t, lat, lng] for t, lat, lng in reversed(track[:MAP_TRACK_PER_VV])],
+                "track": [[t, lat, lng] for _, t, lat, lng in track.get(vv.pk, ())],
             }
         )
     areas = Vehicle.objects.exclude(status=VehicleStatus.REMOVED).order_by("name")

@@ -66,3 +66,41 @@ def test_another_customers_mission_is_a_404(
     vv = _flown(platform, ground_station, customer_a)
     client.force_login(user_b)
     assert client.get(reverse("vv-map-history", args=[vv.pk])).status_code == 404
+
+
+def test_a_snapshot_reads_every_vvs_latest_history_in_a_few_statements(
+    customer_a, user_a, monkeypatch, django_assert_max_num_queries
+) -> None:
+    from missions import selectors
+    from missions.models import Task, TrackPoint, VirtualVehicle
+
+    monkeypatch.setattr(selectors, "MAP_TASKS_PER_VV", 2)
+    monkeypatch.setattr(selectors, "MAP_TRACK_PER_VV", 3)
+    vvs = [
+        VirtualVehicle.objects.create(
+            customer=customer_a,
+            name=f"VV {k}",
+            program="",
+            status="running",
+            submitted_s=k,
+            seed=k,
+            start_ms=0,
+        )
+        for k in range(12)
+    ]
+    for k, vv in enumerate(vvs):
+        for q in range(k % 4):
+            Task.objects.create(
+                vv=vv, q=q, lat=48.0, lng=12.0, alt=10.0, tolerance_m=1, sensors=[], requested_s=q
+            )
+        for t in range(k % 5):
+            TrackPoint.objects.create(vv=vv, t_s=float(t), lat=48.0 + k, lng=12.0, alt=10.0)
+    # However many VVs: those running and those ended, each kind of history once, the areas
+    # and the stations.
+    with django_assert_max_num_queries(7):
+        shown = selectors.map_snapshot_for_user(user=user_a)["vvs"]
+    assert [v["name"] for v in shown] == [vv.name for vv in vvs]
+    for k, v in enumerate(shown):
+        # The latest ones, oldest first, and only this VV's.
+        assert [t["q"] for t in v["tasks"]] == list(range(k % 4))[-2:]
+        assert v["track"] == [[float(t), 48.0 + k, 12.0] for t in range(k % 5)][-3:]
