@@ -99,3 +99,32 @@ def test_the_isolate_pool_and_the_database_pool_follow_the_environment(tmp_path:
         DATABASE_URL=f"sqlite:///{tmp_path}/db.sqlite3", CPCC_DB_POOL_SIZE="8"
     )
     assert (engine, pool) == ("django.db.backends.sqlite3", None)
+
+
+def test_postgresql_prepares_repeated_statements_unless_told_not_to(tmp_path: Path) -> None:
+    code = (
+        "import json, django; django.setup(); from django.conf import settings; "
+        "options = settings.DATABASES['default']['OPTIONS']; "
+        "print(json.dumps([options.get('server_side_binding'), "
+        "options.get('prepare_threshold')]))"
+    )
+
+    def read(**env: str) -> list[object]:
+        out = subprocess.run(
+            [sys.executable, "-c", code],
+            cwd=ROOT,
+            env={**os.environ, "CPCC_VAR_DIR": str(tmp_path), "CPCC_ISOLATE_POOL": "0", **env},
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        return json.loads(out.stdout)
+
+    postgres = "postgres://cpcc@127.0.0.1:5432/cpcc"
+    assert read(DATABASE_URL=postgres) == [True, 5]
+    assert read(DATABASE_URL=postgres, CPCC_DB_PREPARE_AFTER="2") == [True, 2]
+    # PgBouncer before 1.21 in transaction mode: Django's default, nothing prepared.
+    assert read(DATABASE_URL=postgres, CPCC_DB_PREPARE_AFTER="0") == [None, None]
+    # With the pool too; SQLite has no such thing.
+    assert read(DATABASE_URL=postgres, CPCC_DB_POOL_SIZE="3") == [True, 5]
+    assert read(DATABASE_URL=f"sqlite:///{tmp_path}/db.sqlite3") == [None, None]
