@@ -13,6 +13,7 @@ given on the command line win over these.
 - ``CPCC_WEB_BIND``: where to listen (``127.0.0.1:8000``);
 - ``CPCC_WEB_WORKERS``: worker processes (two per core: a worker waits for the database and
   Redis for part of each request, and for a client to take its answer);
+- each worker warms up before it takes its first request (``cpcc_site.wsgi.warm_up``);
 - SIGTERM stops taking connections and lets the requests in progress finish (at most
   ``graceful_timeout``, 20 s, as the workers and daphne do); each worker closes V8 on its
   way out (``vvm_worker.runtime``), exit status 0.
@@ -21,6 +22,7 @@ given on the command line win over these.
 from __future__ import annotations
 
 import os
+from typing import Any
 
 from cpcc_site.env import env_float, env_str
 
@@ -34,3 +36,10 @@ timeout = 120
 # Django's log settings, not gunicorn's own, for the application; gunicorn's access log off
 # (a proxy in front keeps one).
 accesslog = None
+
+
+def post_worker_init(worker: Any) -> None:
+    """A worker loaded the application: it warms up before it takes a request."""
+    from cpcc_site.wsgi import warm_up
+
+    warm_up()
