@@ -9,6 +9,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 from tests.cpcc_site.test_security import ROOT, django_settings, production_env
 
@@ -67,6 +68,19 @@ def test_no_module_reads_the_environment_but_the_settings() -> None:
     assert readers == []
 
 
+def _settings_read(code: str, tmp_path: Path, **env: str) -> Any:
+    """What ``code`` prints (JSON) in a new interpreter with these environment variables."""
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        env={**os.environ, "CPCC_VAR_DIR": str(tmp_path), **env},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(out.stdout)
+
+
 def test_the_isolate_pool_and_the_database_pool_follow_the_environment(tmp_path: Path) -> None:
     code = (
         "import json, os, django; django.setup(); from django.conf import settings; "
@@ -75,16 +89,8 @@ def test_the_isolate_pool_and_the_database_pool_follow_the_environment(tmp_path:
         "db['OPTIONS'].get('pool')]))"
     )
 
-    def read(**env: str) -> list[object]:
-        out = subprocess.run(
-            [sys.executable, "-c", code],
-            cwd=ROOT,
-            env={**os.environ, "CPCC_VAR_DIR": str(tmp_path), **env},
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        return json.loads(out.stdout)
+    def read(**env: str) -> Any:
+        return _settings_read(code, tmp_path, **env)
 
     postgres = "postgres://cpcc@127.0.0.1:5432/cpcc"
     size, engine, max_age, pool = read(
@@ -109,16 +115,8 @@ def test_postgresql_prepares_repeated_statements_unless_told_not_to(tmp_path: Pa
         "options.get('prepare_threshold')]))"
     )
 
-    def read(**env: str) -> list[object]:
-        out = subprocess.run(
-            [sys.executable, "-c", code],
-            cwd=ROOT,
-            env={**os.environ, "CPCC_VAR_DIR": str(tmp_path), "CPCC_ISOLATE_POOL": "0", **env},
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        return json.loads(out.stdout)
+    def read(**env: str) -> Any:
+        return _settings_read(code, tmp_path, CPCC_ISOLATE_POOL="0", **env)
 
     postgres = "postgres://cpcc@127.0.0.1:5432/cpcc"
     assert read(DATABASE_URL=postgres) == [True, 5]
