@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import threading
 from collections import OrderedDict
@@ -45,21 +46,29 @@ def _insert(vv: VirtualVehicle, seq: int, entry: dict[str, Any]) -> str:
     if connection.vendor == "sqlite":
         JournalEntry.objects.create(vv=vv, seq=seq, entry=entry)
         return json.dumps(entry)
-    meta, quote = JournalEntry._meta, connection.ops.quote_name
-    vv_field, seq_field, entry_field = (meta.get_field(name) for name in ("vv", "seq", "entry"))
+    meta = JournalEntry._meta
     with connection.cursor() as cursor:
         cursor.execute(
-            f"INSERT INTO {quote(meta.db_table)} ({quote(vv_field.column)}, "
-            f"{quote(seq_field.column)}, {quote(entry_field.column)}) VALUES (%s, %s, %s) "
-            f"RETURNING CAST({quote(entry_field.column)} AS text)",
+            _insert_sql(connection.vendor),
             [
-                vv_field.get_db_prep_value(vv.pk, connection),
+                meta.get_field("vv").get_db_prep_value(vv.pk, connection),
                 seq,
-                entry_field.get_db_prep_save(entry, connection),
+                meta.get_field("entry").get_db_prep_save(entry, connection),
             ],
         )
         (text,) = cursor.fetchone()
     return text
+
+
+@functools.cache
+def _insert_sql(vendor: str) -> str:
+    """``_insert``'s statement, written once per database."""
+    meta, quote = JournalEntry._meta, connection.ops.quote_name
+    vv, seq, entry = (quote(meta.get_field(name).column) for name in ("vv", "seq", "entry"))
+    return (
+        f"INSERT INTO {quote(meta.db_table)} ({vv}, {seq}, {entry}) VALUES (%s, %s, %s) "
+        f"RETURNING CAST({entry} AS text)"
+    )
 
 
 class JournalView(Sequence[str]):

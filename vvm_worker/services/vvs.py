@@ -4,6 +4,7 @@ and what a user does with their VVs (submit copies, edit while queued, restart, 
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import json
 import secrets
 import uuid
@@ -736,31 +737,22 @@ def _answer_task(
     """Mark the task done with its readings, if it is still open, of the VV's request ``q``
     and (``vehicle_id``) on this RV's list: a fenced UPDATE, which gives back what the answer
     and the map need of the task (no read before or after it). None if it was not so."""
-    meta, quote = Task._meta, connection.ops.quote_name
-
-    def column(name: str) -> str:
-        return quote(meta.get_field(name).column)
-
+    meta = Task._meta
     fence = [
-        (column("id"), task_id),
-        (column("vv"), meta.get_field("vv").get_db_prep_value(vv.pk, connection)),
-        (column("q"), q),
-        (column("status"), TaskStatus.OPEN.value),
+        task_id,
+        meta.get_field("vv").get_db_prep_value(vv.pk, connection),
+        q,
+        TaskStatus.OPEN.value,
+        *(() if vehicle_id is None else (vehicle_id,)),
     ]
-    if vehicle_id is not None:
-        fence.append((column("vehicle"), vehicle_id))
-    returned = ("index", "vehicle", "lat", "lng", "alt", "requested_s")
     with connection.cursor() as cursor:
         cursor.execute(
-            f"UPDATE {quote(meta.db_table)} SET {column('status')} = %s, "
-            f"{column('done_s')} = %s, {column('readings')} = %s "
-            f"WHERE {' AND '.join(f'{name} = %s' for name, _ in fence)} "
-            f"RETURNING {', '.join(column(name) for name in returned)}",
+            _answer_sql(connection.vendor, on_vehicle=vehicle_id is not None),
             [
                 TaskStatus.DONE.value,
                 now,
                 meta.get_field("readings").get_db_prep_save(readings, connection),
-                *(value for _, value in fence),
+                *fence,
             ],
         )
         row = cursor.fetchone()
@@ -780,6 +772,24 @@ def _answer_task(
         requested_s=requested_s,
         done_s=now,
         readings=readings,
+    )
+
+
+@functools.cache
+def _answer_sql(vendor: str, *, on_vehicle: bool) -> str:
+    """``_answer_task``'s statement, written once per database and fence."""
+    meta, quote = Task._meta, connection.ops.quote_name
+
+    def column(name: str) -> str:
+        return quote(meta.get_field(name).column)
+
+    fence = ["id", "vv", "q", "status", *(("vehicle",) if on_vehicle else ())]
+    returned = ("index", "vehicle", "lat", "lng", "alt", "requested_s")
+    return (
+        f"UPDATE {quote(meta.db_table)} SET {column('status')} = %s, "
+        f"{column('done_s')} = %s, {column('readings')} = %s "
+        f"WHERE {' AND '.join(f'{column(name)} = %s' for name in fence)} "
+        f"RETURNING {', '.join(column(name) for name in returned)}"
     )
 
 
