@@ -178,7 +178,8 @@ def test_an_rv_worker_stopped_with_sigterm_in_the_middle_of_steps_exits_0(
     customers = [CustomerFactory(name="Customer A"), CustomerFactory(name="Customer B")]
     vvm = platform_vvm()
     vvs = [
-        vv_submit(customer=c, name=f"Counter {k}", program=counter_program(), vvm=vvm, seed=k)
+        # Work enough for three stops however fast the worker gets through it.
+        vv_submit(customer=c, name=f"Counter {k}", program=counter_program(24), vvm=vvm, seed=k)
         for c in customers
         for k in range(2)
     ]

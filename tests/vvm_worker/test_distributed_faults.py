@@ -118,8 +118,8 @@ def workers(broker_url: str, tmp_path: Path, transactional_db: None) -> Iterator
         pool.stop_all()
 
 
-def counter_program() -> str:
-    return COUNTER.replace("TASKS", str(TASKS)).replace("SPIN", str(SPIN))
+def counter_program(tasks: int = TASKS) -> str:
+    return COUNTER.replace("TASKS", str(tasks)).replace("SPIN", str(SPIN))
 
 
 def ended(*vvs: VirtualVehicle) -> bool:
