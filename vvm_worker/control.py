@@ -145,6 +145,11 @@ class LoopConfig:
     recharge_s: float = 0.0
     standby_s: float = 0.0
     live: bool = False  # someone watches the map: keep the route up to date at every change
+    # A wake-up that finds the vehicle at its target with the arrival due (the leg flown, its
+    # arrival not taken up yet) leaves the plan to that arrival, which plans anyway once the
+    # tasks there are served: the RV workers, where with fast flights most wake-ups find it
+    # so. False (``simulate`` and the arena): it plans at once, as their event order has it.
+    wake_defers_to_arrival: bool = False
 
 
 class ControlLoop:
@@ -177,6 +182,8 @@ class ControlLoop:
         self.recent_alts: list[float] = []
         self._charged_at: float | None = None  # when a charge under way is done
         self.target: int | None = None  # the task the vehicle is flying to
+        # The leg to the target: where it ends, within what, and when it is estimated there.
+        self._leg: tuple[Position, float, float] | None = None
         self.returning = False
         self._token = 0  # invalidates the arrival of a leg that was replaced
         # What the live map shows between two plans: the status and the open tasks in the
@@ -199,6 +206,10 @@ class ControlLoop:
         """The vehicle's tasks or status changed: re-plan, unless its target still stands and
         its planner keeps targets until it gets there."""
         now = self.clock()
+        if self.config.wake_defers_to_arrival and self.target is not None and self._leg:
+            position, tolerance_m, due_s = self._leg
+            if due_s <= now and self.driver.has_arrived(position, tolerance_m, now):
+                return  # the arrival, due, plans with the change (see LoopConfig)
         if not self.planner.retargets and self.target is not None:
             tasks = self.store.open_tasks()
             if any(t.id == self.target for t in tasks):
@@ -338,6 +349,7 @@ class ControlLoop:
         token = self._token
         if choice is not None:
             self.target = choice.id
+            self._leg = None
             self.returning = False
             self.standby_until = None
             try:
@@ -346,6 +358,7 @@ class ControlLoop:
                 self._failed(exc)
                 return
             position, tolerance_m = choice.position, choice.tolerance_m
+            self._leg = (position, tolerance_m, arrival)
             self.scheduler.call_at(
                 arrival, lambda: self._arrive(token, position, tolerance_m, arrival)
             )

@@ -398,6 +398,7 @@ def build_rig(
     ticks: bool = False,
     defer_reports: bool = False,
     sensing: PlatformSensing | None = None,
+    wake_defers_to_arrival: bool = False,
 ) -> VehicleRig:
     """An RV's control loop over the database: for ``simulate`` (one per RV, one queue) and
     for the RV workers (real time). ``driver``: the vehicle's (a MAVLink autopilot), else a
@@ -424,6 +425,7 @@ def build_rig(
             recharge_s=settings.CPCC_RECHARGE_S / scale,
             standby_s=settings.CPCC_STANDBY_S / scale,
             live=live,
+            wake_defers_to_arrival=wake_defers_to_arrival,
         ),
     )
     return VehicleRig(vehicle.pk, vehicle.name, driver, store, loop)

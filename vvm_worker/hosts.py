@@ -364,6 +364,7 @@ class HostedRV:
             plan_time_limit_s=settings.CPCC_PLAN_TIME_LIMIT_S,
             live=vvm.listened,
             ticks=True,
+            wake_defers_to_arrival=True,
         )
         self.driver = self.rig.driver
         self.loop = self.rig.loop

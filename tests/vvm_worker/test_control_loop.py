@@ -1,0 +1,132 @@
+"""The control loop on its own (no Django): when it plans."""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from shapely.geometry import Polygon
+
+from fleet.geo import Position, offset
+from fleet.simulation import SimVehicle, VehicleSpec
+from vvm_worker.control import ACTIVE, Area, ControlLoop, LoopConfig, LoopTask, VehicleState
+from vvm_worker.planning import PlanTask, TravelTime, make_planner
+
+DEPOT = Position(47.0, 8.0, 0.0)
+
+
+class Store:
+    def __init__(self) -> None:
+        self.open: dict[int, LoopTask] = {}
+        self.served: list[tuple[int, float]] = []
+
+    def open_tasks(self) -> Sequence[LoopTask]:
+        return sorted(self.open.values(), key=lambda t: (t.requested_s, t.id))
+
+    def status(self) -> str:
+        return ACTIVE
+
+    def set_status(self, status: str, *, expected: str | None = None) -> None:
+        raise AssertionError("no battery here")
+
+    def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
+        del self.open[task.id]
+        self.served.append((task.id, now_s))
+
+    def record_state(self, state: VehicleState, *, moved: bool) -> None:
+        pass
+
+    def area(self) -> Area:
+        ring = [
+            offset(DEPOT, north_m=n, east_m=e) for n, e in ((-500, -500), (500, -500), (500, 500))
+        ]
+        return Area(Polygon([(p.lng, p.lat) for p in ring]), 0.0, 60.0)
+
+    def aboard(self) -> list[dict[str, Any]]:
+        return []
+
+
+class Clock:
+    """Discrete events, with the loop's timers run only when the test says."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+        self.timers: list[tuple[float, int, Callable[[], None]]] = []
+        self._seq = itertools.count()
+
+    def call_at(self, t_s: float, fn: Callable[[], None]) -> None:
+        heapq.heappush(self.timers, (t_s, next(self._seq), fn))
+
+    def run_due(self) -> None:
+        while self.timers and self.timers[0][0] <= self.now:
+            heapq.heappop(self.timers)[2]()
+
+
+class CountingPlanner:
+    def __init__(self) -> None:
+        self.inner = make_planner("latency", travel_time=TravelTime(10.0, 3.0))
+        self.plans = 0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    def plan(self, here: Position, tasks: list[PlanTask], now: float) -> list[PlanTask]:
+        self.plans += 1
+        return self.inner.plan(here, tasks, now)
+
+
+def _loop(*, defers: bool) -> tuple[ControlLoop, Store, Clock, CountingPlanner]:
+    store, clock, planner = Store(), Clock(), CountingPlanner()
+    loop = ControlLoop(
+        name="RV",
+        driver=SimVehicle(VehicleSpec(max_speed_mps=10.0, climb_rate_mps=3.0), DEPOT),
+        planner=planner,  # type: ignore[arg-type]
+        store=store,
+        scheduler=clock,
+        clock=lambda: clock.now,
+        config=LoopConfig(wake_defers_to_arrival=defers),
+    )
+    return loop, store, clock, planner
+
+
+def _task(task_id: int, east_m: float) -> LoopTask:
+    return LoopTask(task_id, offset(DEPOT, north_m=0.0, east_m=east_m, up_m=10.0), 1.0, 0.0)
+
+
+def test_a_wake_up_at_the_target_with_its_arrival_due_leaves_the_plan_to_the_arrival() -> None:
+    loop, store, clock, planner = _loop(defers=True)
+    store.open[1] = _task(1, 100.0)
+    loop.wake()
+    assert (loop.target, planner.plans) == (1, 1)
+    clock.now = clock.timers[0][0] + 1.0  # there, the arrival not taken up yet
+    store.open[2] = _task(2, 200.0)
+    loop.wake()
+    assert planner.plans == 1  # no plan: the arrival plans with the new task
+    clock.run_due()
+    assert [task for task, _ in store.served] == [1]
+    assert (loop.target, planner.plans) == (2, 2)
+    clock.now = clock.timers[0][0]
+    clock.run_due()
+    assert [task for task, _ in store.served] == [1, 2]
+
+
+def test_a_wake_up_in_flight_plans_at_once() -> None:
+    loop, store, clock, planner = _loop(defers=True)
+    store.open[1] = _task(1, 300.0)
+    loop.wake()
+    clock.now = clock.timers[0][0] / 2  # half way
+    store.open[2] = _task(2, 50.0)
+    loop.wake()
+    assert (planner.plans, loop.target) == (2, 2)  # the nearer task first
+
+
+def test_without_deferral_a_wake_up_at_the_target_plans_at_once() -> None:
+    loop, store, clock, planner = _loop(defers=False)
+    store.open[1] = _task(1, 100.0)
+    loop.wake()
+    clock.now = clock.timers[0][0] + 1.0
+    store.open[2] = _task(2, 200.0)
+    loop.wake()
+    assert planner.plans == 2
