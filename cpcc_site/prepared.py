@@ -9,7 +9,7 @@ ones of ``select_related``) exactly as a queryset would.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Generic, TypeVar
 
 from django.db import DatabaseError, connections, models
@@ -34,6 +34,61 @@ class PreparedRead(Generic[M]):
         self._compiled: dict[tuple[str, str], tuple[Any, str, list[Any], list[int]]] = {}
 
     def first(self, *keys: Any, using: str = "default") -> M | None:
+        """The first row for these keys (the query as compiled: no LIMIT is added, so a
+        locking read stays as the queryset wrote it)."""
+        found = self._objects(keys, None, 0, using, first=True)
+        return found[0] if found else None
+
+    def all(
+        self, *keys: Any, limit: int | None = None, offset: int = 0, using: str = "default"
+    ) -> list[M]:
+        """The rows for these keys, in the queryset's order: ``limit`` of them (None: all)
+        from ``offset`` on, as slicing the queryset gives them."""
+        return self._objects(keys, limit, offset, using)
+
+    def _objects(
+        self, keys: Sequence[Any], limit: int | None, offset: int, using: str, first: bool = False
+    ) -> list[M]:
+        compiler, sql, params = self._bound(keys, using)
+        if limit is not None:
+            sql, params = f"{sql} LIMIT %s OFFSET %s", [*params, limit, offset]
+        elif offset:
+            raise ValueError("an offset needs a limit")
+        with connections[using].cursor() as cursor:
+            cursor.execute(sql, params)
+            if first:
+                row = cursor.fetchone()
+                rows = [] if row is None else [row]
+            else:
+                rows = cursor.fetchall()
+        if not rows:
+            return []
+        select, klass_info = compiler.select, compiler.klass_info
+        converters = compiler.get_converters([column for column, _, _ in select])
+        if converters:
+            rows = list(compiler.apply_converters(rows, converters))
+        fields = klass_info["select_fields"]
+        start, end = fields[0], fields[-1] + 1
+        names = [column.target.attname for column, _, _ in select[start:end]]
+        populators = get_related_populators(klass_info, select, using)
+        model = klass_info["model"]
+        found: list[M] = []
+        for row in rows:
+            obj: M = model.from_db(using, names, row[start:end])
+            for populator in populators:
+                populator.populate(row, obj)
+            found.append(obj)
+        return found
+
+    def count(self, *keys: Any, using: str = "default") -> int:
+        """How many rows there are for these keys (what ``queryset.count()`` says)."""
+        _, sql, params = self._bound(keys, using)
+        with connections[using].cursor() as cursor:
+            cursor.execute(f"SELECT COUNT(*) FROM ({sql}) counted", params)
+            return int(cursor.fetchone()[0])
+
+    def _bound(self, keys: Sequence[Any], using: str) -> tuple[Any, str, list[Any]]:
+        """The compiled query, its SQL and its parameters with these keys in their places."""
         connection = connections[using]
         compiled = self._compiled.get((using, connection.vendor))
         if compiled is None:
@@ -43,22 +98,19 @@ class PreparedRead(Generic[M]):
         params = [*params]
         for (name, _), at, key in zip(self.samples, places, keys, strict=True):
             params[at] = self._field(compiler.query.model, name).get_db_prep_value(key, connection)
-        with connection.cursor() as cursor:
+        return compiler, sql, params
+
+    def rows(self, *keys: Any, using: str = "default") -> list[tuple[Any, ...]]:
+        """Every row of a ``values_list`` queryset for these keys, as tuples (the columns
+        converted as the queryset would)."""
+        compiler, sql, params = self._bound(keys, using)
+        with connections[using].cursor() as cursor:
             cursor.execute(sql, params)
-            row = cursor.fetchone()
-        if row is None:
-            return None
-        select, klass_info = compiler.select, compiler.klass_info
-        converters = compiler.get_converters([column for column, _, _ in select])
+            found = cursor.fetchall()
+        converters = compiler.get_converters([column for column, _, _ in compiler.select])
         if converters:
-            (row,) = compiler.apply_converters([row], converters)
-        fields = klass_info["select_fields"]
-        start, end = fields[0], fields[-1] + 1
-        names = [column.target.attname for column, _, _ in select[start:end]]
-        obj: M = klass_info["model"].from_db(using, names, row[start:end])
-        for populator in get_related_populators(klass_info, select, using):
-            populator.populate(row, obj)
-        return obj
+            found = [tuple(row) for row in compiler.apply_converters(found, converters)]
+        return found
 
     @staticmethod
     def _field(model: type[models.Model], name: str) -> Any:
@@ -79,7 +131,7 @@ class PreparedRead(Generic[M]):
         return compiler, sql, list(params), at
 
 
-_UPDATES: dict[tuple[type[models.Model], tuple[str, ...], str], tuple[str, list[Any]]] = {}
+_UPDATES: dict[tuple[Any, ...], tuple[str, list[Any]]] = {}
 
 
 def save_fields(obj: models.Model, fields: Sequence[str], *, using: str = "default") -> None:
@@ -104,3 +156,167 @@ def save_fields(obj: models.Model, fields: Sequence[str], *, using: str = "defau
         cursor.execute(sql, params)
         if cursor.rowcount != 1:
             raise DatabaseError(f"{model.__name__} {obj.pk}: no row to update")
+
+
+def update_row(
+    model: type[models.Model],
+    pk: Any,
+    *,
+    values: Mapping[str, Any],
+    add: Mapping[str, Any] | None = None,
+    using: str = "default",
+) -> int:
+    """``model.objects.filter(pk=pk).update(**values, **{f: F(f) + n for f, n in add})`` with
+    its SQL written once per model and fields (the ORM compiles an update at every call): one
+    ``UPDATE`` by the primary key; fields that set themselves are left as ``update`` leaves
+    them. The number of rows changed (0: no such row)."""
+    connection = connections[using]
+    add = add or {}
+    key = (model, tuple(values), tuple(add), connection.vendor)
+    compiled = _UPDATES.get(key)
+    if compiled is None:
+        meta, quote = model._meta, connection.ops.quote_name
+        targets = [meta.get_field(name) for name in (*values, *add)]
+        columns = [f"{quote(field.column)} = %s" for field in targets[: len(values)]]
+        columns += [
+            f"{quote(field.column)} = {quote(field.column)} + %s"
+            for field in targets[len(values) :]
+        ]
+        sql = f"UPDATE {quote(meta.db_table)} SET {', '.join(columns)} WHERE {quote(meta.pk.column)} = %s"
+        compiled = _UPDATES[key] = (sql, targets)
+    sql, targets = compiled
+    given = [*values.values(), *add.values()]
+    params = [
+        field.get_db_prep_save(value, connection)
+        for field, value in zip(targets, given, strict=True)
+    ]
+    params.append(model._meta.pk.get_db_prep_value(pk, connection))
+    with connection.cursor() as cursor:
+        cursor.execute(sql, params)
+        return int(cursor.rowcount)
+
+
+_VALUES: dict[tuple[Any, ...], str] = {}
+
+
+def values_by_pk(
+    model: type[models.Model], field: str, pks: Sequence[Any], *, using: str = "default"
+) -> dict[Any, Any]:
+    """``dict(model.objects.filter(pk__in=pks).values_list("pk", field))`` for a field the
+    database gives as Python wants it (text, numbers), with its SQL written once per number of
+    keys (up to _CACHED_ROWS)."""
+    if not pks:
+        return {}
+    connection = connections[using]
+    key = (model, field, len(pks), connection.vendor)
+    sql = _VALUES.get(key)
+    if sql is None:
+        meta, quote = model._meta, connection.ops.quote_name
+        sql = (
+            f"SELECT {quote(meta.pk.column)}, {quote(meta.get_field(field).column)} "
+            f"FROM {quote(meta.db_table)} WHERE {quote(meta.pk.column)} IN "
+            f"({', '.join(['%s'] * len(pks))})"
+        )
+        if len(pks) <= _CACHED_ROWS:
+            _VALUES[key] = sql
+    pk_field = model._meta.pk
+    with connection.cursor() as cursor:
+        cursor.execute(sql, [pk_field.get_db_prep_value(pk, connection) for pk in pks])
+        return dict(cursor.fetchall())
+
+
+_INSERTS: dict[tuple[Any, ...], tuple[str, list[Any]]] = {}
+# Parameters of one INSERT at most (SQLite takes 32,766, PostgreSQL 65,535): more rows go in
+# several. Statements of up to _CACHED_ROWS rows are written once, longer ones each time.
+_MAX_PARAMS = 30_000
+_CACHED_ROWS = 16
+
+
+def insert_rows(
+    objs: Sequence[models.Model],
+    *,
+    on_conflict: str | None = None,
+    unique_fields: Sequence[str] = (),
+    update_fields: Sequence[str] = (),
+    using: str = "default",
+) -> None:
+    """``bulk_create(objs)`` for a model without save signals that anyone listens to, with its
+    SQL written once per model, number of rows and conflict handling: one ``INSERT`` of every
+    concrete field but an automatic primary key, which each new row's object then has.
+
+    ``on_conflict``: None (a conflict raises ``IntegrityError``), ``"ignore"`` (a row that
+    conflicts is not inserted; no key is given back) or ``"update"`` (the row that conflicts
+    on ``unique_fields`` takes ``update_fields`` from the new one; no key is given back).
+    Fields that set themselves (``auto_now``, defaults) do so as in ``bulk_create``."""
+    if not objs:
+        return
+    connection = connections[using]
+    model = type(objs[0])
+    meta = model._meta
+    per_statement = max(1, _MAX_PARAMS // len(meta.local_concrete_fields))
+    if len(objs) > per_statement:
+        for start in range(0, len(objs), per_statement):
+            insert_rows(
+                objs[start : start + per_statement],
+                on_conflict=on_conflict,
+                unique_fields=unique_fields,
+                update_fields=update_fields,
+                using=using,
+            )
+        return
+    key = (model, len(objs), on_conflict, tuple(unique_fields), tuple(update_fields))
+    compiled = _INSERTS.get((*key, connection.vendor))
+    if compiled is None:
+        compiled = _insert_sql(
+            model, len(objs), on_conflict, unique_fields, update_fields, connection
+        )
+        if len(objs) <= _CACHED_ROWS:
+            _INSERTS[(*key, connection.vendor)] = compiled
+    sql, fields = compiled
+    params = [
+        field.get_db_prep_save(field.pre_save(obj, True), connection)
+        for obj in objs
+        for field in fields
+    ]
+    with connection.cursor() as cursor:
+        cursor.execute(sql, params)
+        keys = cursor.fetchall() if on_conflict is None else None
+    for at, obj in enumerate(objs):
+        if keys is not None and meta.pk not in fields:
+            obj.pk = keys[at][0]
+        obj._state.adding, obj._state.db = False, using
+
+
+def _insert_sql(
+    model: type[models.Model],
+    rows: int,
+    on_conflict: str | None,
+    unique_fields: Sequence[str],
+    update_fields: Sequence[str],
+    connection: Any,
+) -> tuple[str, list[Any]]:
+    meta, quote = model._meta, connection.ops.quote_name
+    fields = [
+        field
+        for field in meta.local_concrete_fields
+        if not (field.primary_key and getattr(field, "db_returning", False))
+    ]
+    marks = f"({', '.join(['%s'] * len(fields))})"
+    sql = (
+        f"INSERT INTO {quote(meta.db_table)} ({', '.join(quote(f.column) for f in fields)}) "
+        f"VALUES {', '.join([marks] * rows)}"
+    )
+    if on_conflict == "ignore":
+        sql += " ON CONFLICT DO NOTHING"
+    elif on_conflict == "update":
+        unique = ", ".join(quote(meta.get_field(name).column) for name in unique_fields)
+        updates = ", ".join(
+            f"{quote(column)} = EXCLUDED.{quote(column)}"
+            for column in (meta.get_field(name).column for name in update_fields)
+        )
+        sql += f" ON CONFLICT ({unique}) DO UPDATE SET {updates}"
+    elif on_conflict is None:
+        sql += f" RETURNING {quote(meta.pk.column)}"
+    else:
+        raise ValueError(f"on_conflict: None, 'ignore' or 'update', not {on_conflict!r}")
+    return sql, fields

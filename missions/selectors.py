@@ -81,6 +81,69 @@ def vvs_listed(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
     return vvs.select_related(None).select_related("host_gs", "host_rv").only(*_LISTED)
 
 
+# The pages of a VV list (``vvs_listed``, newest first), compiled once: staff's and a
+# customer's user's, each for every VV or those of one status.
+def _listed(customer_id: int | None, status: str | None) -> QuerySet[VirtualVehicle]:
+    vvs = vvs_listed(VirtualVehicle.objects.all()).order_by("-created")
+    if customer_id is not None:
+        vvs = vvs.filter(customer_id=customer_id)
+    return vvs if status is None else vvs.filter(status=status)
+
+
+_STATUS_SAMPLE = "\x00status"
+_LISTS = {
+    (False, False): PreparedRead(lambda: _listed(None, None), samples=[]),
+    (False, True): PreparedRead(
+        lambda status: _listed(None, status), samples=[("status", _STATUS_SAMPLE)]
+    ),
+    (True, False): PreparedRead(
+        lambda customer_id: _listed(customer_id, None), samples=[("customer_id", -1)]
+    ),
+    (True, True): PreparedRead(
+        lambda customer_id, status: _listed(customer_id, status),
+        samples=[("customer_id", -1), ("status", _STATUS_SAMPLE)],
+    ),
+}
+
+
+class VVPages:
+    """The VVs a user may see (``vv_list_for_user``, only what a list shows, newest first),
+    as a paginator takes them: ``count()`` and a slice each read with SQL written once."""
+
+    ordered = True  # (the paginator asks)
+
+    def __init__(self, read: PreparedRead[VirtualVehicle] | None, keys: Sequence[Any]) -> None:
+        self._read, self._keys = read, list(keys)
+
+    def count(self) -> int:
+        return 0 if self._read is None else self._read.count(*self._keys)
+
+    def __len__(self) -> int:
+        return self.count()
+
+    def __getitem__(self, wanted: slice) -> list[VirtualVehicle]:
+        start, stop = wanted.start or 0, wanted.stop
+        if self._read is None or (stop is not None and stop <= start):
+            return []
+        limit = None if stop is None else stop - start
+        if limit is None and start:
+            return self._read.all(*self._keys)[start:]
+        return self._read.all(*self._keys, limit=limit, offset=start)
+
+
+def vv_pages_for_user(*, user: User, status: str | None = None) -> VVPages:
+    """The VVs of ``vv_list_for_user`` as a list pages through them (``vvs_listed``, newest
+    first), all of them or those of one status."""
+    if user.is_staff:
+        customer: tuple[Any, ...] = ()
+    elif user.customer_id is not None:
+        customer = (user.customer_id,)
+    else:
+        return VVPages(None, ())
+    wanted = () if status is None else (status,)
+    return VVPages(_LISTS[(bool(customer), bool(wanted))], (*customer, *wanted))
+
+
 def with_task_counts(vvs: Sequence[VirtualVehicle]) -> Sequence[VirtualVehicle]:
     """The VVs, each with ``tasks_done`` and ``tasks_open``: one statement for all of them."""
     counts = task_counts(vv_ids=[vv.pk for vv in vvs])

@@ -19,6 +19,7 @@ from django.conf import settings
 from django.db import transaction
 from django.db.models import F
 
+from cpcc_site.prepared import PreparedRead
 from fleet.driving import Driver
 from fleet.geo import Position, distance_m
 from fleet.models import SensorType, Vehicle, VehicleStatus
@@ -48,6 +49,15 @@ from vvm_worker.services.routing import planned_order
 
 _SDC_TTL_S = 10.0
 _TASK_FIELDS = ("id", "lat", "lng", "alt", "tolerance_m", "requested_s", "sensors", "vv_id", "q")
+# An RV's open tasks, oldest request first (read again whenever they may have changed).
+_OPEN_TASKS = PreparedRead(
+    lambda vehicle_id: (
+        Task.objects.filter(vehicle_id=vehicle_id, status=TaskStatus.OPEN)
+        .order_by("requested_s", "id")
+        .values_list(*_TASK_FIELDS)
+    ),
+    samples=[("vehicle", -7_654_321)],
+)
 
 
 def _loop_task(task: Task) -> LoopTask:
@@ -119,12 +129,20 @@ class DatabaseStore:
                 key=lambda t: (t.requested_s, t.id),
             )
         if self._tasks is None:
-            rows = (
-                Task.objects.filter(vehicle_id=self.vehicle_id, status=TaskStatus.OPEN)
-                .order_by("requested_s", "id")
-                .only(*_TASK_FIELDS)
-            )
-            self._tasks = [_loop_task(task) for task in rows]
+            self._tasks = [
+                LoopTask(
+                    id=pk,
+                    position=Position(lat, lng, alt),
+                    tolerance_m=tolerance_m,
+                    requested_s=requested_s,
+                    sensors=tuple(sensors),
+                    vv=vv_id,
+                    group=f"{vv_id}:{q}",
+                )
+                for pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q in (
+                    _OPEN_TASKS.rows(self.vehicle_id)
+                )
+            ]
         return self._tasks
 
     def status(self) -> str:

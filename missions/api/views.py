@@ -52,6 +52,7 @@ from missions.selectors import (
     vv_image_for_user,
     vv_list_for_user,
     vv_log_for_user,
+    vv_pages_for_user,
     vv_storage_for_user,
     vv_storage_get_for_user,
     vv_tasks_for_user,
@@ -178,18 +179,25 @@ class VirtualVehicleViewSet(
 
     def get_queryset(self) -> QuerySet[VirtualVehicle]:
         vvs = vvs_listed(vv_list_for_user(user=self.request.user)).order_by("-created")  # type: ignore[arg-type]
+        wanted = self._status_wanted()
+        return vvs.filter(status=wanted) if wanted else vvs
+
+    def _status_wanted(self) -> str | None:
+        """The ``status`` the list is asked for (None: all); a 400 for one that is none."""
         wanted = self.request.query_params.get("status")
         if wanted is not None and wanted not in VVStatus.values:
             raise ValidationError(
                 {"status": [f"{wanted!r} is not a status; one of {', '.join(VVStatus.values)}."]}
             )
-        return vvs.filter(status=wanted) if wanted else vvs
+        return wanted or None
 
     def get_object(self) -> VirtualVehicle:
         return vv_get_for_user(user=self.request.user, vv_id=self.kwargs["pk"])  # type: ignore[arg-type]
 
     def list(self, request: Request, *args: Any, **kwargs: Any) -> Response:
-        page = self.paginate_queryset(self.filter_queryset(self.get_queryset()))
+        # The queryset's pages, each read with SQL written once (vv_pages_for_user).
+        vvs = vv_pages_for_user(user=request.user, status=self._status_wanted())  # type: ignore[arg-type]
+        page = self.paginate_queryset(vvs)  # type: ignore[arg-type]
         assert page is not None, "the API paginates every list"
         with_task_counts(page)  # the page's VVs' tasks, counted at once
         return self.get_paginated_response(self.get_serializer(page, many=True).data)

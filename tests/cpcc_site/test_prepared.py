@@ -5,10 +5,12 @@ from __future__ import annotations
 import uuid
 
 import pytest
-from django.db import DatabaseError, transaction
+from django.db import DatabaseError, IntegrityError, transaction
 
-from cpcc_site.prepared import PreparedRead, save_fields
-from missions.models import VirtualVehicle
+from cpcc_site import prepared
+from cpcc_site.prepared import PreparedRead, insert_rows, save_fields, update_row, values_by_pk
+from fleet.models import Vehicle
+from missions.models import LogEntry, StorageDocument, Task, VirtualVehicle
 from tests.factories import CustomerFactory, GroundStationFactory, VehicleFactory
 
 pytestmark = pytest.mark.django_db
@@ -99,3 +101,80 @@ def test_save_fields_writes_those_fields_as_save_does_and_leaves_the_others() ->
     stale.delete()
     with pytest.raises(DatabaseError, match="no row to update"):
         save_fields(stale, ["steps"])
+
+
+def _task(vv: VirtualVehicle, q: int) -> Task:
+    return Task(vv=vv, q=q, lat=1.0, lng=2.0, alt=3.0, tolerance_m=1.0, sensors=["CO2"],
+                requested_s=4.0)  # fmt: skip
+
+
+def test_insert_rows_inserts_as_bulk_create_does_and_gives_each_object_its_key() -> None:
+    vv = _vv()
+    tasks = [_task(vv, q) for q in (5, 3, 9)]
+    insert_rows(tasks)
+    assert all(not task._state.adding for task in tasks)
+    stored = {task.pk: task for task in Task.objects.filter(vv=vv)}
+    assert {pk: task.q for pk, task in stored.items()} == {task.pk: task.q for task in tasks}
+    assert stored[tasks[0].pk].sensors == ["CO2"] and stored[tasks[0].pk].status == "open"
+    with pytest.raises(IntegrityError), transaction.atomic():
+        insert_rows([_task(vv, 3)])  # a second task of request 3, index 0
+
+
+def test_insert_rows_ignores_or_updates_the_rows_that_conflict() -> None:
+    vv = _vv()
+    insert_rows([LogEntry(vv=vv, seq=1, at_s=1.0, message="first")])
+    insert_rows(
+        [LogEntry(vv=vv, seq=1, at_s=2.0, message="again"), LogEntry(vv=vv, seq=2, at_s=2.0,
+         message="second")],
+        on_conflict="ignore",
+    )  # fmt: skip
+    assert list(vv.log.order_by("seq").values_list("message", flat=True)) == ["first", "second"]
+    doc = {"vv": vv, "key": "k", "size_bytes": 3, "updated_s": 1.0}
+    insert_rows([StorageDocument(**doc, value=[1])])
+    update = {"unique_fields": ["vv", "key"], "update_fields": ["value", "updated_s"]}
+    insert_rows([StorageDocument(**doc | {"updated_s": 2.0}, value={"a": 2})],
+                on_conflict="update", **update)  # fmt: skip
+    (stored,) = vv.storage.all()
+    assert (stored.value, stored.updated_s) == ({"a": 2}, 2.0)
+
+
+def test_insert_rows_splits_what_one_statement_cannot_hold(monkeypatch) -> None:
+    monkeypatch.setattr(prepared, "_MAX_PARAMS", 30)  # two tasks a statement
+    vv = _vv()
+    tasks = [_task(vv, q) for q in range(5)]
+    insert_rows(tasks)
+    assert sorted(Task.objects.filter(vv=vv).values_list("pk", "q")) == sorted(
+        (task.pk, task.q) for task in tasks
+    )
+
+
+def test_update_row_sets_and_adds_as_an_orm_update_does() -> None:
+    vehicle = VehicleFactory(name="Heli One")
+    Vehicle.objects.filter(pk=vehicle.pk).update(tasks_done=3)
+    changed = update_row(
+        Vehicle, vehicle.pk, values={"lat": 1.5, "planner_state": {"a": [1]}}, add={"tasks_done": 2}
+    )
+    vehicle.refresh_from_db()
+    assert (changed, vehicle.lat, vehicle.planner_state, vehicle.tasks_done) == (
+        1,
+        1.5,
+        {"a": [1]},
+        5,
+    )
+    assert update_row(Vehicle, vehicle.pk + 1000, values={"lat": 2.0}) == 0
+
+
+def test_values_by_pk_and_rows_read_what_the_queryset_reads() -> None:
+    one, two = VehicleFactory(name="One"), VehicleFactory(name="Two", status="maintenance")
+    assert values_by_pk(Vehicle, "status", [two.pk, one.pk, two.pk + 1000]) == {
+        one.pk: "active",
+        two.pk: "maintenance",
+    }
+    vv = _vv()
+    insert_rows([_task(vv, q) for q in (2, 1)])
+    read = PreparedRead(
+        lambda key: Task.objects.filter(vv=key).order_by("q").values_list("vv_id", "q", "sensors"),
+        samples=[("vv", uuid.UUID(int=0))],
+    )
+    assert read.rows(vv.pk) == [(vv.pk, 1, ["CO2"]), (vv.pk, 2, ["CO2"])]
+    assert read.rows(uuid.uuid4()) == []

@@ -11,9 +11,9 @@ from typing import TypedDict
 
 from django.core.exceptions import ValidationError
 from django.db import connection, transaction
-from django.db.models import F
 from django.db.models.functions import Now
 
+from cpcc_site.prepared import update_row
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.models import (
@@ -335,15 +335,19 @@ def vehicle_record_state(
     with transaction.atomic() if alone else contextlib.nullcontext():
         if track_aboard:
             _track_points_aboard(vehicle_id, [(state.t_s, here)])
-        Vehicle.objects.filter(pk=vehicle_id).update(
-            lat=here.lat,
-            lng=here.lng,
-            alt=here.alt,
-            phase=state.phase,
-            distance_m=state.distance_m,
-            flight_s=state.flight_s,
-            planner_state=state.planner_state,
-            **({"tasks_done": F("tasks_done") + tasks_done} if tasks_done else {}),
+        update_row(
+            Vehicle,
+            vehicle_id,
+            values={
+                "lat": here.lat,
+                "lng": here.lng,
+                "alt": here.alt,
+                "phase": state.phase,
+                "distance_m": state.distance_m,
+                "flight_s": state.flight_s,
+                "planner_state": state.planner_state,
+            },
+            add={"tasks_done": tasks_done} if tasks_done else None,
         )
 
 

@@ -14,6 +14,7 @@ from django.db.models.signals import m2m_changed, post_delete, post_save
 from shapely import STRtree
 from shapely.geometry import Point
 
+from cpcc_site.prepared import insert_rows, values_by_pk
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.events import migration_event, task_event
@@ -168,9 +169,7 @@ def fleet_caps_and_rows(
     routes: dict[int, tuple[Position, ...]] = {}
     online: dict[int, bool] = {}
     unsure = sorted(pk for pk, live in known.items() if live.status is None)
-    statuses = (
-        dict(Vehicle.objects.filter(pk__in=unsure).values_list("pk", "status")) if unsure else {}
-    )
+    statuses = values_by_pk(Vehicle, "status", unsure)
     for pk, live in known.items():
         status = live.status if live.status is not None else statuses.get(pk)
         if status is None or status == VehicleStatus.REMOVED or pk not in shape.rows:
@@ -454,7 +453,7 @@ def vv_record_migration(
     if source is not None:
         # An RV's last reported position (its depot before its first flight).
         here, there = source.position, to.position
-        migration = Migration.objects.create(
+        migration = Migration(
             vv=vv,
             from_kind=HostKind.RV if isinstance(source, Vehicle) else HostKind.GS,
             from_name=source.name,
@@ -467,6 +466,7 @@ def vv_record_migration(
             to_lat=there.lat,
             to_lng=there.lng,
         )
+        insert_rows([migration])
         vvm.announce(lambda: migration_event(migration, vv.customer_id))
     if isinstance(to, Vehicle):
         vv.host_rv, vv.host_gs = to, None

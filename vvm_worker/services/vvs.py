@@ -19,7 +19,7 @@ from accounts.models import Customer, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
 from cpcc_site.json_depth import MAX_VALUE_DEPTH  # how deeply a stored value may nest
-from cpcc_site.prepared import PreparedRead, save_fields
+from cpcc_site.prepared import PreparedRead, insert_rows, save_fields
 from fleet.models import Vehicle
 from missions.events import task_event, vv_event
 from missions.models import (
@@ -313,9 +313,9 @@ def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> VVError 
         return VVError(ErrorKind.PLATFORM, message)
     stored = [doc for doc in final.values() if doc is not None]
     if stored:
-        StorageDocument.objects.bulk_create(
+        insert_rows(
             stored,
-            update_conflicts=True,
+            on_conflict="update",
             unique_fields=["vv", "key"],
             update_fields=["value", "size_bytes", "updated_s"],
         )
@@ -324,7 +324,7 @@ def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> VVError 
         StorageDocument.objects.filter(vv=vv, key__in=removed).delete()
     if lines:
         # A line is numbered by the program: applying it twice would be a duplicate.
-        LogEntry.objects.bulk_create(lines, ignore_conflicts=True)
+        insert_rows(lines, on_conflict="ignore")
     vv.effects_applied = max(vv.effects_applied, result.effects_total)
     vv.storage_bytes = result.storage_bytes
     return None
@@ -462,8 +462,8 @@ def _save_tasks(vv: VirtualVehicle, tasks: list[Task] | None, vvm: VVM) -> None:
     """Save the new ones of these tasks (as routing left them: on an RV's list, or rejected)."""
     new = [t for t in tasks or () if t.pk is None]
     if new:
-        created = Task.objects.bulk_create(new)
-        vvm.announce(lambda: [task_event(task, vv.customer_id) for task in created])
+        insert_rows(new)
+        vvm.announce(lambda: [task_event(task, vv.customer_id) for task in new])
 
 
 def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:

@@ -209,3 +209,34 @@ def test_a_list_counts_each_pages_tasks_in_one_statement(api_a, customer_a) -> N
     assert page1["count"] == 55 and len(page1["results"]) == 50 and seen == expected
     # The count, the page, the page's task counts: none per VV, none joins every task.
     assert len(statements) == 3, statements
+
+
+def test_a_list_shows_the_users_vvs_newest_first_of_the_status_asked(
+    api_a, api_b, api_staff, customer_a, customer_b
+) -> None:
+    import datetime as dt
+
+    from django.utils import timezone
+
+    start = timezone.now()
+    for n, (customer, status) in enumerate(
+        [(customer_a, "queued"), (customer_b, "queued"), (customer_a, "finished"),
+         (customer_a, "queued"), (customer_b, "finished")]
+    ):  # fmt: skip
+        vv = VirtualVehicle.objects.create(
+            customer=customer, name=f"vv {n}", program=PROGRAM, seed=n, start_ms=0,
+            submitted_s=0.0, status=status,
+        )  # fmt: skip
+        VirtualVehicle.objects.filter(pk=vv.pk).update(created=start + dt.timedelta(seconds=n))
+
+    def names(api: APIClient, query: str = "") -> tuple[int, list[str]]:
+        body = api.get(f"/api/v1/vvs/{query}").json()
+        return body["count"], [vv["name"] for vv in body["results"]]
+
+    assert names(api_a) == (3, ["vv 3", "vv 2", "vv 0"])
+    assert names(api_a, "?status=queued") == (2, ["vv 3", "vv 0"])
+    assert names(api_b, "?status=finished") == (1, ["vv 4"])
+    assert names(api_staff) == (5, ["vv 4", "vv 3", "vv 2", "vv 1", "vv 0"])
+    assert names(api_staff, "?status=finished") == (2, ["vv 4", "vv 2"])
+    assert names(api_a, "?status=failed") == (0, [])
+    assert api_a.get("/api/v1/vvs/?page=2").status_code == 404
