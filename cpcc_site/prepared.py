@@ -10,6 +10,7 @@ ones of ``select_related``) exactly as a queryset would.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from django.db import DatabaseError, connections, models
@@ -18,20 +19,30 @@ from django.db.models.query import get_related_populators
 M = TypeVar("M", bound=models.Model)
 
 
+@dataclass(frozen=True)
+class Many:
+    """The sample of a key that is a list: ``marker(i)`` is its i-th value, one the query
+    holds nowhere else."""
+
+    marker: Callable[[int], Any]
+
+
 class PreparedRead(Generic[M]):
     """``build(*keys)`` is a queryset that selects rows by the values ``keys`` (a primary key,
     say, and the customer the row must belong to); ``first(*keys)`` runs it for other values.
     ``samples`` names the model's field of each key (``pk`` or a field's name or attname) and a
-    value of it that the query holds nowhere else (to find its place among the parameters).
-    The queryset may use ``select_related`` and ``select_for_update`` (then ``first`` must run
-    in a transaction, as the queryset would). Safe to share between threads."""
+    value of it that the query holds nowhere else (to find its place among the parameters);
+    a key that is a list (``pk__in=keys``) has a ``Many`` sample, and the query is compiled
+    once for each length of list it is given. The queryset may use ``select_related``,
+    annotations and ``select_for_update`` (then it must run in a transaction, as the queryset
+    would). Safe to share between threads."""
 
     def __init__(
         self, build: Callable[..., models.QuerySet[M]], *, samples: Sequence[tuple[str, Any]]
     ) -> None:
         self.build = build
         self.samples = list(samples)
-        self._compiled: dict[tuple[str, str], tuple[Any, str, list[Any], list[int]]] = {}
+        self._compiled: dict[tuple[Any, ...], tuple[Any, str, list[Any], list[list[int]]]] = {}
 
     def first(self, *keys: Any, using: str = "default") -> M | None:
         """The first row for these keys (the query as compiled: no LIMIT is added, so a
@@ -71,12 +82,15 @@ class PreparedRead(Generic[M]):
         start, end = fields[0], fields[-1] + 1
         names = [column.target.attname for column, _, _ in select[start:end]]
         populators = get_related_populators(klass_info, select, using)
+        annotations = list(compiler.annotation_col_map.items())
         model = klass_info["model"]
         found: list[M] = []
         for row in rows:
             obj: M = model.from_db(using, names, row[start:end])
             for populator in populators:
                 populator.populate(row, obj)
+            for name, at in annotations:
+                setattr(obj, name, row[at])
             found.append(obj)
         return found
 
@@ -90,14 +104,19 @@ class PreparedRead(Generic[M]):
     def _bound(self, keys: Sequence[Any], using: str) -> tuple[Any, str, list[Any]]:
         """The compiled query, its SQL and its parameters with these keys in their places."""
         connection = connections[using]
-        compiled = self._compiled.get((using, connection.vendor))
+        pairs = zip(self.samples, keys, strict=True)
+        lengths = tuple(len(key) for (_, sample), key in pairs if isinstance(sample, Many))
+        compiled = self._compiled.get((using, connection.vendor, lengths))
         if compiled is None:
-            compiled = self._compile(using)
-            self._compiled[(using, connection.vendor)] = compiled
+            compiled = self._compile(using, lengths)
+            self._compiled[(using, connection.vendor, lengths)] = compiled
         compiler, sql, params, places = compiled
         params = [*params]
-        for (name, _), at, key in zip(self.samples, places, keys, strict=True):
-            params[at] = self._field(compiler.query.model, name).get_db_prep_value(key, connection)
+        for (name, sample), at, key in zip(self.samples, places, keys, strict=True):
+            field = self._field(compiler.query.model, name)
+            values = key if isinstance(sample, Many) else [key]
+            for where, value in zip(at, values, strict=True):
+                params[where] = field.get_db_prep_value(value, connection)
         return compiler, sql, params
 
     def rows(self, *keys: Any, using: str = "default") -> list[tuple[Any, ...]]:
@@ -116,18 +135,31 @@ class PreparedRead(Generic[M]):
     def _field(model: type[models.Model], name: str) -> Any:
         return model._meta.pk if name == "pk" else model._meta.get_field(name)
 
-    def _compile(self, using: str) -> tuple[Any, str, list[Any], list[int]]:
+    def _compile(
+        self, using: str, lengths: tuple[int, ...] = ()
+    ) -> tuple[Any, str, list[Any], list[list[int]]]:
         connection = connections[using]
-        queryset = self.build(*(value for _, value in self.samples))
+        sizes = iter(lengths)
+        given = [
+            [value.marker(i) for i in range(next(sizes))] if isinstance(value, Many) else value
+            for _, value in self.samples
+        ]
+        queryset = self.build(*given)
         compiler = queryset.query.get_compiler(using=using)
         sql, params = compiler.as_sql()
         at = []
-        for name, value in self.samples:
-            marker = self._field(queryset.model, name).get_db_prep_value(value, connection)
-            places = [i for i, param in enumerate(params) if param == marker]
-            if len(places) != 1:
-                raise ValueError(f"the key {name} must appear once among the parameters: {places}")
-            at.append(places[0])
+        for (name, sample), value in zip(self.samples, given, strict=True):
+            field = self._field(queryset.model, name)
+            where = []
+            for one in value if isinstance(sample, Many) else [value]:
+                marker = field.get_db_prep_value(one, connection)
+                places = [i for i, param in enumerate(params) if param == marker]
+                if len(places) != 1:
+                    raise ValueError(
+                        f"the key {name} must appear once among the parameters: {places}"
+                    )
+                where.append(places[0])
+            at.append(where)
         return compiler, sql, list(params), at
 
 

@@ -11,6 +11,7 @@ from typing import Any
 from django.db import transaction
 
 from cpcc_site.celery import app
+from cpcc_site.prepared import PreparedRead
 from missions.models import VirtualVehicle
 from vvm_worker.dispatch import (
     ADMIT_TASK,
@@ -23,6 +24,12 @@ from vvm_worker.dispatch import (
 )
 
 logger = logging.getLogger("cpcc.dispatch")
+
+# Where a VV is, read after the commit that moved it (SQL written once: one read a message).
+_HOSTS = PreparedRead(
+    lambda vv_id: VirtualVehicle.objects.filter(pk=vv_id).values_list("host_gs_id", "host_rv_id"),
+    samples=[("pk", uuid.UUID(int=0))],
+)
 
 
 class CeleryDispatcher:
@@ -47,12 +54,10 @@ class CeleryDispatcher:
         transaction.on_commit(lambda: _safely(_send_admit, customer_id))
 
     def _send_vv(self, vv_id: uuid.UUID) -> None:
-        host = (
-            VirtualVehicle.objects.filter(pk=vv_id).values_list("host_gs_id", "host_rv_id").first()
-        )
-        if host is None:
+        hosts = _HOSTS.rows(vv_id)
+        if not hosts:
             return
-        gs_id, rv_id = host
+        ((gs_id, rv_id),) = hosts
         if rv_id is not None and self.local is not None and self.local.is_vehicle(rv_id):
             self.local.advance_later(vv_id)
             return

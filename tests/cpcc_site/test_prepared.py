@@ -178,3 +178,22 @@ def test_values_by_pk_and_rows_read_what_the_queryset_reads() -> None:
     )
     assert read.rows(vv.pk) == [(vv.pk, 1, ["CO2"]), (vv.pk, 2, ["CO2"])]
     assert read.rows(uuid.uuid4()) == []
+
+
+def test_a_read_by_a_list_of_keys_is_compiled_for_each_length_and_keeps_annotations() -> None:
+    from django.db.models import BooleanField, ExpressionWrapper, Q
+
+    from cpcc_site.prepared import Many
+
+    one, two, three = (VehicleFactory(name=n, tasks_done=k) for k, n in enumerate("ABC"))
+    read = PreparedRead(
+        lambda ids: (
+            Vehicle.objects.filter(pk__in=ids)
+            .order_by("name")
+            .annotate(busy=ExpressionWrapper(Q(tasks_done__gte=1), output_field=BooleanField()))
+        ),
+        samples=[("pk", Many(lambda i: -1000 - i))],
+    )
+    assert [(v.name, v.busy) for v in read.all([three.pk, one.pk])] == [("A", False), ("C", True)]
+    assert [(v.name, v.busy) for v in read.all([two.pk])] == [("B", True)]
+    assert [v.name for v in read.all([two.pk, three.pk, one.pk])] == ["A", "B", "C"]

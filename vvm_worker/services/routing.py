@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import itertools
 import time
 from collections.abc import Iterable, Sequence
@@ -14,7 +15,7 @@ from django.db.models.signals import m2m_changed, post_delete, post_save
 from shapely import STRtree
 from shapely.geometry import Point
 
-from cpcc_site.prepared import insert_rows, values_by_pk
+from cpcc_site.prepared import Many, PreparedRead, insert_rows, values_by_pk
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.events import migration_event, task_event
@@ -181,15 +182,7 @@ def fleet_caps_and_rows(
         rows[pk], routes[pk], online[pk] = row, live.route, True  # its worker is this process
     remote = sorted(wanted - set(known))
     if remote:
-        vehicles = Vehicle.objects.filter(pk__in=remote).exclude(status=VehicleStatus.REMOVED)
-        if vvm.lease_s is not None:
-            # Whose worker renewed its lease within lease_s, by the database's clock.
-            vehicles = vehicles.annotate(
-                online=ExpressionWrapper(
-                    Q(worker_seen__gte=db_time_ago(vvm.lease_s)), output_field=BooleanField()
-                )
-            )
-        read = {v.pk: v for v in vehicles}
+        read = {v.pk: v for v in _remote_read(vvm.lease_s).all(remote)}
         routes.update(planned_routes({pk: v.planner_state for pk, v in read.items()})[0])
         for pk, vehicle in read.items():
             rows[pk] = vehicle
@@ -213,17 +206,38 @@ def fleet_caps_and_rows(
     return caps, rows
 
 
+# The open tasks of some RVs, oldest first, and the rows of RVs another process hosts (with
+# ``online``: whose worker renewed its lease within lease_s, by the database's clock): reads
+# of every routing, compiled once for each number of RVs.
+_ROUTES = PreparedRead(
+    lambda vehicle_ids: (
+        Task.objects.filter(status=TaskStatus.OPEN, vehicle_id__in=vehicle_ids)
+        .order_by("requested_s", "id")
+        .values_list("pk", "vehicle_id", "lat", "lng", "alt")
+    ),
+    samples=[("vehicle", Many(lambda i: -7_000_000 - i))],
+)
+
+
+@functools.cache
+def _remote_read(lease_s: float | None) -> PreparedRead[Vehicle]:
+    def build(ids: list[int]) -> QuerySet[Vehicle]:
+        vehicles = Vehicle.objects.filter(pk__in=ids).exclude(status=VehicleStatus.REMOVED)
+        if lease_s is None:
+            return vehicles
+        online = Q(worker_seen__gte=db_time_ago(lease_s))
+        return vehicles.annotate(online=ExpressionWrapper(online, output_field=BooleanField()))
+
+    return PreparedRead(build, samples=[("pk", Many(lambda i: -7_000_000 - i))])
+
+
 def planned_routes(
     plans: dict[int, Any],
 ) -> tuple[dict[int, tuple[Position, ...]], dict[int, int]]:
     """The open tasks of these RVs (id -> the planner state it saved), in the order its planner
     last meant to serve them (tasks the plan does not know yet come last, oldest first), and
     how many each has."""
-    rows = (
-        Task.objects.filter(status=TaskStatus.OPEN, vehicle_id__in=sorted(plans))
-        .order_by("requested_s", "id")
-        .values_list("pk", "vehicle_id", "lat", "lng", "alt")
-    )
+    rows = _ROUTES.rows(sorted(plans)) if plans else []
     tasks: dict[int, list[tuple[int, Position]]] = {}
     for pk, vehicle_id, lat, lng, alt in rows:
         tasks.setdefault(vehicle_id, []).append((pk, Position(lat, lng, alt)))
