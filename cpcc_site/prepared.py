@@ -163,6 +163,43 @@ class PreparedRead(Generic[M]):
         return compiler, sql, list(params), at
 
 
+class PreparedPages(Generic[M]):
+    """The rows of a ``PreparedRead`` for these keys as a paginator takes them (Django's
+    ``Paginator``, DRF's pagination): ``count()`` and slices, each one statement written once.
+    ``each`` is done to every row read (to give it a related object the caller has, say).
+    No read (None): no rows."""
+
+    ordered = True  # (the paginator asks)
+
+    def __init__(
+        self,
+        read: PreparedRead[M] | None,
+        keys: Sequence[Any],
+        *,
+        each: Callable[[M], Any] | None = None,
+    ) -> None:
+        self._read, self._keys, self._each = read, list(keys), each
+
+    def count(self) -> int:
+        return 0 if self._read is None else self._read.count(*self._keys)
+
+    def __len__(self) -> int:
+        return self.count()
+
+    def __getitem__(self, wanted: slice) -> list[M]:
+        start, stop = wanted.start or 0, wanted.stop
+        if self._read is None or (stop is not None and stop <= start):
+            return []
+        if stop is None:
+            found = self._read.all(*self._keys)[start:]
+        else:
+            found = self._read.all(*self._keys, limit=stop - start, offset=start)
+        if self._each is not None:
+            for obj in found:
+                self._each(obj)
+        return found
+
+
 _UPDATES: dict[tuple[Any, ...], tuple[str, list[Any]]] = {}
 
 

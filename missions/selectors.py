@@ -15,7 +15,7 @@ from django.db.models import Count, F, Model, Q, QuerySet, TextField, Window
 from django.db.models.functions import Cast, RowNumber
 
 from accounts.models import User
-from cpcc_site.prepared import PreparedRead
+from cpcc_site.prepared import PreparedPages, PreparedRead
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.events import event_for, migration_event, task_event, vv_event
 from missions.models import (
@@ -106,32 +106,7 @@ _LISTS = {
 }
 
 
-class VVPages:
-    """The VVs a user may see (``vv_list_for_user``, only what a list shows, newest first),
-    as a paginator takes them: ``count()`` and a slice each read with SQL written once."""
-
-    ordered = True  # (the paginator asks)
-
-    def __init__(self, read: PreparedRead[VirtualVehicle] | None, keys: Sequence[Any]) -> None:
-        self._read, self._keys = read, list(keys)
-
-    def count(self) -> int:
-        return 0 if self._read is None else self._read.count(*self._keys)
-
-    def __len__(self) -> int:
-        return self.count()
-
-    def __getitem__(self, wanted: slice) -> list[VirtualVehicle]:
-        start, stop = wanted.start or 0, wanted.stop
-        if self._read is None or (stop is not None and stop <= start):
-            return []
-        limit = None if stop is None else stop - start
-        if limit is None and start:
-            return self._read.all(*self._keys)[start:]
-        return self._read.all(*self._keys, limit=limit, offset=start)
-
-
-def vv_pages_for_user(*, user: User, status: str | None = None) -> VVPages:
+def vv_pages_for_user(*, user: User, status: str | None = None) -> PreparedPages[VirtualVehicle]:
     """The VVs of ``vv_list_for_user`` as a list pages through them (``vvs_listed``, newest
     first), all of them or those of one status."""
     if user.is_staff:
@@ -139,9 +114,9 @@ def vv_pages_for_user(*, user: User, status: str | None = None) -> VVPages:
     elif user.customer_id is not None:
         customer = (user.customer_id,)
     else:
-        return VVPages(None, ())
+        return PreparedPages(None, ())
     wanted = () if status is None else (status,)
-    return VVPages(_LISTS[(bool(customer), bool(wanted))], (*customer, *wanted))
+    return PreparedPages(_LISTS[(bool(customer), bool(wanted))], (*customer, *wanted))
 
 
 def with_task_counts(vvs: Sequence[VirtualVehicle]) -> Sequence[VirtualVehicle]:
@@ -220,6 +195,31 @@ def vv_storage_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[Stora
     """The VV's storage documents, by key."""
     vv = vv_get_for_user(user=user, vv_id=vv_id)
     return vv.storage.order_by("key")  # each document's ``vv`` is this VV
+
+
+# The pages of a VV's log and storage, compiled once (the VV is read first, for the user).
+_LOG_PAGES = PreparedRead(
+    lambda vv_id: LogEntry.objects.filter(vv_id=vv_id).order_by("at_s", "seq", "id"),
+    samples=[("vv", uuid.UUID(int=0))],
+)
+_STORAGE_PAGES = PreparedRead(
+    lambda vv_id: StorageDocument.objects.filter(vv_id=vv_id).order_by("key"),
+    samples=[("vv", uuid.UUID(int=0))],
+)
+
+
+def vv_log_pages_for_user(*, user: User, vv_id: uuid.UUID | str) -> PreparedPages[LogEntry]:
+    """``vv_log_for_user`` as a list pages through it (each line's ``vv`` is the VV)."""
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    return PreparedPages(_LOG_PAGES, (vv.pk,), each=lambda entry: setattr(entry, "vv", vv))
+
+
+def vv_storage_pages_for_user(
+    *, user: User, vv_id: uuid.UUID | str
+) -> PreparedPages[StorageDocument]:
+    """``vv_storage_for_user`` as a list pages through it (each document's ``vv`` is the VV)."""
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    return PreparedPages(_STORAGE_PAGES, (vv.pk,), each=lambda doc: setattr(doc, "vv", vv))
 
 
 def vv_storage_get_for_user(*, user: User, vv_id: uuid.UUID | str, key: str) -> StorageDocument:

@@ -52,9 +52,11 @@ from missions.selectors import (
     vv_image_for_user,
     vv_list_for_user,
     vv_log_for_user,
+    vv_log_pages_for_user,
     vv_pages_for_user,
     vv_storage_for_user,
     vv_storage_get_for_user,
+    vv_storage_pages_for_user,
     vv_tasks_for_user,
     vvs_listed,
     with_task_counts,
@@ -300,6 +302,13 @@ class VVStorageListView(VVErrorsMixin, generics.ListAPIView):  # type: ignore[ty
     def get_queryset(self) -> QuerySet[StorageDocument]:
         return vv_storage_for_user(user=self.request.user, vv_id=self.kwargs["id"])  # type: ignore[arg-type]
 
+    def list(self, request: Request, *args: Any, **kwargs: Any) -> Response:
+        # The queryset's pages, each read with SQL written once.
+        docs = vv_storage_pages_for_user(user=request.user, vv_id=self.kwargs["id"])  # type: ignore[arg-type]
+        page = self.paginate_queryset(docs)  # type: ignore[arg-type]
+        assert page is not None, "the API paginates every list"
+        return self.get_paginated_response(self.get_serializer(page, many=True).data)
+
 
 @extend_schema(
     parameters=[
@@ -381,6 +390,13 @@ class VVLogView(VVErrorsMixin, generics.ListAPIView):  # type: ignore[type-arg]
 
     def get_queryset(self) -> QuerySet[LogEntry]:
         return vv_log_for_user(user=self.request.user, vv_id=self.kwargs["id"])  # type: ignore[arg-type]
+
+    def list(self, request: Request, *args: Any, **kwargs: Any) -> Response:
+        # The queryset's pages, each read with SQL written once.
+        lines = vv_log_pages_for_user(user=request.user, vv_id=self.kwargs["id"])  # type: ignore[arg-type]
+        page = self.paginate_queryset(lines)  # type: ignore[arg-type]
+        assert page is not None, "the API paginates every list"
+        return self.get_paginated_response(self.get_serializer(page, many=True).data)
 
 
 @extend_schema(

@@ -89,6 +89,26 @@ def test_storage_lists_are_paginated(mission, api_a, monkeypatch) -> None:
     assert keys == MISSION_KEYS and second["next"] is None
 
 
+def test_a_page_of_storage_or_log_costs_the_same_statements_whatever_its_rows(
+    mission, api_a, monkeypatch
+) -> None:
+    from django.db import connection
+    from django.test.utils import CaptureQueriesContext
+
+    api_a.get(vv_url(mission, "log/"))  # the token, remembered
+    counted = {}
+    for size in (1, 2):
+        monkeypatch.setattr(PageNumberPagination, "page_size", size)
+        for what in ("storage/", "log/"):
+            with CaptureQueriesContext(connection) as seen:
+                body = api_a.get(vv_url(mission, what)).json()
+            assert len(body["results"]) == size
+            counted[what, size] = len(seen.captured_queries)
+    # The VV, the count, the page: none for each row (a row's VV is the one read first).
+    assert counted["storage/", 1] == counted["storage/", 2] <= 3
+    assert counted["log/", 1] == counted["log/", 2] <= 3
+
+
 @pytest.mark.parametrize("key", ["p0.co2", "plain key", "all/readings"])
 def test_one_storage_key_whatever_characters_it_has(mission, api_a, key) -> None:
     response = api_a.get(storage_item_url(mission, key))
