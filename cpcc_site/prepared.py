@@ -1,10 +1,13 @@
-"""Reads made again and again (at every step of a VV, at every API request), compiled once.
+"""Statements made again and again (at every task of an RV, at every API request), written once.
 
 Django compiles a queryset's SQL each time it runs: for a VV's row with its customer and hosts
 (about 90 columns over four tables) that is half a millisecond, five times the time the
 database takes to answer. A ``PreparedRead`` compiles its queryset once per database and
 runs the same SQL again with new parameters, building the model instances (and the related
-ones of ``select_related``) exactly as a queryset would.
+ones of ``select_related``) exactly as a queryset would, or giving its rows or their count;
+``PreparedPages`` hands such a read to a paginator. The writes (``insert_rows``,
+``save_fields``, ``update_row``) and ``values_by_pk`` write their SQL themselves, once per
+model and shape, for models whose save signals nobody listens to.
 """
 
 from __future__ import annotations
@@ -29,11 +32,12 @@ class Many:
 
 class PreparedRead(Generic[M]):
     """``build(*keys)`` is a queryset that selects rows by the values ``keys`` (a primary key,
-    say, and the customer the row must belong to); ``first(*keys)`` runs it for other values.
+    say, and the customer the row must belong to); ``first(*keys)``, ``all``, ``rows`` and
+    ``count`` run it for other values.
     ``samples`` names the model's field of each key (``pk`` or a field's name or attname) and a
     value of it that the query holds nowhere else (to find its place among the parameters);
     a key that is a list (``pk__in=keys``) has a ``Many`` sample, and the query is compiled
-    once for each length of list it is given. The queryset may use ``select_related``,
+    once for each length of list it is given (up to _CACHED_ROWS; longer ones at each run). The queryset may use ``select_related``,
     annotations and ``select_for_update`` (then it must run in a transaction, as the queryset
     would). Safe to share between threads."""
 
@@ -109,7 +113,8 @@ class PreparedRead(Generic[M]):
         compiled = self._compiled.get((using, connection.vendor, lengths))
         if compiled is None:
             compiled = self._compile(using, lengths)
-            self._compiled[(using, connection.vendor, lengths)] = compiled
+            if all(length <= _CACHED_ROWS for length in lengths):  # longer lists: each time
+                self._compiled[(using, connection.vendor, lengths)] = compiled
         compiler, sql, params, places = compiled
         params = [*params]
         for (name, sample), at, key in zip(self.samples, places, keys, strict=True):

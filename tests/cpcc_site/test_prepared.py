@@ -197,3 +197,17 @@ def test_a_read_by_a_list_of_keys_is_compiled_for_each_length_and_keeps_annotati
     assert [(v.name, v.busy) for v in read.all([three.pk, one.pk])] == [("A", False), ("C", True)]
     assert [(v.name, v.busy) for v in read.all([two.pk])] == [("B", True)]
     assert [v.name for v in read.all([two.pk, three.pk, one.pk])] == ["A", "B", "C"]
+
+
+def test_a_long_list_of_keys_is_read_without_keeping_its_statement(monkeypatch) -> None:
+    from cpcc_site.prepared import Many
+
+    monkeypatch.setattr(prepared, "_CACHED_ROWS", 2)
+    vehicles = [VehicleFactory(name=f"V{n}") for n in range(3)]
+    read = PreparedRead(
+        lambda ids: Vehicle.objects.filter(pk__in=ids).order_by("name"),
+        samples=[("pk", Many(lambda i: -1000 - i))],
+    )
+    assert [v.name for v in read.all([v.pk for v in vehicles])] == ["V0", "V1", "V2"]
+    assert [v.name for v in read.all([vehicles[1].pk])] == ["V1"]
+    assert len(read._compiled) == 1  # the one of one key, not the one of three
