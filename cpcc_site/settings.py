@@ -270,12 +270,6 @@ CELERY_TASK_PUBLISH_RETRY_POLICY = {
     "interval_max": 0.5,
 }
 CELERY_BROKER_CONNECTION_TIMEOUT = 2.0
-# Celery's Django fix-up closes every database connection after each task unless told to
-# reuse them, so a worker would connect anew for every message (PostgreSQL starts a process
-# for each). The workers keep theirs as CPCC_DB_CONN_MAX_AGE says instead: each task closes
-# the old and the broken ones before and after it runs, as Django does around a request
-# (cpcc_site/celery.py).
-CELERY_DB_REUSE_MAX = 2**62
 # Batteries: an RV keeps this fraction of its endurance (battery_s) in reserve: it takes a task
 # only if it can still fly home afterwards with the reserve left, else it hands its work over,
 # flies home and recharges for CPCC_RECHARGE_S (simulated vehicles; time acceleration applies).
