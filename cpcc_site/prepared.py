@@ -8,12 +8,17 @@ ones of ``select_related``) exactly as a queryset would, or giving its rows or t
 ``PreparedPages`` hands such a read to a paginator. The writes (``insert_rows``,
 ``save_fields``, ``update_row``) and ``values_by_pk`` write their SQL themselves, once per
 model and shape, for models whose save signals nobody listens to.
+
+On PostgreSQL a unit of work may run ``pipelined``: the writes it marks ``deferred`` go to the
+server without waiting for their answers, which come back with the next statement that waits
+(every other one does, as outside a pipeline), and their checks run when the block ends.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+import contextlib
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
 from django.db import DatabaseError, connections, models
@@ -226,10 +231,12 @@ def save_fields(obj: models.Model, fields: Sequence[str], *, using: str = "defau
     sql, targets = compiled
     params = [field.get_db_prep_save(field.pre_save(obj, False), connection) for field in targets]
     params.append(model._meta.pk.get_db_prep_value(obj.pk, connection))
-    with connection.cursor() as cursor:
-        cursor.execute(sql, params)
-        if cursor.rowcount != 1:
+
+    def check(rowcount: int) -> None:
+        if rowcount != 1:
             raise DatabaseError(f"{model.__name__} {obj.pk}: no row to update")
+
+    _execute(connection, sql, params, lambda cursor: check(cursor.rowcount))
 
 
 def update_row(
@@ -239,11 +246,12 @@ def update_row(
     values: Mapping[str, Any],
     add: Mapping[str, Any] | None = None,
     using: str = "default",
-) -> int:
+) -> int | None:
     """``model.objects.filter(pk=pk).update(**values, **{f: F(f) + n for f, n in add})`` with
     its SQL written once per model and fields (the ORM compiles an update at every call): one
     ``UPDATE`` by the primary key; fields that set themselves are left as ``update`` leaves
-    them. The number of rows changed (0: no such row)."""
+    them. The number of rows changed (0: no such row; None when ``deferred``: not known
+    yet)."""
     connection = connections[using]
     add = add or {}
     key = (model, tuple(values), tuple(add), connection.vendor)
@@ -265,9 +273,9 @@ def update_row(
         for field, value in zip(targets, given, strict=True)
     ]
     params.append(model._meta.pk.get_db_prep_value(pk, connection))
-    with connection.cursor() as cursor:
-        cursor.execute(sql, params)
-        return int(cursor.rowcount)
+    changed: list[int] = []
+    _execute(connection, sql, params, lambda cursor: changed.append(int(cursor.rowcount)))
+    return changed[0] if changed else None
 
 
 _VALUES: dict[tuple[Any, ...], str] = {}
@@ -352,12 +360,14 @@ def insert_rows(
         for obj in objs
         for field in fields
     ]
-    with connection.cursor() as cursor:
-        cursor.execute(sql, params)
-        keys = cursor.fetchall() if on_conflict is None else None
-    for at, obj in enumerate(objs):
-        if keys is not None and meta.pk not in fields:
-            obj.pk = keys[at][0]
+
+    def take_keys(cursor: Any) -> None:
+        for obj, (pk,) in zip(objs, cursor.fetchall(), strict=True):
+            obj.pk = pk
+
+    keyed = on_conflict is None and meta.pk not in fields
+    _execute(connection, sql, params, take_keys if keyed else None)
+    for obj in objs:
         obj._state.adding, obj._state.db = False, using
 
 
@@ -394,3 +404,96 @@ def _insert_sql(
     else:
         raise ValueError(f"on_conflict: None, 'ignore' or 'update', not {on_conflict!r}")
     return sql, fields
+
+
+# --- units of work that do not wait for their writes ---------------------------------------
+
+
+@dataclass
+class _Pipeline:
+    """A ``pipelined`` block on one connection: the psycopg pipeline, whether the statements
+    run now may go on without their answers, and what to do with those answers."""
+
+    pipeline: Any
+    deferring: bool = False
+    then: list[Callable[[], None]] = field(default_factory=list)
+
+    def wait_unless_deferred(
+        self, execute: Callable[..., Any], sql: str, params: Any, many: bool, context: Any
+    ) -> Any:
+        """A Django execute wrapper: every statement but a deferred one waits for its answer
+        (and so for the answers of every statement before it), as outside a pipeline."""
+        result = execute(sql, params, many, context)
+        if not self.deferring:
+            with context["connection"].wrap_database_errors:
+                self.pipeline.sync()
+        return result
+
+
+_PIPELINE = "_cpcc_pipeline"
+
+
+@contextlib.contextmanager
+def pipelined(using: str = "default") -> Iterator[None]:
+    """Run a unit of work (inside its transaction) with its ``deferred`` writes pipelined:
+    sent to PostgreSQL at once, their answers read with the next statement that waits. When
+    the block ends every answer is in, and what the deferred writes check (a row that was
+    there to update, the keys of new rows) is done: a failure is raised there, inside the
+    transaction, which then rolls back as it would have. On SQLite, or inside another
+    ``pipelined``, it changes nothing."""
+    connection = connections[using]
+    if connection.vendor != "postgresql" or getattr(connection, _PIPELINE, None) is not None:
+        yield
+        return
+    connection.ensure_connection()
+    with connection.wrap_database_errors, connection.connection.pipeline() as pipeline:
+        state = _Pipeline(pipeline)
+        setattr(connection, _PIPELINE, state)
+        try:
+            with connection.execute_wrapper(state.wait_unless_deferred):
+                yield
+        finally:
+            setattr(connection, _PIPELINE, None)
+    for then in state.then:
+        then()
+
+
+@contextlib.contextmanager
+def deferred(using: str = "default") -> Iterator[None]:
+    """Inside ``pipelined``: the writes of ``insert_rows``, ``save_fields`` and
+    ``update_row`` (and any other statement whose answer nobody reads) do not wait for their
+    answers. A new row's key is set when the ``pipelined`` block ends: nothing in the block
+    may read it before. Outside ``pipelined`` it changes nothing."""
+    state: _Pipeline | None = getattr(connections[using], _PIPELINE, None)
+    if state is None or state.deferring:
+        yield
+        return
+    state.deferring = True
+    try:
+        yield
+    finally:
+        state.deferring = False
+
+
+def _execute(
+    connection: Any, sql: str, params: list[Any], answer: Callable[[Any], None] | None
+) -> None:
+    """Run a write; ``answer(cursor)`` reads what it needs of its answer: at once, or, when
+    the write is deferred, at the end of the ``pipelined`` block."""
+    state: _Pipeline | None = getattr(connection, _PIPELINE, None)
+    if state is None or not state.deferring or answer is None:
+        with connection.cursor() as cursor:
+            cursor.execute(sql, params)
+            if answer is not None:
+                answer(cursor)
+        return
+    cursor = connection.cursor()
+    cursor.execute(sql, params)
+
+    def read() -> None:
+        try:
+            answer(cursor)
+        finally:
+            cursor.close()
+
+    state.then.append(read)

@@ -52,6 +52,18 @@ def distance_m(a: Position, b: Position) -> float:
     return math.hypot(ground_distance_m(a, b), b.alt - a.alt)
 
 
+# Fewer metres than any degree of latitude spans on the ellipsoid (110,574 m at the equator).
+_M_PER_DEGREE_LAT_AT_LEAST = 110_000.0
+
+
+def within_m(a: Position, b: Position, limit_m: float) -> bool:
+    """``distance_m(a, b) <= limit_m``, without the geodesic when the difference in latitude
+    or altitude alone is more than the limit (most pairs an RV compares are far apart)."""
+    if abs(b.alt - a.alt) > limit_m or abs(b.lat - a.lat) * _M_PER_DEGREE_LAT_AT_LEAST > limit_m:
+        return False
+    return distance_m(a, b) <= limit_m
+
+
 def interpolate(a: Position, b: Position, fraction: float) -> Position:
     """The point a fraction of the way from a to b (0 gives a, 1 gives b)."""
     if fraction <= 0.0:

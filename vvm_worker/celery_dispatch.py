@@ -38,7 +38,8 @@ class CeleryDispatcher:
     A VV goes to the queue of the host it is on at that moment, a vehicle's wake-up to the
     vehicle's queue. ``local`` lets an RV worker do the work of its own vehicles in its own
     thread without a round trip through Redis (an RV resuming a VV it keeps, a VV moving
-    between two vehicles of the worker, a re-plan after new work).
+    between two vehicles of the worker, a re-plan after new work), and a ground station's
+    worker the work of the VVs it takes (those it admits, those that stay on it).
     """
 
     def __init__(self, local: LocalHost | None = None) -> None:
@@ -58,8 +59,11 @@ class CeleryDispatcher:
         if not hosts:
             return
         ((gs_id, rv_id),) = hosts
-        if rv_id is not None and self.local is not None and self.local.is_vehicle(rv_id):
-            self.local.advance_later(vv_id)
+        local = self.local
+        if local is not None and (
+            local.is_vehicle(rv_id) if rv_id is not None else gs_id and local.is_station(gs_id)
+        ):
+            local.advance_later(vv_id)
             return
         queue = rv_queue(rv_id) if rv_id is not None else gs_queue(gs_id) if gs_id else SHARED_QUEUE
         app.send_task(VV_ADVANCE_TASK, args=[str(vv_id)], queue=queue)

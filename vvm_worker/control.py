@@ -25,7 +25,7 @@ from typing import Any, Protocol
 from shapely.geometry import Polygon
 
 from fleet.driving import Driver, DriverError
-from fleet.geo import Position, distance_m
+from fleet.geo import Position, within_m
 from vvm_worker.planning import Planner, PlanTask, standby_position
 
 logger = logging.getLogger("cpcc.executor")
@@ -256,7 +256,7 @@ class ControlLoop:
         served = [
             t
             for t in self.store.open_tasks()
-            if distance_m(here, t.position) <= t.tolerance_m + REACH_SLACK_M
+            if within_m(here, t.position, t.tolerance_m + REACH_SLACK_M)
         ]
         battery = self.battery_fraction(now)
         for task in served:

@@ -47,15 +47,19 @@ ADMIT_TASK = "cpcc.admit"
 
 
 class LocalHost(Protocol):
-    """The RVs this process runs (an RV worker hosts one or several), for work it can do
-    itself without a message."""
+    """The RVs (an RV worker hosts one or several) or the ground station this process runs,
+    for work it can do itself without a message."""
 
     def is_vehicle(self, vehicle_id: int) -> bool:
         """Whether this process hosts the vehicle."""
         ...
 
+    def is_station(self, station_id: int) -> bool:
+        """Whether this process hosts the ground station."""
+        ...
+
     def advance_later(self, vv_id: uuid.UUID) -> None:
-        """Advance the VV, which is on one of this process's vehicles, on its host thread."""
+        """Advance the VV, which is on one of this process's hosts, on its host thread."""
         ...
 
     def wake_later(self, vehicle_id: int) -> None:
@@ -74,6 +78,9 @@ class Announcer(Protocol):
     def flush(self) -> None:
         """Publish what waits (an announcer that batches the changes of a host's work)."""
 
+    def close(self) -> None:
+        """Publish what waits and stop (the end of a host's work)."""
+
 
 class Silent:
     """The announcer of `simulate` and of tests: nobody listens."""
@@ -82,4 +89,7 @@ class Silent:
         pass
 
     def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
         pass

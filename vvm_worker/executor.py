@@ -21,7 +21,7 @@ from django.db.models import F
 
 from cpcc_site.prepared import PreparedRead
 from fleet.driving import Driver
-from fleet.geo import Position, distance_m
+from fleet.geo import Position, within_m
 from fleet.models import SensorType, Vehicle, VehicleStatus
 from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
@@ -260,7 +260,7 @@ class DatabaseStore:
         """Whether the loop is about to serve an open task here (it records its arrival
         first): then the record goes with the first answer."""
         return any(
-            distance_m(here, t.position) <= t.tolerance_m + REACH_SLACK_M for t in self.open_tasks()
+            within_m(here, t.position, t.tolerance_m + REACH_SLACK_M) for t in self.open_tasks()
         )
 
     def _write(self, state: VehicleState, *, moved: bool) -> None:

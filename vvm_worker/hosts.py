@@ -16,6 +16,7 @@ only after its checkpoint is in the database.
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures
 import heapq
 import logging
@@ -201,6 +202,9 @@ class RVHost:
     def is_vehicle(self, vehicle_id: int) -> bool:
         return vehicle_id in self.rvs
 
+    def is_station(self, station_id: int) -> bool:
+        return False
+
     def advance_later(self, vv_id: uuid.UUID) -> None:
         self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
 
@@ -241,7 +245,7 @@ class RVHost:
                 self._each(lambda rv: rv.rig.store.write_waiting(), "report")
             except Exception:
                 logger.warning("the vehicles' last reports are lost: the database is away")
-            self.vvm.announcer.flush()
+            self.vvm.announcer.close()
         finally:
             self.vvm.runtime.close()
             self._close_drivers()
@@ -459,12 +463,19 @@ class HostedRV:
 
 class GSHost:
     """The worker of one ground station: loads new VVs, takes back the ones that end or wait,
-    and watches the RVs' leases."""
+    and watches the RVs' leases.
+
+    The VVs that its own work leaves on the station (those it admits, one that steps again
+    here) it advances itself, right after that work, in the same thread and without a message
+    (``advance_later``): a message is a hint the station would only send to itself. Should
+    the worker die first, they are on the station in the database, where its sweep and its
+    next start find them."""
 
     def __init__(self, station: GroundStation) -> None:
         self.station_id = station.pk
         self.name = station.name
-        self.vvm = platform_vvm()
+        self.vvm = platform_vvm(local=self)
+        self._later: collections.deque[uuid.UUID] = collections.deque()
         self._stopping = threading.Event()
         self._watch = threading.Thread(target=self._watch_leases, name="lease-watch", daemon=True)
         # The sweep's memory (its thread's own). No RV's worker can renew its lease while the
@@ -473,25 +484,71 @@ class GSHost:
         self._leases_from = 0.0  # time.monotonic() from which leases are checked
         self._online: set[int] = set()  # the RVs whose lease was valid at the last sweep
 
+    # --- LocalHost (vvm_worker.dispatch): the VVs this station takes -------------------------
+
+    def is_vehicle(self, vehicle_id: int) -> bool:
+        return False
+
+    def is_station(self, station_id: int) -> bool:
+        return bool(station_id == self.station_id)
+
+    def advance_later(self, vv_id: uuid.UUID) -> None:
+        self._later.append(vv_id)
+
+    def wake_later(self, vehicle_id: int) -> None:  # no vehicle is hosted here
+        raise AssertionError(f"a ground station's worker hosts no vehicle ({vehicle_id})")
+
+    # --- what Celery tasks ask (one at a time, in Celery's thread) ---------------------------
+
     def advance(self, vv_id: uuid.UUID) -> None:
-        vv_advance(vv_id=vv_id, vvm=self.vvm)
+        self._work(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
 
     def admit(self, customer_id: int) -> None:
-        vv_admit_queued(customer_id=customer_id, vvm=self.vvm)
+        self._work(lambda: vv_admit_queued(customer_id=customer_id, vvm=self.vvm))
 
     def wake(self, vehicle_id: int) -> None:  # an RV's message that reached a GS: nothing to do
         pass
 
+    def _work(self, work: Callable[[], Any]) -> None:
+        """Do a piece of work, then advance the VVs it left here, then tell the maps."""
+        try:
+            work()
+            self._advance_waiting()
+        finally:
+            self.vvm.announcer.flush()
+
+    def _advance_waiting(self) -> None:
+        """Advance the VVs that work of this worker left on the station, oldest first (those
+        they leave here in turn too). One whose advance fails for another reason than a
+        database outage is logged and the others go on; an outage is raised with the VV still
+        waiting (the caller waits it out and does all again)."""
+        while self._later:
+            vv_id = self._later[0]
+            try:
+                vv_advance(vv_id=vv_id, vvm=self.vvm)
+            except Exception as exc:
+                if database.is_outage(exc):
+                    raise
+                logger.exception(
+                    "vv advance failed", extra={"vv": str(vv_id), "ground_station": self.name}
+                )
+            self._later.popleft()
+
     def start(self) -> None:
         here = VirtualVehicle.objects.filter(host_gs_id=self.station_id, status__in=ACTIVE_STATUSES)
-        advance_each(here, vvm=self.vvm, ground_station=self.name)
-        _admit_all(self.vvm)
+
+        def recover() -> None:
+            advance_each(here, vvm=self.vvm, ground_station=self.name)
+            _admit_all(self.vvm)
+
+        self._work(recover)
         self._watch.start()
         logger.info("gs worker started", extra={"ground_station": self.name})
 
     def stop(self) -> None:
         self._stopping.set()
         self._watch.join(timeout=10)
+        self.vvm.announcer.close()
 
     def _watch_leases(self) -> None:
         vvm = platform_vvm()  # a runtime of this thread's own

@@ -11,6 +11,8 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import queue
+import threading
 from typing import Any
 
 import redis
@@ -43,12 +45,28 @@ class FeedAnnouncer:
 
     ``batched`` (an RV worker's host thread): what commits is kept until ``flush``, which the
     host calls after each piece of work, and then published in one round trip to Redis
-    however many changes the piece made (a task's answer makes three to five)."""
+    however many changes the piece made (a task's answer makes three to five).
 
-    def __init__(self, client: redis.Redis | None = None, *, batched: bool = False) -> None:
+    ``in_background`` (with ``batched``): ``flush`` hands what committed to a publisher thread
+    and returns at once, so the host thread never waits for Redis; the publisher sends all
+    that waits in one pipeline, in the order it committed. ``close`` publishes what is left
+    and stops the thread."""
+
+    def __init__(
+        self,
+        client: redis.Redis | None = None,
+        *,
+        batched: bool = False,
+        in_background: bool = False,
+    ) -> None:
         self._client = client
         self._batched = batched
         self._committed: list[str] = []
+        self._in_background = in_background
+        if in_background and not batched:
+            raise ValueError("a feed published in the background is batched")
+        self._outbox: queue.SimpleQueue[list[str] | None] = queue.SimpleQueue()
+        self._publisher: threading.Thread | None = None  # started with the first flush
 
     def announce(self, event: dict[str, Any]) -> None:
         data = json.dumps(event, separators=(",", ":"))
@@ -60,9 +78,46 @@ class FeedAnnouncer:
 
     def flush(self) -> None:
         """Publish the changes that committed since the last flush, in one pipeline."""
-        if self._committed:
-            committed, self._committed = self._committed, []
+        if not self._committed:
+            return
+        committed, self._committed = self._committed, []
+        if not self._in_background:
             self._publish(committed)
+            return
+        if self._publisher is None:
+            self._publisher = threading.Thread(
+                target=self._publish_waiting, name="cpcc-feed", daemon=True
+            )
+            self._publisher.start()
+        self._outbox.put(committed)
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Publish what waits, then stop the publisher (if any)."""
+        self.flush()
+        if self._publisher is not None:
+            self._outbox.put(None)
+            self._publisher.join(timeout_s)
+            self._publisher = None
+
+    def _publish_waiting(self) -> None:
+        outbox = self._outbox
+        while True:
+            events = outbox.get()
+            stop = events is None
+            waiting = list(events or [])
+            while not stop:  # whatever else waits goes in the same round trip
+                try:
+                    more = outbox.get_nowait()
+                except queue.Empty:
+                    break
+                if more is None:
+                    stop = True
+                else:
+                    waiting.extend(more)
+            if waiting:
+                self._publish(waiting)
+            if stop:
+                return
 
     def _publish(self, events: list[str]) -> None:
         pipe = (self._client or feed_client()).pipeline(transaction=False)

@@ -15,12 +15,13 @@ from vvm_worker.services import VVM
 
 def platform_vvm(*, local: LocalHost | None = None) -> VVM:
     """A VVM for a request of the web application, an admin action or a host's worker
-    (``local``: the RVs whose own work skips the broker, whose host publishes the changes
-    of each piece of its work at once). Each has a runtime of its own."""
+    (``local``: the RVs or the ground station whose own work skips the broker, whose host
+    publishes the changes of each piece of its work at once, from a thread of their own).
+    Each has a runtime of its own."""
     return VVM(
         clock=SystemClock(),
         dispatcher=CeleryDispatcher(local=local),
         field=SensorField(0),
         lease_s=settings.CPCC_RV_LEASE_S,
-        announcer=FeedAnnouncer(batched=local is not None),
+        announcer=FeedAnnouncer(batched=local is not None, in_background=local is not None),
     )

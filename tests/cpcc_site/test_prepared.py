@@ -5,10 +5,18 @@ from __future__ import annotations
 import uuid
 
 import pytest
-from django.db import DatabaseError, IntegrityError, transaction
+from django.db import DatabaseError, IntegrityError, connection, transaction
 
 from cpcc_site import prepared
-from cpcc_site.prepared import PreparedRead, insert_rows, save_fields, update_row, values_by_pk
+from cpcc_site.prepared import (
+    PreparedRead,
+    deferred,
+    insert_rows,
+    pipelined,
+    save_fields,
+    update_row,
+    values_by_pk,
+)
 from fleet.models import Vehicle
 from missions.models import LogEntry, StorageDocument, Task, VirtualVehicle
 from tests.factories import CustomerFactory, GroundStationFactory, VehicleFactory
@@ -211,3 +219,69 @@ def test_a_long_list_of_keys_is_read_without_keeping_its_statement(monkeypatch) 
     assert [v.name for v in read.all([v.pk for v in vehicles])] == ["V0", "V1", "V2"]
     assert [v.name for v in read.all([vehicles[1].pk])] == ["V1"]
     assert len(read._compiled) == 1  # the one of one key, not the one of three
+
+
+def _syncs(monkeypatch) -> list[int]:
+    import psycopg
+
+    syncs: list[int] = []
+    real = psycopg.Pipeline.sync
+
+    def counted(self):  # type: ignore[no-untyped-def]
+        syncs.append(1)
+        return real(self)
+
+    monkeypatch.setattr(psycopg.Pipeline, "sync", counted)
+    return syncs
+
+
+def test_a_pipelined_unit_of_work_writes_as_before_and_sets_keys_by_its_end(monkeypatch) -> None:
+    """Deferred writes land as the same writes outside a pipeline do; the new rows' keys are
+    there when the block ends; a statement that is not deferred still waits for its answer."""
+    postgres = connection.vendor == "postgresql"
+    syncs = _syncs(monkeypatch) if postgres else []
+    vv = _vv(host_rv=VehicleFactory(name="Heli One"))
+    tasks = [_task(vv, q) for q in (5, 3)]
+    with transaction.atomic(), pipelined():
+        with deferred():
+            insert_rows(tasks)
+            vv.steps = 11
+            save_fields(vv, ["steps"])
+            changed = update_row(Vehicle, vv.host_rv_id, values={"lat": 7.5})
+            if postgres:  # sent, not waited for
+                assert [t.pk for t in tasks] == [None, None] and changed is None and not syncs
+        # A read waits, and sees what was written before it in the transaction.
+        assert Task.objects.filter(vv=vv).count() == 2
+        if postgres:
+            assert len(syncs) == 1
+    assert all(t.pk is not None for t in tasks)
+    assert sorted(Task.objects.filter(vv=vv).values_list("pk", "q")) == sorted(
+        (t.pk, t.q) for t in tasks
+    )
+    assert VirtualVehicle.objects.get(pk=vv.pk).steps == 11
+    assert Vehicle.objects.get(pk=vv.host_rv_id).lat == 7.5
+
+
+def test_a_deferred_write_that_fails_rolls_the_unit_of_work_back_with_its_error() -> None:
+    vv = _vv()
+    insert_rows([_task(vv, 3)])
+    gone = VirtualVehicle.objects.get(pk=vv.pk)
+
+    def duplicate() -> None:
+        with transaction.atomic(), pipelined(), deferred():
+            insert_rows([_task(vv, 4)])
+            insert_rows([_task(vv, 3)])  # a second task of request 3, index 0
+
+    with pytest.raises(IntegrityError):
+        duplicate()
+    assert list(Task.objects.filter(vv=vv).values_list("q", flat=True)) == [3]
+    VirtualVehicle.objects.filter(pk=vv.pk).delete()
+
+    def missing_row() -> None:
+        with transaction.atomic(), pipelined(), deferred():
+            LogEntry.objects.create(vv=_vv(), seq=1, at_s=1.0, message="rolled back")
+            save_fields(gone, ["steps"])
+
+    with pytest.raises(DatabaseError, match="no row to update"):
+        missing_row()
+    assert not LogEntry.objects.filter(message="rolled back").exists()

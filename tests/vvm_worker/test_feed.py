@@ -5,6 +5,7 @@ savepoint or its transaction) never does."""
 from __future__ import annotations
 
 import json
+import threading
 
 import pytest
 import redis
@@ -95,3 +96,33 @@ def test_unbatched_each_change_is_published_as_its_transaction_commits(
             feed.announce({"n": 2})
         assert published(client) == []
     assert published(client) == [1, 2]
+
+
+def test_in_the_background_the_host_thread_never_waits_and_close_publishes_what_waits(
+    client, django_capture_on_commit_callbacks
+) -> None:
+    """An RV worker's feed: flushes return at once (Redis is held up here, and the flushes
+    still return), and everything reaches the stream in the order it committed by `close`."""
+    feed = FeedAnnouncer(client, batched=True, in_background=True)
+    held = threading.Event()
+    publish = feed._publish
+
+    def held_publish(events: list[str]) -> None:
+        held.wait(10)  # Redis slow: the publisher waits, never the caller of flush
+        publish(events)
+
+    feed._publish = held_publish  # type: ignore[method-assign]
+    for n in range(1, 6):
+        with django_capture_on_commit_callbacks(execute=True), transaction.atomic():
+            feed.announce({"n": n})
+        feed.flush()
+    assert published(client) == []  # all handed over, none sent yet
+    held.set()
+    feed.close()
+    assert published(client) == [1, 2, 3, 4, 5]
+    assert CountingRedis.pipelines <= 2  # what waited went out together
+
+
+def test_in_the_background_needs_batches() -> None:
+    with pytest.raises(ValueError, match="batched"):
+        FeedAnnouncer(in_background=True)

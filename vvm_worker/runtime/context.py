@@ -43,6 +43,8 @@ from vvm_worker.runtime.v8 import (
 _APPEND_WITH_STEP_CHARS = 64 * 1024
 # Fixed cost of re-running a program up to its last answer, on top of the time it took.
 _REPLAY_SLACK_S = 0.25
+# What prelude.js's stepIfResumes gives back when the step would not resume (nothing done).
+_REPLAY = "replay"
 
 
 def _effects(items: Sequence[Mapping[str, Any]]) -> tuple[Effect, ...]:
@@ -251,15 +253,18 @@ class VVContext:
         text of what the program threw, what stopped it (``cpu``, ``heap``) and how long it
         ran."""
         isolate = self._isolate
-        resumes = await self._host_async("willResume", run_json)
-        timeout = resume_timeout if resumes is True else replay_timeout
         isolate.set_hard_memory_limit(heap_bytes)
         raw: Any = None  # the outcome, when the step returns it
         thrown: str | None = None
         killed_by: str | None = None
         started = time.perf_counter()
         try:
-            raw = await self._host_async("step", *arguments, timeout=timeout)
+            if resume_timeout != replay_timeout:
+                # A step that resumes has the CPU quota, one that replays its allowance too.
+                raw = await self._host_async("stepIfResumes", *arguments, timeout=resume_timeout)
+            if resume_timeout == replay_timeout or raw == _REPLAY:
+                raw, started = None, time.perf_counter()
+                raw = await self._host_async("step", *arguments, timeout=replay_timeout)
         except JSTimeoutException:
             killed_by = "cpu"
         except JSOOMException:

@@ -1033,6 +1033,14 @@
       host(key, 'willResume');
       return run !== null && run.canResume(jsonParse(json));
     },
+    // `step`, if it resumes where the program waits (see willResume); else nothing is done
+    // (no entry is appended) and 'replay' comes back: the host steps again with the
+    // allowance of a replay. One call for the common step instead of two.
+    stepIfResumes: function (key, json, entries) {
+      host(key, 'stepIfResumes');
+      if (run === null || !run.canResume(jsonParse(json))) return 'replay';
+      return hostApi.step(key, json, entries);
+    },
     // Journal entries as a JSON array (see JournalEntry).
     append: function (key, json) {
       host(key, 'append');

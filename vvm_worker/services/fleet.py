@@ -13,7 +13,7 @@ from django.core.exceptions import ValidationError
 from django.db import connection, transaction
 from django.db.models.functions import Now
 
-from cpcc_site.prepared import update_row
+from cpcc_site.prepared import deferred, update_row
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.models import (
@@ -332,7 +332,7 @@ def vehicle_record_state(
     here = state.position
     # One commit for the track points and the row (a lone UPDATE commits by itself).
     alone = track_aboard and connection.get_autocommit()
-    with transaction.atomic() if alone else contextlib.nullcontext():
+    with transaction.atomic() if alone else contextlib.nullcontext(), deferred():
         if track_aboard:
             _track_points_aboard(vehicle_id, [(state.t_s, here)])
         update_row(

@@ -15,7 +15,7 @@ from django.db.models.signals import m2m_changed, post_delete, post_save
 from shapely import STRtree
 from shapely.geometry import Point
 
-from cpcc_site.prepared import Many, PreparedRead, insert_rows, values_by_pk
+from cpcc_site.prepared import Many, PreparedRead, deferred, insert_rows, values_by_pk
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.events import migration_event, task_event
@@ -480,7 +480,8 @@ def vv_record_migration(
             to_lat=there.lat,
             to_lng=there.lng,
         )
-        insert_rows([migration])
+        with deferred():  # its key is read by the end of the unit of work
+            insert_rows([migration])
         vvm.announce(lambda: migration_event(migration, vv.customer_id))
     if isinstance(to, Vehicle):
         vv.host_rv, vv.host_gs = to, None

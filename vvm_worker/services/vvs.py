@@ -19,7 +19,7 @@ from accounts.models import Customer, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
 from cpcc_site.json_depth import MAX_VALUE_DEPTH  # how deeply a stored value may nest
-from cpcc_site.prepared import PreparedRead, insert_rows, save_fields
+from cpcc_site.prepared import PreparedRead, deferred, insert_rows, pipelined, save_fields
 from fleet.models import Vehicle
 from missions.events import task_event, vv_event
 from missions.models import (
@@ -462,7 +462,8 @@ def _save_tasks(vv: VirtualVehicle, tasks: list[Task] | None, vvm: VVM) -> None:
     """Save the new ones of these tasks (as routing left them: on an RV's list, or rejected)."""
     new = [t for t in tasks or () if t.pk is None]
     if new:
-        insert_rows(new)
+        with deferred():  # their keys are read by the end of the unit of work
+            insert_rows(new)
         vvm.announce(lambda: [task_event(task, vv.customer_id) for task in new])
 
 
@@ -483,7 +484,7 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
 
 
 def _advance(vv_id: uuid.UUID, vvm: VVM) -> None:
-    with transaction.atomic():
+    with transaction.atomic(), pipelined():
         vv = _locked_vv(vv_id)
         if vv is None or vv.is_ended or vv.status == VVStatus.QUEUED:
             return
@@ -521,7 +522,8 @@ def _save_changed(vv: VirtualVehicle, before: tuple[Any, ...]) -> None:
         for name, old, new in zip(_ADVANCED_FIELDS, before, _row(vv), strict=True)
         if old != new
     ]
-    save_fields(vv, [*changed, "updated"])  # no VV signals: compiled once, not at every step
+    with deferred():  # checked by the end of the unit of work
+        save_fields(vv, [*changed, "updated"])  # no VV signals: compiled once
 
 
 def _advance_locked(vv: VirtualVehicle, vvm: VVM, *, before: tuple[Any, ...] | None = None) -> None:
@@ -654,7 +656,7 @@ def task_complete(
     if vv_id is None:
         vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
     try:
-        with transaction.atomic():
+        with transaction.atomic(), pipelined():
             return _answer_and_advance(task_id, readings, vvm, vehicle_id, vv_id, arrival)
     except _StepBroke as broke:
         # Retried, the step would break again and again. The transaction is rolled back, so
