@@ -9,8 +9,9 @@ from django.db import transaction
 from missions.models import VirtualVehicle
 from tests.broker import queued
 from vvm_worker.dispatch import SHARED_QUEUE, gs_queue
+from vvm_worker.hosts import GSHost
 from vvm_worker.platform import platform_vvm
-from vvm_worker.services import vv_create_for_user, vv_submit
+from vvm_worker.services import vv_cancel, vv_create_for_user, vv_submit
 
 PROGRAM = "VV.log('hello');"
 
@@ -54,3 +55,25 @@ def test_a_vv_is_sent_to_the_queue_of_the_host_it_is_on(
         vv = vv_submit(customer=customer_a, name="VV", program=PROGRAM, vvm=platform_vvm())
     assert vv.host_gs == ground_station
     assert queued(broker, gs_queue(ground_station.pk)) == [("cpcc.vv_advance", [str(vv.pk)])]
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)  # real commits
+def test_a_ground_stations_worker_advances_the_vvs_it_admits_itself_without_a_message(
+    customer_a, ground_station, broker
+) -> None:
+    """A VV that the station's own work leaves on it (here: admitted) is advanced by that
+    worker within the same piece of work, with no message to itself on the broker."""
+    customer_a.max_parallel_vvs = 1
+    customer_a.save()
+    first = vv_submit(customer=customer_a, name="First", program=PROGRAM, vvm=platform_vvm())
+    second = vv_submit(customer=customer_a, name="Second", program=PROGRAM, vvm=platform_vvm())
+    vv_cancel(vv_id=first.pk, vvm=platform_vvm())  # its place is free
+    assert second.status == "queued"
+    host = GSHost(ground_station)
+    host.admit(customer_a.pk)
+    second.refresh_from_db()
+    assert second.status == "finished"
+    assert list(second.log.values_list("message", flat=True)) == ["hello"]
+    sent = queued(broker, gs_queue(ground_station.pk))
+    assert ("cpcc.vv_advance", [str(second.pk)]) not in sent
+    host.vvm.announcer.close()
