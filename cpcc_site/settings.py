@@ -334,6 +334,9 @@ CPCC_SIM_SPEED = env_float("CPCC_SIM_SPEED", 1.0, minimum=0.0)
 # V8 isolates a worker process prepares ahead of time (vvm_worker/runtime/pool.py; 0: each is
 # made when a VV needs it).
 CPCC_ISOLATE_POOL = int(env_float("CPCC_ISOLATE_POOL", 2, minimum=0))
+# A ground station's worker starts every new VV (a new isolate each): it keeps more ready, for
+# bursts of submissions (about 1.7 MB each).
+CPCC_GS_ISOLATE_POOL = int(env_float("CPCC_GS_ISOLATE_POOL", 16, minimum=0))
 # The password `loadscenario` and `demo` give the scenario's customers' logins (empty:
 # loadscenario generates one for a new login and prints it, demo keeps one in var/), and the
 # demo's admin password (empty: one kept in var/).

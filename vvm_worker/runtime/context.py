@@ -88,28 +88,32 @@ class VVContext:
         self.usable = True
         self.journal_length = 0
         self._last_entry: str | None = None
+        self._stepped = False
         prepared = POOL.take()
         self._isolate = prepared.isolate
         self._key = prepared.key
+        catalog_json = json.dumps(list(catalog))
         try:
-            self._host("setCatalog", json.dumps(list(catalog)))
             try:
-                self._set_program(program)
+                self._set_program(program, catalog_json)
             except JSParseException:
                 if not program.generator:
                     raise
                 # V8 refuses the generator form of a program it parses as written (a case the
                 # rewrite did not foresee): run it the replay way.
-                self._set_program(instrument_program(source, suspendable=False))
+                self._set_program(instrument_program(source, suspendable=False), catalog_json)
         except BaseException:
             self.close()
             raise
 
-    def _set_program(self, program: Instrumented) -> None:
+    def _set_program(self, program: Instrumented, catalog_json: str) -> None:
+        """Give the isolate the program and the VV's catalog, in one call (the catalog after
+        the program's last line, so that the program's lines keep their numbers)."""
         function = "function*" if program.generator else "function"
         self._program_prefix = f"__cpcc_host.setProgram({self._key}, {function} () {{"
+        catalog = self._host_script("setCatalog", catalog_json)
         self._isolate.eval(
-            f"{self._program_prefix}{program.code}\n}});\n//# sourceURL={PROGRAM_NAME}",
+            f"{self._program_prefix}{program.code}\n}}); {catalog};\n//# sourceURL={PROGRAM_NAME}",
             timeout_s=HOST_TIMEOUT_S,
         )
         self._program = program
@@ -184,15 +188,19 @@ class VVContext:
         # A step that resumes where the program waits runs only new work: its CPU quota. One
         # that replays also re-runs what the program did before, which has its own allowance.
         replay = limits.cpu_s + 2.0 * step.replay_s + _REPLAY_SLACK_S
+        replay_timeout = replay if len(step.journal) else limits.cpu_s
+        # A context that never ran a step has nowhere to resume: it replays.
+        resume_timeout = replay if catches_up else limits.cpu_s
         raw, thrown, killed_by, duration = v8.call(
             lambda: self._run(
                 arguments,
                 run_json,
                 heap_bytes=limits.heap_bytes,
-                resume_timeout=replay if catches_up else limits.cpu_s,
-                replay_timeout=replay if len(step.journal) else limits.cpu_s,
+                resume_timeout=resume_timeout if self._stepped else replay_timeout,
+                replay_timeout=replay_timeout,
             )
         )
+        self._stepped = True
         self._appended(texts)
         killed: tuple[str, str] | None = None
         if killed_by == "cpu":

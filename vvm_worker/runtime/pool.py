@@ -90,14 +90,26 @@ class IsolatePool:
     def take(self) -> Prepared:
         return v8.call(self._take)
 
+    def fill(self) -> None:
+        """Start preparing isolates up to ``size`` now, in the background (a worker that
+        expects a burst of new VVs), rather than at the first ``take``."""
+        v8.call(self._start_filling)
+
     async def _take(self) -> Prepared:
+        self._on_this_loop()
+        prepared = self._ready.pop() if self._ready else await prepare()
+        await self._start_filling()
+        return prepared
+
+    def _on_this_loop(self) -> None:
         loop = asyncio.get_running_loop()
         if self._loop is not loop:  # first use, or a new owner (after a fork)
             self._loop, self._ready, self._filling = loop, [], None
-        prepared = self._ready.pop() if self._ready else await prepare()
+
+    async def _start_filling(self) -> None:
+        self._on_this_loop()
         if self._filling is None and len(self._ready) < self.size:
-            self._filling = loop.create_task(self._fill())
-        return prepared
+            self._filling = asyncio.get_running_loop().create_task(self._fill())
 
     async def _fill(self) -> None:
         try:

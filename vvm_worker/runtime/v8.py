@@ -92,6 +92,7 @@ class Isolate:
         self._owner = owner
         self._manager: contextlib.AbstractContextManager[MiniRacer] | None = manager
         self._mr: MiniRacer | None = None
+        self._closing = False  # closed by its user: the owner frees it next
 
     # --- on the owner's loop ------------------------------------------------------------------
 
@@ -122,7 +123,7 @@ class Isolate:
 
     @property
     def closed(self) -> bool:
-        return self._mr is None
+        return self._mr is None or self._closing
 
     def eval(self, code: str, *, timeout_s: float) -> Any:
         """Evaluate ``code`` and return its value (a primitive); raises mini-racer's
@@ -140,14 +141,16 @@ class Isolate:
         return dict(self._owner.call_sync(lambda: self._racer().heap_stats()))
 
     def close(self) -> None:
-        """Free the isolate (idempotent; after shutdown the owner has freed it already)."""
-        if self._mr is None:
+        """Free the isolate (idempotent; after shutdown the owner has freed it already). From
+        another thread the caller does not wait: the owner frees it after the work queued
+        before, and the isolate is not to be used again."""
+        if self.closed:
             return
+        self._closing = True
         if self._owner.on_owner_thread():
             self._owner.forget(self)
             return
-        with contextlib.suppress(V8Closed):
-            self._owner.call_sync(lambda: self._owner.forget(self))
+        self._owner.call_soon(lambda: self._owner.forget(self))
 
 
 class _Maker:
@@ -278,6 +281,14 @@ class _Owner:
             loop = self._start()
             future = asyncio.run_coroutine_threadsafe(self._tracked(work), loop)
         return future.result()
+
+    def call_soon(self, work: Callable[[], None]) -> None:
+        """Run the quick function ``work()`` on the owner's loop without waiting for it;
+        nothing once V8 is shut down (the shutdown did what it would)."""
+        with self._lock:
+            if self._closed or self._loop is None:
+                return
+            self._loop.call_soon_threadsafe(work)
 
     def call_sync(self, work: Callable[[], T]) -> T:
         """Run the quick function ``work()`` on the owner's loop and wait for its result."""

@@ -143,6 +143,14 @@ def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> Grou
         if not stations:
             return None
         return min(stations, key=lambda gs: (distance_m(near, gs.position), gs.name))
+    loaded = ground_stations_loaded()
+    if not loaded:
+        return None
+    return min(loaded, key=lambda gs: (gs.load, gs.name))
+
+
+def ground_stations_loaded() -> list[GroundStation]:
+    """Every ground station, each with ``load``: how many VVs that have not ended it holds."""
     on_it = (
         VirtualVehicle.objects.filter(host_gs=OuterRef("pk"), status__in=ACTIVE_STATUSES)
         .order_by()
@@ -150,10 +158,7 @@ def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> Grou
         .annotate(n=Count("pk"))
         .values("n")
     )
-    loaded = list(GroundStation.objects.annotate(load=Coalesce(Subquery(on_it), 0)))
-    if not loaded:
-        return None
-    return min(loaded, key=lambda gs: (gs.load, gs.name))
+    return list(GroundStation.objects.annotate(load=Coalesce(Subquery(on_it), 0)))
 
 
 def pending_json(p: PendingRequest) -> dict[str, Any]:

@@ -14,13 +14,14 @@ from typing import Any
 from django.core.exceptions import ValidationError
 from django.db import connection, transaction
 from django.db.models import F
+from django.utils import timezone
 
 from accounts.models import Customer, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
 from cpcc_site.json_depth import MAX_VALUE_DEPTH  # how deeply a stored value may nest
 from cpcc_site.prepared import PreparedRead, deferred, insert_rows, pipelined, save_fields
-from fleet.models import Vehicle
+from fleet.models import GroundStation, Vehicle
 from missions.events import task_event, vv_event
 from missions.models import (
     ACTIVE_STATUSES,
@@ -52,6 +53,7 @@ from vvm_worker.services.base import (
     VVM,
     ProgramRejected,
     ground_station_for,
+    ground_stations_loaded,
     logger,
     pending_json,
     pending_of,
@@ -242,18 +244,29 @@ def _admit(customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
         if free <= 0:
             return []
         queued = VirtualVehicle.objects.filter(customer=customer, status=VVStatus.QUEUED)
-        admitted = []
-        for vv in queued.order_by("submitted_s", "created", "id")[:free]:
-            gs = ground_station_for(vv)
-            if gs is None:
+        admitted = list(queued.order_by("submitted_s", "created", "id")[:free])
+        if not admitted:
+            return []
+        # Each to the ground station holding the fewest VVs (counting those admitted before
+        # it), as ground_station_for would say one after the other: one read for all.
+        stations = ground_stations_loaded()
+        if not stations:
+            for vv in admitted:
                 logger.warning("no ground station: VV stays queued", extra={"vv": str(vv.id)})
-                break
-            vv.status = VVStatus.RUNNING
-            vv.host_gs = gs
-            vv.started_s = vvm.clock.now_s()
-            vv.save(update_fields=["status", "host_gs", "started_s", "updated"])
+            return []
+        now, stamp = vvm.clock.now_s(), timezone.now()
+        by_station: dict[GroundStation, list[uuid.UUID]] = {}
+        for vv in admitted:
+            gs = min(stations, key=lambda gs: (gs.load, gs.name))
+            gs.load += 1
+            vv.status, vv.host_gs, vv.started_s, vv.updated = VVStatus.RUNNING, gs, now, stamp
+            by_station.setdefault(gs, []).append(vv.pk)
+        for gs, ids in by_station.items():  # one UPDATE a station
+            VirtualVehicle.objects.filter(pk__in=ids).update(
+                status=VVStatus.RUNNING, host_gs=gs, started_s=now, updated=stamp
+            )
+        for vv in admitted:
             vvm.announce(lambda vv=vv: vv_event(vv))
-            admitted.append(vv)
             vvm.dispatcher.vv_arrived(vv.id)
         return admitted
 

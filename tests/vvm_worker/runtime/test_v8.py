@@ -11,6 +11,7 @@ import subprocess
 import sys
 import textwrap
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -217,3 +218,57 @@ def test_the_v8_thread_owns_every_isolate() -> None:
     finally:
         isolate.close()
     assert isolate.closed
+
+
+def test_closing_an_isolate_from_another_thread_does_not_wait_for_the_v8_thread() -> None:
+    """A worker that lets a VV's context go does not wait while the V8 thread is busy; the
+    isolate is freed after the work queued before it."""
+    isolate, other = v8.new_isolate(), v8.new_isolate()
+    before = v8.open_isolates()
+    busy, release = threading.Event(), threading.Event()
+
+    async def hold() -> None:  # the V8 thread's loop, held
+        busy.set()
+        release.wait(10)
+
+    holder = threading.Thread(target=lambda: v8.call(hold))
+    holder.start()
+    assert busy.wait(10)
+    isolate.close()  # returns although the V8 thread cannot free it now
+    assert isolate.closed and v8.open_isolates() == before
+    release.set()
+    holder.join(10)
+    assert other.eval("1 + 1", timeout_s=5) == 2  # after the close, on the same loop
+    assert v8.open_isolates() == before - 1
+    other.close()
+
+
+def test_a_pool_filled_ahead_gives_isolates_without_preparing_them_when_taken(
+    monkeypatch,
+) -> None:
+    from vvm_worker.runtime import pool as pool_module
+
+    pool = pool_module.IsolatePool(3)
+    pool.fill()
+
+    def ready() -> int:  # read on the V8 thread, which fills the pool
+        return v8.call(lambda: _count(pool))
+
+    deadline = time.monotonic() + 30
+    while ready() < 3:
+        assert time.monotonic() < deadline, "the pool was not filled"
+        time.sleep(0.05)
+
+    async def refused() -> pool_module.Prepared:
+        raise AssertionError("prepared when taken")
+
+    monkeypatch.setattr(pool_module, "prepare", refused)
+    pool.size = 0  # nothing prepared after these
+    taken = [pool.take() for _ in range(3)]
+    assert len({id(p.isolate) for p in taken}) == 3
+    for prepared in taken:
+        prepared.isolate.close()
+
+
+async def _count(pool) -> int:  # type: ignore[no-untyped-def]
+    return len(pool._ready)

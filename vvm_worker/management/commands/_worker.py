@@ -16,6 +16,7 @@ from django.db.models import Model
 from cpcc_site.celery import app
 from cpcc_site.embedded_redis import EmbeddedRedis
 from vvm_worker.hosts import GSHost, RVHost, set_host
+from vvm_worker.runtime.pool import POOL
 
 
 def ensure_broker() -> None:
@@ -43,6 +44,13 @@ def run_celery(*, queues: list[str], node: str, loglevel: str) -> None:
             loglevel,
         ]
     )
+
+
+def prepare_isolates(at_least: int) -> None:
+    """Keep at least this many V8 isolates prepared (``CPCC_ISOLATE_POOL`` if more), starting
+    now: a VV new to this process starts in one without waiting for it to be made."""
+    POOL.size = max(POOL.size, at_least)
+    POOL.fill()
 
 
 def host_named(model: type[Model], name: str, what: str) -> Any:

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
+from django.conf import settings
 from django.core.management.base import BaseCommand, CommandParser
 
 from fleet.models import GroundStation
 from vvm_worker.dispatch import SHARED_QUEUE, gs_queue
 from vvm_worker.hosts import GSHost
-from vvm_worker.management.commands._worker import host_named, serve
+from vvm_worker.management.commands._worker import host_named, prepare_isolates, serve
 
 
 class Command(BaseCommand):
@@ -21,6 +22,7 @@ class Command(BaseCommand):
 
     def handle(self, *args: Any, **options: Any) -> None:
         station = host_named(GroundStation, options["name"], "ground station")
+        prepare_isolates(settings.CPCC_GS_ISOLATE_POOL)  # every new VV starts here
         serve(
             self,
             GSHost(station),

@@ -11,8 +11,12 @@ from django.core.management.base import BaseCommand, CommandError, CommandParser
 from fleet.models import Vehicle
 from vvm_worker.dispatch import rv_queue
 from vvm_worker.hosts import CannotFly, RVHost
-from vvm_worker.management.commands._worker import hosts_named, serve
+from vvm_worker.management.commands._worker import hosts_named, prepare_isolates, serve
 from vvm_worker.planning import DEFAULT_PLANNER, PLANNER_NAMES
+
+# Isolates kept prepared for each vehicle hosted (about 1.7 MB each), up to MAX_PREPARED.
+ISOLATES_PER_VEHICLE = 2
+MAX_PREPARED = 32
 
 
 class Command(BaseCommand):
@@ -38,6 +42,8 @@ class Command(BaseCommand):
         except CannotFly as exc:
             raise CommandError(str(exc)) from None
         ids = [vehicle.pk for vehicle in vehicles]
+        # A VV arriving from another process needs a new context: two ready per vehicle.
+        prepare_isolates(min(ISOLATES_PER_VEHICLE * len(ids), MAX_PREPARED))
         serve(
             self,
             host,
