@@ -6,8 +6,8 @@ database takes to answer. A ``PreparedRead`` compiles its queryset once per data
 runs the same SQL again with new parameters, building the model instances (and the related
 ones of ``select_related``) exactly as a queryset would, or giving its rows or their count;
 ``PreparedPages`` hands such a read to a paginator. The writes (``insert_rows``,
-``save_fields``, ``update_row``) and ``values_by_pk`` write their SQL themselves, once per
-model and shape, for models whose save signals nobody listens to.
+``save_fields``, ``update_row``) write their SQL themselves, once per model and shape, for
+models whose save signals nobody listens to.
 
 On PostgreSQL a unit of work may run ``pipelined``: the writes it marks ``deferred`` go to the
 server without waiting for their answers, which come back with the next statement that waits
@@ -276,35 +276,6 @@ def update_row(
     changed: list[int] = []
     _execute(connection, sql, params, lambda cursor: changed.append(int(cursor.rowcount)))
     return changed[0] if changed else None
-
-
-_VALUES: dict[tuple[Any, ...], str] = {}
-
-
-def values_by_pk(
-    model: type[models.Model], field: str, pks: Sequence[Any], *, using: str = "default"
-) -> dict[Any, Any]:
-    """``dict(model.objects.filter(pk__in=pks).values_list("pk", field))`` for a field the
-    database gives as Python wants it (text, numbers), with its SQL written once per number of
-    keys (up to _CACHED_ROWS)."""
-    if not pks:
-        return {}
-    connection = connections[using]
-    key = (model, field, len(pks), connection.vendor)
-    sql = _VALUES.get(key)
-    if sql is None:
-        meta, quote = model._meta, connection.ops.quote_name
-        sql = (
-            f"SELECT {quote(meta.pk.column)}, {quote(meta.get_field(field).column)} "
-            f"FROM {quote(meta.db_table)} WHERE {quote(meta.pk.column)} IN "
-            f"({', '.join(['%s'] * len(pks))})"
-        )
-        if len(pks) <= _CACHED_ROWS:
-            _VALUES[key] = sql
-    pk_field = model._meta.pk
-    with connection.cursor() as cursor:
-        cursor.execute(sql, [pk_field.get_db_prep_value(pk, connection) for pk in pks])
-        return dict(cursor.fetchall())
 
 
 _INSERTS: dict[tuple[Any, ...], tuple[str, list[Any]]] = {}

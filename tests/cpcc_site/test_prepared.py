@@ -9,13 +9,13 @@ from django.db import DatabaseError, IntegrityError, connection, transaction
 
 from cpcc_site import prepared
 from cpcc_site.prepared import (
+    Many,
     PreparedRead,
     deferred,
     insert_rows,
     pipelined,
     save_fields,
     update_row,
-    values_by_pk,
 )
 from fleet.models import Vehicle
 from missions.models import LogEntry, StorageDocument, Task, VirtualVehicle
@@ -172,9 +172,13 @@ def test_update_row_sets_and_adds_as_an_orm_update_does() -> None:
     assert update_row(Vehicle, vehicle.pk + 1000, values={"lat": 2.0}) == 0
 
 
-def test_values_by_pk_and_rows_read_what_the_queryset_reads() -> None:
+def test_rows_read_what_the_queryset_reads() -> None:
     one, two = VehicleFactory(name="One"), VehicleFactory(name="Two", status="maintenance")
-    assert values_by_pk(Vehicle, "status", [two.pk, one.pk, two.pk + 1000]) == {
+    statuses = PreparedRead(
+        lambda ids: Vehicle.objects.filter(pk__in=ids).values_list("pk", "status"),
+        samples=[("pk", Many(lambda i: -7_000_000 - i))],
+    )
+    assert dict(statuses.rows([two.pk, one.pk, two.pk + 1000])) == {
         one.pk: "active",
         two.pk: "maintenance",
     }

@@ -15,7 +15,7 @@ from django.db.models.signals import m2m_changed, post_delete, post_save
 from shapely import STRtree
 from shapely.geometry import Point
 
-from cpcc_site.prepared import Many, PreparedRead, deferred, insert_rows, values_by_pk
+from cpcc_site.prepared import Many, PreparedRead, deferred, insert_rows
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.events import migration_event, task_event
@@ -170,7 +170,7 @@ def fleet_caps_and_rows(
     routes: dict[int, tuple[Position, ...]] = {}
     online: dict[int, bool] = {}
     unsure = sorted(pk for pk, live in known.items() if live.status is None)
-    statuses = values_by_pk(Vehicle, "status", unsure)
+    statuses = dict(_STATUSES.rows(unsure)) if unsure else {}
     for pk, live in known.items():
         status = live.status if live.status is not None else statuses.get(pk)
         if status is None or status == VehicleStatus.REMOVED or pk not in shape.rows:
@@ -205,6 +205,12 @@ def fleet_caps_and_rows(
         )
     return caps, rows
 
+
+# The statuses of some RVs (of this process, when their loops do not know theirs).
+_STATUSES = PreparedRead(
+    lambda vehicle_ids: Vehicle.objects.filter(pk__in=vehicle_ids).values_list("pk", "status"),
+    samples=[("pk", Many(lambda i: -7_000_000 - i))],
+)
 
 # The open tasks of some RVs, oldest first, and the rows of RVs another process hosts (with
 # ``online``: whose worker renewed its lease within lease_s, by the database's clock): reads
