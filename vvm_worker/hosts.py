@@ -510,12 +510,13 @@ class GSHost:
         pass
 
     def _work(self, work: Callable[[], Any]) -> None:
-        """Do a piece of work, then advance the VVs it left here, then tell the maps."""
+        """Do a piece of work, then advance the VVs it left here; the maps are told what each
+        of them changed as soon as it is committed."""
         try:
             work()
-            self._advance_waiting()
         finally:
             self.vvm.announcer.flush()
+        self._advance_waiting()
 
     def _advance_waiting(self) -> None:
         """Advance the VVs that work of this worker left on the station, oldest first (those
@@ -532,6 +533,8 @@ class GSHost:
                 logger.exception(
                     "vv advance failed", extra={"vv": str(vv_id), "ground_station": self.name}
                 )
+            finally:
+                self.vvm.announcer.flush()
             self._later.popleft()
 
     def start(self) -> None:

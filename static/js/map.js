@@ -102,11 +102,19 @@
     return this.vvs[id];
   };
 
+  // What has ended does not start again: each worker publishes its changes in its own order,
+  // so the word that a VV or task ended may arrive before an older word about it, which is
+  // then kept out.
+  var VV_ENDED = { finished: true, failed: true, killed: true, cancelled: true };
+
   CPCCMap.prototype._event = function (e) {
     var vv = this._vv(e.vv);
     if (e.kind === 'vv') {
+      if (VV_ENDED[vv.status] && !VV_ENDED[e.status]) return;
       vv.name = e.name; vv.status = e.status; vv.host_kind = e.host_kind; vv.host = e.host;
     } else if (e.kind === 'task') {
+      var known = vv.tasks[e.id];
+      if (known && known.status !== 'open' && e.status === 'open') return;
       vv.tasks[e.id] = e;
     } else if (e.kind === 'migration') {
       for (var i = 0; i < vv.migrations.length; i++) if (vv.migrations[i].id === e.id) return;

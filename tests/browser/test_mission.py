@@ -224,3 +224,26 @@ def see_the_results(page: Page, vv_id: str) -> None:
     with page.expect_download() as got:
         page.get_by_role("link", name="storage.json").click()
     assert sorted(json.loads(Path(got.value.path()).read_text())) == KEYS
+
+
+def test_the_live_map_keeps_what_ended_when_an_older_word_arrives_late(world, page) -> None:
+    """Each worker publishes its changes in its own order: the word that a task was served
+    or a VV finished may reach the map before an older word about it, which changes nothing."""
+    log_in(page, "customer-a", then="/map/")
+    live = page.locator("#live-map")
+    expect(live).to_have_attribute("data-connected", "true")
+    vv = "00000000-0000-4000-8000-000000000001"
+    task = {"kind": "task", "vv": vv, "id": 7, "q": 0, "index": 0, "lat": 48.11, "lng": 12.87,
+            "alt": 10.0, "requested_s": 1.0}  # fmt: skip
+    done = {**task, "status": "done", "done_s": 2.0}
+    opened = {**task, "status": "open", "done_s": None}
+    finished = {"kind": "vv", "vv": vv, "name": "VV", "status": "finished", "host_kind": "gs",
+                "host": "GS Base"}  # fmt: skip
+    running = {**finished, "status": "running", "host_kind": "rv", "host": "Heli One"}
+    page.evaluate(
+        "(events) => window.cpccMap.applyFrame({seq: window.cpccMap.seq, events: events})",
+        [done, finished, opened, running],
+    )
+    expect(live).to_have_attribute("data-tasks-open", "0")
+    expect(live).to_have_attribute("data-tasks-done", "1")
+    assert page.evaluate(f"() => window.cpccMap.vvs['{vv}'].status") == "finished"
