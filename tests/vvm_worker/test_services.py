@@ -7,7 +7,13 @@ import pytest
 from fleet.models import VehicleStatus
 from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.factories import AREA_ONE, AREA_TWO, VehicleFactory
-from vvm_worker.services import ProgramRejected, task_complete, vehicle_set_status, vv_submit
+from vvm_worker.services import (
+    ProgramRejected,
+    task_complete,
+    vehicle_set_status,
+    vv_advance,
+    vv_submit,
+)
 
 ONE_TASK = """
 var co2 = VV.sensor.get('CO2');
@@ -440,3 +446,40 @@ def test_a_scenario_with_a_vv_name_the_submission_refuses_says_where_before_load
     with pytest.raises(ScenarioError, match=r"vvs\[1\]\.name: The name has a control character"):
         scenario_apply(scenario=scenario, logins=False)
     assert not Customer.objects.exists()
+
+
+class Heard:
+    """An announcer that keeps what it hears (events as the live map would get them)."""
+
+    def __init__(self) -> None:
+        self.events: list[dict] = []
+
+    def announce(self, event: dict) -> None:
+        self.events.append(event)
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def test_the_map_hears_each_new_task_and_migration_with_its_row_id(
+    customer_a, ground_station, vvm_factory, django_capture_on_commit_callbacks
+) -> None:
+    """On PostgreSQL a step's new rows are written without waiting (their ids come back by
+    the end of the unit of work): the events that name them are built only then."""
+    VehicleFactory(name="Heli One")
+    vvm = vvm_factory()
+    vvm.announcer = heard = Heard()
+    with django_capture_on_commit_callbacks(execute=True):
+        vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=vvm)
+    with django_capture_on_commit_callbacks(execute=True):
+        vv_advance(vv_id=vv.pk, vvm=vvm)
+    tasks = [e for e in heard.events if e["kind"] == "task"]
+    moves = [e for e in heard.events if e["kind"] == "migration"]
+    assert [t["id"] for t in tasks] == list(Task.objects.filter(vv=vv).values_list("pk", flat=True))
+    assert [m["id"] for m in moves] == list(
+        Migration.objects.filter(vv=vv).values_list("pk", flat=True)
+    )
+    assert tasks and moves and all(e["id"] is not None for e in tasks + moves)

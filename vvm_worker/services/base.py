@@ -11,6 +11,7 @@ from dataclasses import field as dataclass_field
 from typing import Any, Protocol
 
 from django.core.exceptions import ValidationError
+from django.db import transaction
 from django.db.models import Count, DateTimeField, ExpressionWrapper, OuterRef, Subquery
 from django.db.models.functions import Coalesce, Now
 
@@ -111,6 +112,15 @@ class VVM:
         events = make()
         for event in [events] if isinstance(events, dict) else events:
             self.announcer.announce(event)
+
+    def announce_at_commit(
+        self, make: Callable[[], dict[str, Any] | Iterable[dict[str, Any]]]
+    ) -> None:
+        """``announce``, with the event built once the transaction commits: for rows whose
+        keys a deferred insert sets only by the end of the unit of work
+        (``cpcc_site.prepared.deferred``)."""
+        if self.listened:
+            transaction.on_commit(lambda: self.announce(make))
 
     def settle_host(self, vehicle: Any) -> None:
         """Before a VV boards or leaves this RV (a Vehicle row read in this transaction):

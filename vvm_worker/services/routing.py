@@ -488,7 +488,7 @@ def vv_record_migration(
         )
         with deferred():  # its key is read by the end of the unit of work
             insert_rows([migration])
-        vvm.announce(lambda: migration_event(migration, vv.customer_id))
+        vvm.announce_at_commit(lambda: migration_event(migration, vv.customer_id))
     if isinstance(to, Vehicle):
         vv.host_rv, vv.host_gs = to, None
     else:

@@ -477,7 +477,7 @@ def _save_tasks(vv: VirtualVehicle, tasks: list[Task] | None, vvm: VVM) -> None:
     if new:
         with deferred():  # their keys are read by the end of the unit of work
             insert_rows(new)
-        vvm.announce(lambda: [task_event(task, vv.customer_id) for task in new])
+        vvm.announce_at_commit(lambda: [task_event(task, vv.customer_id) for task in new])
 
 
 def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
