@@ -271,7 +271,7 @@ class VVContext:
                 # A step that resumes has the CPU quota, one that replays its allowance too.
                 raw = await self._host_async("stepIfResumes", *arguments, timeout=resume_timeout)
             if resume_timeout == replay_timeout or raw == _REPLAY:
-                raw, started = None, time.perf_counter()
+                raw, started = None, time.perf_counter()  # (None again if the step throws)
                 raw = await self._host_async("step", *arguments, timeout=replay_timeout)
         except JSTimeoutException:
             killed_by = "cpu"

@@ -251,8 +251,8 @@ def _admit(customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
         # it), as ground_station_for would say one after the other: one read for all.
         stations = ground_stations_loaded()
         if not stations:
-            for vv in admitted:
-                logger.warning("no ground station: VV stays queued", extra={"vv": str(vv.id)})
+            first = admitted[0]
+            logger.warning("no ground station: VV stays queued", extra={"vv": str(first.id)})
             return []
         now, stamp = vvm.clock.now_s(), timezone.now()
         by_station: dict[GroundStation, list[uuid.UUID]] = {}
