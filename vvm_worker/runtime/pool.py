@@ -93,21 +93,25 @@ class IsolatePool:
     def fill(self) -> None:
         """Start preparing isolates up to ``size`` now, in the background (a worker that
         expects a burst of new VVs), rather than at the first ``take``."""
-        v8.call(self._start_filling)
+        v8.call(self._begin_filling)
 
     async def _take(self) -> Prepared:
         self._on_this_loop()
         prepared = self._ready.pop() if self._ready else await prepare()
-        await self._start_filling()
+        self._fill_soon()
         return prepared
+
+    async def _begin_filling(self) -> None:
+        self._on_this_loop()
+        self._fill_soon()
 
     def _on_this_loop(self) -> None:
         loop = asyncio.get_running_loop()
         if self._loop is not loop:  # first use, or a new owner (after a fork)
             self._loop, self._ready, self._filling = loop, [], None
 
-    async def _start_filling(self) -> None:
-        self._on_this_loop()
+    def _fill_soon(self) -> None:
+        """On the owner's loop: prepare isolates up to ``size`` in a background task."""
         if self._filling is None and len(self._ready) < self.size:
             self._filling = asyncio.get_running_loop().create_task(self._fill())
 
