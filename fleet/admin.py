@@ -10,7 +10,7 @@ from django.template.response import TemplateResponse
 from django.urls import URLPattern, path, reverse
 from django.utils import timezone
 
-from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
+from fleet.models import GroundStation, NoFlyZone, RallyPoint, SensorType, Vehicle, VehicleStatus
 from fleet.selectors import ground_station_list, vehicle_list
 from fleet.widgets import AreaWidget, map_media
 from missions.selectors import with_active_vv_count
@@ -20,6 +20,10 @@ from vvm_worker.services import (
     VehicleConfig,
     ground_station_create,
     ground_station_update,
+    no_fly_zone_delete,
+    no_fly_zone_save,
+    rally_point_delete,
+    rally_point_save,
     vehicle_create,
     vehicle_set_status,
     vehicle_update,
@@ -34,6 +38,17 @@ def _config(form: Any, fields: Any, only_changed: bool) -> Any:
 
 def _station(station: GroundStation) -> dict[str, Any]:
     return {"name": station.name, "lat": station.lat, "lng": station.lng}
+
+
+def _area_widget(*, besides: int | None = None) -> AreaWidget:
+    """An area's map, with the areas of the RVs in the fleet (but ``besides``) and the ground
+    stations around it."""
+    others = [
+        {"name": v.name, "status": v.status, "area": v.area}
+        for v in vehicle_list()
+        if v.status != VehicleStatus.REMOVED and v.pk != besides
+    ]
+    return AreaWidget(others=others, stations=[_station(gs) for gs in ground_station_list()])
 
 
 def _age(seconds: float) -> str:
@@ -101,6 +116,63 @@ class GroundStationAdmin(admin.ModelAdmin):
             obj.pk = ground_station_create(config=config, vvm=platform_vvm()).pk
 
 
+class _AirspaceAdmin(admin.ModelAdmin):
+    """Saved and deleted through its services, which tell every RV's worker."""
+
+    def _save(self, obj: Any) -> None:
+        raise NotImplementedError
+
+    def _delete(self, obj: Any) -> None:
+        raise NotImplementedError
+
+    def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
+        self._save(obj)
+
+    def delete_model(self, request: HttpRequest, obj: Any) -> None:
+        self._delete(obj)
+
+    def delete_queryset(self, request: HttpRequest, queryset: QuerySet[Any]) -> None:
+        for obj in queryset:
+            self._delete(obj)
+
+
+@admin.register(NoFlyZone)
+class NoFlyZoneAdmin(_AirspaceAdmin):
+    """No-fly zones: no RV serves a task inside one (between its altitudes), and every RV's
+    autopilot gets it as an exclusion fence (when it holds at every altitude the RV flies)."""
+
+    list_display = ["name", "min_altitude_m", "max_altitude_m", "updated"]
+    search_fields = ["name"]
+    fields = ["name", "area", ("min_altitude_m", "max_altitude_m")]
+
+    def get_form(
+        self, request: HttpRequest, obj: Any = None, change: bool = False, **kwargs: Any
+    ) -> Any:
+        # The zone on a map, with the RVs' areas and the ground stations around it.
+        kwargs["widgets"] = {**kwargs.get("widgets", {}), "area": _area_widget()}
+        return super().get_form(request, obj, change=change, **kwargs)
+
+    def _save(self, obj: Any) -> None:
+        no_fly_zone_save(zone=obj, vvm=platform_vvm())
+
+    def _delete(self, obj: Any) -> None:
+        no_fly_zone_delete(zone=obj, vvm=platform_vvm())
+
+
+@admin.register(RallyPoint)
+class RallyPointAdmin(_AirspaceAdmin):
+    """Rally points every RV's autopilot gets (where it may land or wait instead of home)."""
+
+    list_display = ["name", "lat", "lng", "alt"]
+    search_fields = ["name"]
+
+    def _save(self, obj: Any) -> None:
+        rally_point_save(point=obj, vvm=platform_vvm())
+
+    def _delete(self, obj: Any) -> None:
+        rally_point_delete(point=obj, vvm=platform_vvm())
+
+
 @admin.register(Vehicle)
 class VehicleAdmin(admin.ModelAdmin):
     """RVs: their limits and sensors; status changes go through the actions, which move the
@@ -142,6 +214,7 @@ class VehicleAdmin(admin.ModelAdmin):
                     ("max_speed_mps", "climb_rate_mps"),
                     "battery_s",
                     "sensors",
+                    "sensor_sources",
                 ]
             },
         ),
@@ -164,13 +237,7 @@ class VehicleAdmin(admin.ModelAdmin):
         self, request: HttpRequest, obj: Any = None, change: bool = False, **kwargs: Any
     ) -> Any:
         # The area on a map, with the other RVs' areas and the ground stations around it.
-        others = [
-            {"name": v.name, "status": v.status, "area": v.area}
-            for v in vehicle_list()
-            if v.status != VehicleStatus.REMOVED and (obj is None or v.pk != obj.pk)
-        ]
-        stations = [_station(gs) for gs in ground_station_list()]
-        widget = AreaWidget(others=others, stations=stations)
+        widget = _area_widget(besides=None if obj is None else obj.pk)
         kwargs["widgets"] = {**kwargs.get("widgets", {}), "area": widget}
         return super().get_form(request, obj, change=change, **kwargs)
 

@@ -8,7 +8,9 @@ driver's errors are kinds of it), never a type of its link.
 
 from __future__ import annotations
 
-from typing import Protocol
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 from fleet.geo import Position
 
@@ -24,6 +26,46 @@ class DriverError(Exception):
         super().__init__(message)
         if permanent is not None:
             self.permanent = permanent
+
+
+class SensorFailure(Exception):
+    """A reading the vehicle did not give: its sensor did not answer in time, its link is
+    gone, its camera refused. ``reason`` says why in words a customer may read (no port, no
+    address, no vehicle); the message adds where, for the operator's log. The task ends with
+    the reason as its error: a reading is never invented."""
+
+    def __init__(self, reason: str, *, where: str = "") -> None:
+        super().__init__(f"{where}: {reason}" if where else reason)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class SensorRead:
+    """What a control loop asks of a vehicle's own sensor: the SDC entry (``sensor``: its
+    name, ``kind``, ``params``) and where the vehicle gets it (``source``: ``telemetry``,
+    ``named_value``, ``camera``; ``name``: the NAMED_VALUE_FLOAT name), taken no earlier than
+    ``since_s`` (platform time: the vehicle's arrival) and within ``timeout_s``."""
+
+    sensor: str
+    kind: str
+    source: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+    name: str = ""
+    since_s: float = 0.0
+    timeout_s: float = 2.0
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One reading as the vehicle took it: its kind-specific fields (``value`` for a scalar;
+    ``lat``, ``lng``, ``alt``, ``satellites``, ``hdop`` for GPS; ``width``, ``height``,
+    ``format`` for a camera, with the picture's bytes in ``image``), the vehicle's own time
+    (epoch milliseconds) and position at the moment it was taken."""
+
+    fields: Mapping[str, Any]
+    epoch_ms: int
+    position: Position
+    image: bytes | None = None
 
 
 class Driver(Protocol):
@@ -51,3 +93,8 @@ class Driver(Protocol):
     def battery_remaining_s(self, t: float) -> float | None: ...
     def time_to_s(self, target: Position, now_s: float) -> float: ...
     def time_home_s(self, start: Position) -> float: ...
+
+    def read_sensor(self, read: SensorRead) -> Sample:
+        """A reading of one of the vehicle's own sensors; raises ``SensorFailure`` when it
+        does not come (a simulated vehicle has none: its readings come from the field)."""
+        ...

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from functools import lru_cache
+from typing import Any
 
 from django.core.exceptions import ValidationError
 from django.core.validators import MaxValueValidator, MinValueValidator
@@ -11,6 +12,7 @@ from django.db import models
 from shapely.geometry import Point, Polygon
 
 from fleet.geo import Position
+from fleet.sources import SensorSource, SourceError, parse_sources
 
 LAT = [MinValueValidator(-90.0), MaxValueValidator(90.0)]
 LNG = [MinValueValidator(-180.0), MaxValueValidator(180.0)]
@@ -21,6 +23,21 @@ def _polygon(area_json: str) -> Polygon:
     # The mapper asks for the areas of the whole fleet at every routing decision; vehicle rows
     # are read anew each time, so the polygons are kept by the area's text.
     return Polygon([(float(lng), float(lat)) for lat, lng in json.loads(area_json)])
+
+
+def check_ring(area: Any, field: str) -> None:
+    """ValidationError on ``field`` unless ``area`` is a closed ring of at least 3 distinct
+    ``[lat, lng]`` points that does not cross itself."""
+    try:
+        ring = [(float(lat), float(lng)) for lat, lng in area]
+    except (TypeError, ValueError):
+        raise ValidationError({field: "a list of [lat, lng] points"}) from None
+    if len(set(ring)) < 3:
+        raise ValidationError({field: "needs at least 3 distinct points"})
+    if ring[0] != ring[-1]:
+        raise ValidationError({field: "must be closed: the last point repeats the first"})
+    if not Polygon([(lng, lat) for lat, lng in ring]).is_valid:
+        raise ValidationError({field: "is not a valid polygon (does it cross itself?)"})
 
 
 class SensorKind(models.TextChoices):
@@ -106,6 +123,14 @@ class Vehicle(models.Model):
     climb_rate_mps = models.FloatField(default=3.0, validators=[MinValueValidator(0.1)])
     battery_s = models.FloatField(null=True, blank=True, help_text="Flight endurance, seconds.")
     sensors = models.ManyToManyField(SensorType, related_name="vehicles", blank=True)
+    sensor_sources = models.JSONField(
+        default=dict,
+        blank=True,
+        help_text='Where its sensors\' readings come from, by SDC entry name, e.g. {"CO2": '
+        '{"source": "named_value", "name": "CO2"}}; sources: field (simulated), telemetry, '
+        "named_value, camera (MAVLink), plugin (its own computer). A sensor not named here reads the "
+        "simulated field.",
+    )
     # Live state, written by the vehicle's control loop.
     lat = models.FloatField(null=True, blank=True)
     lng = models.FloatField(null=True, blank=True)
@@ -156,13 +181,73 @@ class Vehicle(models.Model):
 
     def clean(self) -> None:
         super().clean()
+        check_ring(self.area, "area")
+        if self.sensor_sources is None:  # an empty field in a form: no sources named
+            self.sensor_sources = {}
         try:
-            ring = [(float(lat), float(lng)) for lat, lng in self.area]
-        except (TypeError, ValueError):
-            raise ValidationError({"area": "a list of [lat, lng] points"}) from None
-        if len(set(ring)) < 3:
-            raise ValidationError({"area": "needs at least 3 distinct points"})
-        if ring[0] != ring[-1]:
-            raise ValidationError({"area": "must be closed: the last point repeats the first"})
-        if not self.area_polygon.is_valid:
-            raise ValidationError({"area": "is not a valid polygon (does it cross itself?)"})
+            self.parsed_sources()
+        except SourceError as exc:
+            raise ValidationError({"sensor_sources": str(exc)}) from None
+
+    def parsed_sources(self) -> dict[str, SensorSource]:
+        """Its sensor sources, checked against the SDC (SourceError says what is wrong)."""
+        catalog = {s.name: s.as_catalog_entry() for s in SensorType.objects.all()}
+        return parse_sources(
+            self.sensor_sources, catalog=catalog, mavlink=self.driver == Driver.MAVLINK
+        )
+
+
+class NoFlyZone(models.Model):
+    """An exclusion zone the provider draws (an airport, a prison, a crowd): no RV serves a
+    point inside it between its altitudes, and each RV's autopilot gets it as an exclusion
+    fence."""
+
+    name = models.CharField(max_length=80, unique=True)
+    area = models.JSONField(help_text="A closed ring of [lat, lng] points.")
+    min_altitude_m = models.FloatField(
+        default=0.0, validators=[MinValueValidator(0.0)], help_text="Metres above ground."
+    )
+    max_altitude_m = models.FloatField(
+        null=True, blank=True, help_text="Metres above ground; empty: no ceiling."
+    )
+    updated = models.DateTimeField(auto_now=True)
+
+    class Meta:
+        ordering = ["name"]
+        verbose_name = "no-fly zone"
+
+    def __str__(self) -> str:
+        return self.name
+
+    @property
+    def area_polygon(self) -> Polygon:
+        return _polygon(json.dumps(self.area))
+
+    def clean(self) -> None:
+        super().clean()
+        check_ring(self.area, "area")
+        if self.max_altitude_m is not None and self.max_altitude_m < self.min_altitude_m:
+            raise ValidationError(
+                {"max_altitude_m": f"must not be below min_altitude_m ({self.min_altitude_m:g} m)"}
+            )
+
+
+class RallyPoint(models.Model):
+    """A place where an RV may land or wait instead of its home (ArduPilot's rally points),
+    given to every RV's autopilot."""
+
+    name = models.CharField(max_length=80, unique=True)
+    lat = models.FloatField(validators=LAT)
+    lng = models.FloatField(validators=LNG)
+    alt = models.FloatField(default=20.0, help_text="Metres above ground it holds at.")
+    updated = models.DateTimeField(auto_now=True)
+
+    class Meta:
+        ordering = ["name"]
+
+    def __str__(self) -> str:
+        return self.name
+
+    @property
+    def position(self) -> Position:
+        return Position(self.lat, self.lng, self.alt)

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import dataclass
 
-from django.db.models import QuerySet
+from django.db.models import Q, QuerySet
 
-from fleet.models import GroundStation, SensorType, Vehicle
+from fleet.geo import Position
+from fleet.models import GroundStation, NoFlyZone, RallyPoint, SensorType, Vehicle
 
 
 class UnknownSensors(LookupError):
@@ -40,3 +42,31 @@ def vehicle_list(*, status: str | None = None) -> QuerySet[Vehicle]:
 def ground_station_list() -> QuerySet[GroundStation]:
     """Every ground station, by name."""
     return GroundStation.objects.order_by("name")
+
+
+@dataclass(frozen=True)
+class VehicleFence:
+    """What an RV's autopilot is to enforce: its operation area (a closed ring of [lat, lng])
+    and altitude range, the no-fly zones' rings, and the rally points."""
+
+    area: list[list[float]]
+    min_altitude_m: float
+    max_altitude_m: float
+    exclusions: list[list[list[float]]]
+    rally: list[Position]
+
+
+def vehicle_fence(*, vehicle: Vehicle) -> VehicleFence:
+    """The fence of this RV's autopilot. An autopilot's exclusion polygon holds at every
+    altitude: it gets the no-fly zones that hold at every altitude the RV may fly; a zone of
+    a narrower band is the platform's alone to keep (the mapper serves no task inside it)."""
+    zones = NoFlyZone.objects.filter(min_altitude_m__lte=vehicle.min_altitude_m).filter(
+        Q(max_altitude_m__isnull=True) | Q(max_altitude_m__gte=vehicle.max_altitude_m)
+    )
+    return VehicleFence(
+        area=vehicle.area,
+        min_altitude_m=vehicle.min_altitude_m,
+        max_altitude_m=vehicle.max_altitude_m,
+        exclusions=[zone.area for zone in zones],
+        rally=[point.position for point in RallyPoint.objects.all()],
+    )

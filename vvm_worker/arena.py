@@ -101,6 +101,9 @@ class MemoryStore:
         self.arena.done[task.id] = now_s
         self.arena.by[task.id] = self.spec.name
 
+    def fail(self, task: LoopTask, reason: str, now_s: float) -> None:
+        self.complete(task, [], now_s)  # the arena's vehicles read no sensors
+
     def record_state(self, state: VehicleState, *, moved: bool) -> None:
         pass
 

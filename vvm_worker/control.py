@@ -24,7 +24,7 @@ from typing import Any, Protocol
 
 from shapely.geometry import Polygon
 
-from fleet.driving import Driver, DriverError
+from fleet.driving import Driver, DriverError, SensorFailure
 from fleet.geo import Position, within_m
 from vvm_worker.planning import Planner, PlanTask, standby_position
 
@@ -101,6 +101,11 @@ class Store(Protocol):
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
         """The task was served with these readings (its VV resumes)."""
+        ...
+
+    def fail(self, task: LoopTask, reason: str, now_s: float) -> None:
+        """The vehicle was there but took no reading (``reason``, in a customer's words): the
+        task ends with that error (its VV resumes with it)."""
         ...
 
     def record_state(self, state: VehicleState, *, moved: bool) -> None:
@@ -261,8 +266,13 @@ class ControlLoop:
         battery = self.battery_fraction(now)
         for task in served:
             self.recent_alts = [*self.recent_alts[1 - RECENT_TASKS :], task.position.alt]
-            readings = self.sensing(task, here, now, battery)
-            self.store.complete(task, readings, now)
+            try:
+                readings = self.sensing(task, here, now, battery)
+            except SensorFailure as failure:
+                logger.warning("reading failed: %s", failure, extra=self._log())
+                self.store.fail(task, failure.reason, now)
+            else:
+                self.store.complete(task, readings, now)
         self._plan(now)
 
     def _landed(self, token: int, due_s: float) -> None:

@@ -20,11 +20,13 @@ from django.db import transaction
 from django.db.models import F
 
 from cpcc_site.prepared import PreparedRead
-from fleet.driving import Driver
+from fleet.driving import Driver, Sample, SensorFailure, SensorRead
 from fleet.geo import Position, within_m
 from fleet.models import SensorType, Vehicle, VehicleStatus
+from fleet.plugins import SensorPlugin, plugin_class
 from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
+from fleet.sources import FIELD, PLUGIN, SensorSource, source_for
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.control import (
     REACH_SLACK_M,
@@ -36,7 +38,7 @@ from vvm_worker.control import (
     VehicleState,
 )
 from vvm_worker.planning import TravelTime, make_planner
-from vvm_worker.sensing import read_sensors
+from vvm_worker.sensing import read_sensors, vehicle_reading
 from vvm_worker.services import (
     VVM,
     task_complete,
@@ -159,6 +161,18 @@ class DatabaseStore:
         self._status = None
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
+        self._answer(task, readings, now_s)
+
+    def fail(self, task: LoopTask, reason: str, now_s: float) -> None:
+        self._answer(task, [], now_s, failure=reason)
+
+    def _answer(
+        self,
+        task: LoopTask,
+        readings: list[dict[str, Any]],
+        now_s: float,
+        failure: str | None = None,
+    ) -> None:
         log = self.settled_log
         if log is not None:
             log.clear()  # what was settled before is committed
@@ -173,6 +187,7 @@ class DatabaseStore:
                 vehicle_id=self.vehicle_id,
                 vv_id=task.vv,
                 arrival=arrival,
+                failure=failure,
             )
         except BaseException:
             self._arrival = arrival  # rolled back with the answer: still to be recorded
@@ -308,10 +323,15 @@ class PlatformSensing:
     def __call__(
         self, task: LoopTask, position: Position, now_s: float, battery: float | None
     ) -> list[dict[str, Any]]:
-        catalog = self._catalog()
+        return self.read(task.sensors, position, now_s, battery)
+
+    def read(
+        self, names: Sequence[str], position: Position, now_s: float, battery: float | None
+    ) -> list[dict[str, Any]]:
+        catalog = self.catalog()
         return read_sensors(
             field=self.vvm.field,
-            sensors=[catalog[name] for name in task.sensors],
+            sensors=[catalog[name] for name in names],
             position=position,
             time_s=now_s,
             epoch_ms=self.vvm.clock.epoch_ms(now_s),
@@ -319,7 +339,7 @@ class PlatformSensing:
             seed=self.vvm.world_seed,
         )
 
-    def _catalog(self) -> dict[str, dict[str, Any]]:
+    def catalog(self) -> dict[str, dict[str, Any]]:
         # The SDC changes rarely; read it again now and then, not at every stop.
         now = time.monotonic()
         if self._sdc is None or now - self._sdc[0] > _SDC_TTL_S:
@@ -327,15 +347,102 @@ class PlatformSensing:
         return self._sdc[1]
 
 
+class VehicleSensing:
+    """The readings of one RV's sensors, each from its source (``fleet.sources``): the
+    simulated field (``PlatformSensing``), the vehicle itself through its driver (telemetry,
+    a companion's named values, its camera), or a plug-in on the vehicle's own computer. A
+    reading that does not come raises SensorFailure: the task's error."""
+
+    def __init__(
+        self,
+        field: PlatformSensing,
+        *,
+        driver: Driver,
+        sources: dict[str, SensorSource],
+    ) -> None:
+        self.field = field
+        self.driver = driver
+        self.clock = field.vvm.clock
+        self.sources: dict[str, SensorSource] = {}
+        self.plugins: dict[str, SensorPlugin] = {}
+        self.configure(sources)
+
+    def configure(self, sources: dict[str, SensorSource]) -> None:
+        """Read the sensors from these sources from now on: one plug-in instance per sensor
+        that names one, made now (one that cannot be loaded or refuses its options raises
+        with the reason, and nothing changes); those no longer named are closed."""
+        plugins = {
+            name: self.plugins[name]
+            if self.sources.get(name) == source
+            else plugin_class(source.plugin)(**source.options)
+            for name, source in sources.items()
+            if source.source == PLUGIN
+        }
+        for name, plugin in self.plugins.items():
+            if plugins.get(name) is not plugin:
+                plugin.close()
+        self.sources, self.plugins = sources, plugins
+
+    def __call__(
+        self, task: LoopTask, position: Position, now_s: float, battery: float | None
+    ) -> list[dict[str, Any]]:
+        if not self.sources:  # every reading from the field, as ever
+            return self.field(task, position, now_s, battery)
+        catalog = self.field.catalog()
+        readings = []
+        for name in task.sensors:
+            entry = catalog[name]
+            source = source_for(self.sources, name)
+            if source.source == FIELD:
+                readings.extend(self.field.read([name], position, now_s, battery))
+                continue
+            if source.source == PLUGIN:
+                sample = self._plugin_sample(name, source, now_s)
+            else:
+                sample = self.driver.read_sensor(
+                    SensorRead(
+                        sensor=name,
+                        kind=str(entry["kind"]),
+                        params=entry.get("params") or {},
+                        source=source.source,
+                        name=source.name,
+                        since_s=now_s,
+                        timeout_s=source.timeout_s,
+                    )
+                )
+            readings.append(vehicle_reading(entry, sample))
+        return readings
+
+    def _plugin_sample(self, name: str, source: SensorSource, now_s: float) -> Sample:
+        """A plug-in's reading, with where the vehicle was and the time it was taken."""
+        try:
+            fields = self.plugins[name].read(source.timeout_s)
+        except SensorFailure:
+            raise
+        except Exception as exc:  # a third-party plug-in's own error: its type and words
+            raise SensorFailure(
+                "the sensor's plug-in failed", where=f"{source.plugin}: {exc!r}"
+            ) from exc
+        now = self.clock.now_s()
+        return Sample(
+            fields=fields, epoch_ms=self.clock.epoch_ms(now), position=self.driver.position_at(now)
+        )
+
+    def close(self) -> None:
+        for plugin in self.plugins.values():
+            plugin.close()
+
+
 @dataclass
 class VehicleRig:
-    """One RV as a host runs it: its driver, its store and its control loop."""
+    """One RV as a host runs it: its driver, its store, its sensors and its control loop."""
 
     vehicle_id: int
     name: str
     driver: Driver
     store: DatabaseStore
     loop: ControlLoop
+    sensing: VehicleSensing
 
     def changed(self) -> Callable[[], None]:
         """The RV's tasks or status were just changed: forget what the store read, and the
@@ -425,6 +532,9 @@ def build_rig(
     if driver is None:
         driver = SimVehicle(spec, vehicle.depot, now_s=vvm.clock.now_s())
     store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, ticks=ticks, defer_reports=defer_reports)
+    readings = VehicleSensing(
+        sensing or PlatformSensing(vvm), driver=driver, sources=vehicle.parsed_sources()
+    )
     loop = ControlLoop(
         name=vehicle.name,
         driver=driver,
@@ -436,7 +546,7 @@ def build_rig(
         store=store,
         scheduler=scheduler,
         clock=vvm.clock.now_s,
-        sensing=sensing or PlatformSensing(vvm),
+        sensing=readings,
         config=LoopConfig(
             battery_s=spec.battery_s,
             reserve=settings.CPCC_BATTERY_RESERVE,
@@ -446,4 +556,4 @@ def build_rig(
             wake_defers_to_arrival=wake_defers_to_arrival,
         ),
     )
-    return VehicleRig(vehicle.pk, vehicle.name, driver, store, loop)
+    return VehicleRig(vehicle.pk, vehicle.name, driver, store, loop, readings)

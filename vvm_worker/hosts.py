@@ -32,9 +32,10 @@ from django.db import close_old_connections, connection, transaction
 from django.db.models import Exists, OuterRef, Q, QuerySet
 
 from cpcc_site import database
-from fleet.mavlink.driver import MavlinkDriver
+from fleet.mavlink.driver import Fence, MavlinkDriver
 from fleet.mavlink.errors import MavlinkError
 from fleet.models import Driver, GroundStation, Vehicle, VehicleStatus
+from fleet.selectors import VehicleFence, vehicle_fence
 from missions.events import VEHICLE_STALE_S
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle, VVStatus
 from vvm_worker.clock import Clock
@@ -345,13 +346,16 @@ class HostedRV:
         if vehicle.driver == Driver.MAVLINK:
             if speed <= 0:
                 raise ValueError("a MAVLink vehicle cannot fly instantly: set CPCC_SIM_SPEED > 0")
+            fence = vehicle_fence(vehicle=vehicle)
             driver = MavlinkDriver(
                 vehicle.driver_url,
                 spec=kinematics(vehicle, scale=scale),
                 depot=vehicle.depot,
-                area=vehicle.area,
-                min_altitude_m=vehicle.min_altitude_m,
-                max_altitude_m=vehicle.max_altitude_m,
+                area=fence.area,
+                min_altitude_m=fence.min_altitude_m,
+                max_altitude_m=fence.max_altitude_m,
+                exclusions=fence.exclusions,
+                rally=fence.rally,
                 clock=vvm.clock.now_s,
                 link_timeout_s=settings.CPCC_MAVLINK_LINK_TIMEOUT_S,
                 on_link_lost=self._link_lost_later,
@@ -380,19 +384,24 @@ class HostedRV:
         return {"vehicle": self.name}
 
     def changed(self) -> None:
-        """The vehicle's work, status or configuration changed: re-plan, and give a MAVLink
-        vehicle its new geofence if its area or altitudes changed."""
+        """The vehicle's work, status or configuration changed: re-plan, read its sensors
+        from the sources configured now, and give a MAVLink vehicle its new geofence if its
+        area, altitudes, the no-fly zones or the rally points changed."""
+        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
+        try:
+            self.rig.sensing.configure(vehicle.parsed_sources())
+        except ValueError:  # a plug-in gone since it was configured: the old sources stay
+            logger.exception("sensor sources not changed", extra=self._log())
         if isinstance(self.driver, MavlinkDriver) and self.driver.link_ok:
-            vehicle = Vehicle.objects.get(pk=self.vehicle_id)
-            wanted = (
-                [(lat, lng) for lat, lng in vehicle.area[:-1]],
-                vehicle.min_altitude_m,
-                vehicle.max_altitude_m,
-            )
-            if self.driver.fence is None or _fence_differs(self.driver.fence, wanted):
+            fence = vehicle_fence(vehicle=vehicle)
+            if self.driver.fence is None or _fence_differs(self.driver.fence, fence, vehicle):
                 try:
                     self.driver.upload_fence(
-                        vehicle.area, vehicle.min_altitude_m, vehicle.max_altitude_m
+                        fence.area,
+                        fence.min_altitude_m,
+                        fence.max_altitude_m,
+                        exclusions=fence.exclusions,
+                        rally=fence.rally,
                     )
                 except MavlinkError:
                     logger.exception("geofence not uploaded", extra=self._log())
@@ -457,6 +466,7 @@ class HostedRV:
         )
 
     def close(self) -> None:
+        self.rig.sensing.close()
         if isinstance(self.driver, MavlinkDriver):
             self.driver.close()
 
@@ -638,16 +648,36 @@ def stalled(*, waiting_s: float | None = None, **host: Any) -> QuerySet[VirtualV
 _host: RVHost | GSHost | None = None
 
 
-def _fence_differs(
-    fence: tuple[list[tuple[float, float]], float, float],
-    wanted: tuple[list[tuple[float, float]], float, float],
-) -> bool:
-    (have, low, high), (want, want_low, want_high) = fence, wanted
-    if (low, high) != (want_low, want_high) or len(have) != len(want):
-        return True
-    return any(
-        abs(a - c) > 1e-7 or abs(b - d) > 1e-7 for (a, b), (c, d) in zip(have, want, strict=True)
+def _fence_differs(have: Fence, wanted: VehicleFence, vehicle: Vehicle) -> bool:
+    """Whether the autopilot's fence is not (within the protocol's 1e-7 degrees) the one
+    wanted now."""
+
+    def vertices(ring: list[list[float]]) -> list[tuple[float, float]]:
+        points = [(float(lat), float(lng)) for lat, lng in ring]
+        return points[:-1] if len(points) > 1 and points[0] == points[-1] else points
+
+    want = [
+        vertices(wanted.area),
+        [wanted.min_altitude_m, wanted.max_altitude_m],
+        *(vertices(ring) for ring in wanted.exclusions),
+        [(p.lat, p.lng, p.alt - vehicle.depot_alt) for p in wanted.rally],
+    ]
+    got = [
+        have.area,
+        [have.min_altitude_m, have.max_altitude_m],
+        *have.exclusions,
+        list(have.rally),
+    ]
+    flat_want, flat_got = _flat(want), _flat(got)
+    return len(flat_want) != len(flat_got) or any(
+        abs(a - b) > 1e-7 for a, b in zip(flat_want, flat_got, strict=True)
     )
+
+
+def _flat(value: Any) -> list[float]:
+    if isinstance(value, int | float):
+        return [float(value)]
+    return [x for item in value for x in _flat(item)]
 
 
 def set_host(host: RVHost | GSHost | None) -> None:

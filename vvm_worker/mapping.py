@@ -19,6 +19,23 @@ QUEUE_PENALTY_S = 30.0
 
 
 @dataclass(frozen=True)
+class ExclusionZone:
+    """A no-fly zone: no RV serves a point inside ``area`` ((lng, lat) coordinates, border
+    included) between ``min_altitude_m`` and ``max_altitude_m`` (None: no ceiling)."""
+
+    area: Polygon
+    min_altitude_m: float = 0.0
+    max_altitude_m: float | None = None
+
+    def holds(self, task: TaskRequest) -> bool:
+        if task.alt < self.min_altitude_m:
+            return False
+        if self.max_altitude_m is not None and task.alt > self.max_altitude_m:
+            return False
+        return bool(self.area.covers(Point(task.lng, task.lat)))
+
+
+@dataclass(frozen=True)
 class VehicleCaps:
     """What the mapper needs to know about one RV."""
 
@@ -35,6 +52,8 @@ class VehicleCaps:
     climb_rate_mps: float = 3.0
     # The open tasks aboard in the order the RV's planner means to serve them (all or some).
     route: tuple[Position, ...] = ()
+    # The provider's no-fly zones, the same for every RV.
+    no_fly: tuple[ExclusionZone, ...] = ()
 
     def covers(self, task: TaskRequest) -> bool:
         return bool(self.area.covers(Point(task.lng, task.lat)))
@@ -44,6 +63,7 @@ class VehicleCaps:
             self.covers(task)
             and self.min_altitude_m <= task.alt <= self.max_altitude_m
             and set(task.sensors) <= self.sensors
+            and not any(zone.holds(task) for zone in self.no_fly)
         )
 
     def cost_s(self, task: TaskRequest) -> float:
@@ -94,6 +114,8 @@ def map_task(task: TaskRequest, fleet: Sequence[VehicleCaps]) -> MapDecision:
 
 def _why_not(task: TaskRequest, fleet: Sequence[VehicleCaps]) -> str:
     where = _fmt(task)
+    if fleet and any(zone.holds(task) for zone in fleet[0].no_fly):
+        return f"no vehicle can serve the task at {where}: it is inside a no-fly zone"
     covering = [v for v in fleet if v.covers(task)]
     if not covering:
         return f"no vehicle can serve the task at {where}: it is outside every operation area"

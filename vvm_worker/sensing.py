@@ -17,8 +17,10 @@ from typing import Any
 from django.core.files.base import ContentFile
 from django.core.files.storage import default_storage
 
+from fleet.driving import Sample, SensorFailure
 from fleet.geo import Position
 from fleet.simulation import SensorField, SensorSpec, render_camera
+from fleet.simulation.sensors import SCALAR_QUANTITIES
 
 IMAGE_DIR = "readings"
 
@@ -75,3 +77,26 @@ def read_sensors(
             reading["image"] = save_image(image, "jpg" if fmt in ("jpeg", "jpg") else "png")
         readings.append(reading)
     return readings
+
+
+def vehicle_reading(entry: Mapping[str, Any], sample: Sample) -> dict[str, Any]:
+    """The reading of an SDC entry as the vehicle took it (its own time and position); a
+    picture is kept under MEDIA_ROOT. SensorFailure for a picture the vehicle did not give."""
+    spec = sensor_spec(entry)
+    here = sample.position
+    reading: dict[str, Any] = {
+        "sensor": spec.name,
+        "kind": spec.kind,
+        "time": iso_time(sample.epoch_ms),
+        "position": {"lat": here.lat, "lng": here.lng, "alt": here.alt},
+        **sample.fields,
+    }
+    if spec.kind == "scalar":
+        quantity = str(spec.params.get("quantity", "")).lower()
+        reading["unit"] = spec.unit or SCALAR_QUANTITIES.get(quantity, "")
+    elif spec.kind == "camera":
+        if not sample.image:
+            raise SensorFailure("the camera gave no picture", where=spec.name)
+        fmt = str(sample.fields.get("format") or spec.params.get("format", "png")).lower()
+        reading["image"] = save_image(sample.image, "jpg" if fmt in ("jpeg", "jpg") else "png")
+    return reading

@@ -68,6 +68,13 @@ class VehicleInSerializer(serializers.Serializer):
     sensors = serializers.ListField(
         child=StrictCharField(), required=False, help_text="SDC entry names."
     )
+    sensor_sources = serializers.DictField(
+        child=serializers.DictField(),
+        required=False,
+        help_text='Where a sensor\'s readings come from, by SDC entry name: {"source": "field" | '
+        '"telemetry" | "named_value" | "camera" | "plugin", ...} (docs/mavlink.md); a sensor not named '
+        "reads the simulated field.",
+    )
 
     def validate_depot(self, value: list[float]) -> list[float]:
         _check_lat_lng(value[0], value[1], "depot")
@@ -121,6 +128,7 @@ class VehicleOutSerializer(serializers.ModelSerializer):
             "climb_rate_mps",
             "battery_s",
             "sensors",
+            "sensor_sources",
             "position",
             "phase",
             "distance_m",

@@ -32,13 +32,19 @@ to time-stamp telemetry (flight time). Link timeouts run on the monotonic clock.
 
 from __future__ import annotations
 
+import io
 import logging
 import math
 import threading
 import time
+import urllib.parse
+import urllib.request
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
+import PIL.Image
+
+from fleet.driving import Sample, SensorFailure, SensorRead
 from fleet.geo import Position, distance_m, ground_distance_m
 from fleet.mavlink.errors import (
     CommandDenied,
@@ -48,7 +54,7 @@ from fleet.mavlink.errors import (
     VehicleTookOver,
 )
 from fleet.mavlink.link import MavlinkLink
-from fleet.mavlink.mission import fence_polygon_items
+from fleet.mavlink.mission import exclusion_polygons, fence_polygon_items, rally_items
 from fleet.mavlink.modes import COPTER_TYPES, Autopilot
 from fleet.mavlink.wire import mavlink
 from fleet.simulation.vehicle import (
@@ -78,6 +84,8 @@ _ARDUPILOT_RESEND_S = 1.0
 _PX4_STREAM_HZ = 4.0
 _PX4_OFFBOARD_AFTER_S = 1.2  # PX4 enters offboard after a second of setpoints
 _STUCK_ARMED_S = 5.0  # landed but still armed this long after returning: disarm
+_CAMERA = mavlink.MAV_COMP_ID_CAMERA  # the camera component (MAVLink camera protocol)
+_MAX_PICTURE_BYTES = 20_000_000
 
 # Flying states and the modes the autopilot may show in them without the driver being
 # overruled (PX4 switches from AUTO.TAKEOFF to AUTO.LOITER by itself, RTL ends in LAND).
@@ -96,6 +104,18 @@ _MODES = {
 _RETURN_MODES = frozenset({"RTL", "LAND", "AUTO.RTL", "AUTO.LAND", "SMART_RTL", "AUTO_RTL"})
 
 
+class Fence(NamedTuple):
+    """What a vehicle's autopilot was given by ``upload_fence``: the area's vertices (the
+    inclusion polygon), the altitude range, each no-fly zone's vertices and the rally points
+    as (lat, lng, altitude above home)."""
+
+    area: list[tuple[float, float]]
+    min_altitude_m: float
+    max_altitude_m: float
+    exclusions: tuple[tuple[tuple[float, float], ...], ...] = ()
+    rally: tuple[tuple[float, float, float], ...] = ()
+
+
 class MavlinkDriver:
     """Flies one ArduPilot or PX4 copter over a MAVLink link (see the module docstring).
 
@@ -104,7 +124,8 @@ class MavlinkDriver:
     endurance (for estimates and ``battery_remaining_s``). ``depot``: its home, where it arms
     (the autopilot's home is where it armed, so altitudes relative to home are relative to the
     depot). ``area``/``min_altitude_m``/``max_altitude_m``: the geofence to upload on connect
-    (None: none). ``clock``: the platform clock. ``telemetry_hz``: the GLOBAL_POSITION_INT rate
+    (None: none), with ``exclusions`` (no-fly zones' rings) and ``rally`` points (see
+    ``upload_fence``). ``clock``: the platform clock. ``telemetry_hz``: the GLOBAL_POSITION_INT rate
     to ask for. ``arrival_tolerance_m``: how close counts as "there" for ``phase_at``.
     ``on_link_lost``: called (on the link's thread) when the heartbeat stops.
     """
@@ -118,6 +139,8 @@ class MavlinkDriver:
         area: Sequence[Sequence[float]] | None = None,
         min_altitude_m: float = 0.0,
         max_altitude_m: float | None = None,
+        exclusions: Sequence[Sequence[Sequence[float]]] = (),
+        rally: Sequence[Position] = (),
         clock: Callable[[], float] = time.time,
         telemetry_hz: float = 4.0,
         link_timeout_s: float = 3.0,
@@ -146,11 +169,11 @@ class MavlinkDriver:
         self.on_link_lost = on_link_lost
         self.name = name or str(self.link.endpoint)
         self._fence_request = (
-            (area, min_altitude_m, max_altitude_m)
+            (area, min_altitude_m, max_altitude_m, exclusions, rally)
             if area is not None and max_altitude_m is not None
             else None
         )
-        self.fence: tuple[list[tuple[float, float]], float, float] | None = None
+        self.fence: Fence | None = None  # what the autopilot was given last
 
         self._lock = threading.RLock()
         self._command_lock = threading.Lock()  # one flight command sequence at a time
@@ -164,6 +187,7 @@ class MavlinkDriver:
         self._position_seen_s: float | None = None
         self._home_amsl_m: float | None = None
         self._battery: float | None = None
+        self._captures = 0  # pictures asked for (MAV_CMD_IMAGE_START_CAPTURE sequence numbers)
         self._landed_state: int | None = None
         self._armed = False
         self._mode = ""
@@ -222,6 +246,9 @@ class MavlinkDriver:
                 (mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 1.0),
                 (mavlink.MAVLINK_MSG_ID_HEARTBEAT, 1.0),
                 (mavlink.MAVLINK_MSG_ID_STATUSTEXT, 1.0),
+                # What its sensors' readings come from (fleet.sources: telemetry).
+                (mavlink.MAVLINK_MSG_ID_GPS_RAW_INT, 1.0),
+                (mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE, 2.0),
             ):
                 try:
                     self.link.set_message_interval(message_id, rate_hz)
@@ -232,8 +259,8 @@ class MavlinkDriver:
             except MavlinkError as exc:
                 logger.warning("%s: no HOME_POSITION: %s", self.name, exc)
             if self._fence_request is not None:
-                area, low, high = self._fence_request
-                self.upload_fence(area, low, high)
+                area, low, high, exclusions, rally = self._fence_request
+                self.upload_fence(area, low, high, exclusions=exclusions, rally=rally)
         except BaseException:
             self.close()
             raise
@@ -274,38 +301,66 @@ class MavlinkDriver:
     # --- geofence -------------------------------------------------------------------------
 
     def upload_fence(
-        self, area: Sequence[Sequence[float]], min_altitude_m: float, max_altitude_m: float
+        self,
+        area: Sequence[Sequence[float]],
+        min_altitude_m: float,
+        max_altitude_m: float,
+        *,
+        exclusions: Sequence[Sequence[Sequence[float]]] = (),
+        rally: Sequence[Position] = (),
     ) -> None:
-        """Upload the operation area as the vehicle's geofence, with its altitude ceiling.
+        """Upload the operation area as the vehicle's geofence, with its altitude ceiling, the
+        provider's no-fly zones as exclusion polygons and its rally points.
 
-        The area (a ring of (lat, lng), closed or not) becomes one inclusion polygon
-        (MAV_MISSION_TYPE_FENCE); the ceiling is set relative to home (``FENCE_ALT_MAX`` and
-        FENCE_TYPE's altitude and polygon bits, then ``FENCE_ENABLE`` on ArduPilot;
-        ``GF_MAX_VER_DIST`` on PX4, whose fence acts when GF_ACTION is not "none": it is set
-        to Return if it was). The minimum altitude is not put on the autopilot (a floor would
-        trip on every take-off and landing): the platform keeps tasks above it. Call again
-        whenever the area or altitudes change. Raises ValueError for a bad area or altitude
-        range, MissionRejected/MissionTimeout, and the parameter errors.
+        The area (a ring of (lat, lng), closed or not) becomes one inclusion polygon and each
+        ring of ``exclusions`` an exclusion polygon (MAV_MISSION_TYPE_FENCE); the ceiling is
+        set relative to home (``FENCE_ALT_MAX`` and FENCE_TYPE's altitude and polygon bits, its
+        circle bit cleared, then ``FENCE_ENABLE`` on ArduPilot; ``GF_MAX_VER_DIST`` on PX4,
+        whose fence acts when GF_ACTION is not "none": it is set to Return if it was). The
+        ``rally`` points (altitudes above ground) become the rally list
+        (MAV_MISSION_TYPE_RALLY; an empty one clears it). The minimum altitude is not put on
+        the autopilot (a floor would trip on every take-off and landing): the platform keeps
+        tasks above it. Call again whenever any of it changes. Raises ValueError for a bad
+        area or altitude range, MissionRejected/MissionTimeout, and the parameter errors.
         """
         if not max_altitude_m > min_altitude_m:
             raise ValueError(
                 f"max altitude {max_altitude_m!r} must be above min altitude {min_altitude_m!r}"
             )
         items = fence_polygon_items(area)
+        for ring in exclusions:
+            items += fence_polygon_items(ring, exclusion=True, first_seq=len(items))
         ceiling = max_altitude_m - self.depot.alt
         self.link.upload_mission(items, mavlink.MAV_MISSION_TYPE_FENCE)
+        points = [(p.lat, p.lng, p.alt - self.depot.alt) for p in rally]
+        self.link.upload_mission(rally_items(points), mavlink.MAV_MISSION_TYPE_RALLY)
         if self.autopilot is Autopilot.PX4:
             self.link.param_set("GF_MAX_VER_DIST", ceiling)
             if self.link.param_get("GF_ACTION") == 0:
                 self.link.param_set("GF_ACTION", 3)  # Return
         else:
             self.link.param_set("FENCE_ALT_MAX", ceiling)
+            # Max altitude and polygon; not ArduCopter's default circle around home
+            # (FENCE_RADIUS, 300 m), which would refuse targets in a larger area.
             fence_type = int(self.link.param_get("FENCE_TYPE"))
-            self.link.param_set("FENCE_TYPE", fence_type | 1 | 4)  # + max altitude, polygon
+            self.link.param_set("FENCE_TYPE", (fence_type | 1 | 4) & ~2)
             self.link.param_set("FENCE_ENABLE", 1)
-        self.fence = ([(i.lat, i.lng) for i in items], min_altitude_m, max_altitude_m)
+        inclusion = [(i.lat, i.lng) for i in items[: int(items[0].param1)]]
+        self.fence = Fence(
+            inclusion,
+            min_altitude_m,
+            max_altitude_m,
+            tuple(tuple(p) for p in exclusion_polygons(items)),
+            tuple(points),
+        )
         logger.info(
-            "%s: geofence of %d vertices, ceiling %.1f m uploaded", self.name, len(items), ceiling
+            "%s: geofence of %d vertices and %d no-fly zone(s), ceiling %.1f m, %d rally "
+            "point(s) uploaded",
+            self.name,
+            len(inclusion),
+            len(exclusions),
+            ceiling,
+            len(points),
         )
 
     # --- commands (the driver API) ----------------------------------------------------------
@@ -378,6 +433,129 @@ class MavlinkDriver:
         if not (math.isfinite(duration_s) and duration_s >= 0):
             raise ValueError(f"duration_s must be a finite number >= 0, got {duration_s!r}")
         return now_s + duration_s
+
+    # --- sensors ------------------------------------------------------------------------------
+
+    def read_sensor(self, read: SensorRead) -> Sample:
+        """A reading of the vehicle's own sensor, the way ArduPilot and PX4 publish it: the
+        next message that carries it, received from now on within ``read.timeout_s`` (never
+        one from before the vehicle got here). GPS and altitude: GLOBAL_POSITION_INT (with
+        GPS_RAW_INT's satellites and HDOP); pressure and temperature: SCALED_PRESSURE;
+        battery: SYS_STATUS; a named value: NAMED_VALUE_FLOAT of that name from any
+        component of the vehicle. Raises SensorFailure when it does not come."""
+        quantity = str(read.params.get("quantity", "")).lower()
+        if read.source == "named_value":
+            what = f"NAMED_VALUE_FLOAT {read.name!r}"
+            msg = self._next(
+                lambda m: m.get_type() == "NAMED_VALUE_FLOAT" and _text(m.name) == read.name,
+                read,
+                what,
+                any_component=True,
+            )
+            return self._sample(read, {"value": round(float(msg.value), 4)})
+        if read.source == "camera":
+            return self._capture(read)
+        if read.source != "telemetry":
+            raise SensorFailure(f"this vehicle has no {read.source} source", where=read.sensor)
+        if read.kind == "gps" or quantity == "altitude":
+            msg = self._next(_is("GLOBAL_POSITION_INT"), read, "GLOBAL_POSITION_INT")
+            if msg.lat == 0 and msg.lon == 0:
+                raise SensorFailure("the autopilot has no position fix", where=read.sensor)
+            alt = self.depot.alt + msg.relative_alt / 1000
+            if read.kind != "gps":
+                return self._sample(read, {"value": round(alt, 2)})
+            fields: dict[str, Any] = {"lat": msg.lat / 1e7, "lng": msg.lon / 1e7, "alt": alt}
+            raw = self.link.last_message("GPS_RAW_INT")
+            if raw is not None:
+                fields["satellites"] = (
+                    None if raw.satellites_visible == 255 else raw.satellites_visible
+                )
+                fields["hdop"] = None if raw.eph == 65535 else round(raw.eph / 100, 2)
+            return self._sample(read, fields)
+        if quantity in ("pressure", "temperature"):
+            msg = self._next(_is("SCALED_PRESSURE"), read, "SCALED_PRESSURE")
+            value = msg.press_abs if quantity == "pressure" else msg.temperature / 100
+            return self._sample(read, {"value": round(float(value), 2)})
+        if quantity == "battery":
+            msg = self._next(
+                lambda m: m.get_type() == "SYS_STATUS" and m.battery_remaining >= 0,
+                read,
+                "SYS_STATUS with the battery's charge",
+            )
+            return self._sample(read, {"value": float(msg.battery_remaining)})
+        raise SensorFailure(
+            f"the autopilot's telemetry has no {quantity or read.kind}", where=read.sensor
+        )
+
+    def _next(
+        self,
+        match: Callable[[Any], bool],
+        read: SensorRead,
+        what: str,
+        *,
+        any_component: bool = False,
+    ) -> Any:
+        if not self.link.link_ok:
+            raise SensorFailure("the vehicle's link is down", where=f"{self.name}: {read.sensor}")
+        msg = self.link.next_message(match, read.timeout_s, any_component=any_component)
+        if msg is None:
+            raise SensorFailure(
+                f"no reading within {read.timeout_s:g} s",
+                where=f"{self.name}: {read.sensor} ({what})",
+            )
+        return msg
+
+    def _capture(self, read: SensorRead) -> Sample:
+        """A picture through the MAVLink camera protocol: MAV_CMD_IMAGE_START_CAPTURE (one
+        image) to the camera component, its CAMERA_IMAGE_CAPTURED (time and position of the
+        capture, the picture's URI), then the picture fetched from that URI."""
+        where = f"{self.name}: {read.sensor} (camera {_CAMERA})"
+        if not self.link.link_ok:
+            raise SensorFailure("the vehicle's link is down", where=where)
+        deadline = time.monotonic() + read.timeout_s
+        self._captures += 1
+        sequence = self._captures
+
+        def is_captured(msg: Any) -> bool:
+            return bool(
+                msg.get_type() == "CAMERA_IMAGE_CAPTURED" and msg.get_srcComponent() == _CAMERA
+            )
+
+        with self.link.waiting(is_captured, any_component=True) as captured:
+            try:
+                self.link.command_long(
+                    mavlink.MAV_CMD_IMAGE_START_CAPTURE,
+                    [0, 0, 1, sequence],
+                    component=_CAMERA,
+                    timeout_s=min(1.0, read.timeout_s),
+                )
+            except CommandDenied as exc:
+                raise SensorFailure(
+                    "the camera refused to take a picture", where=f"{where}: {exc}"
+                ) from exc
+            except MavlinkError as exc:
+                raise SensorFailure("the camera did not answer", where=f"{where}: {exc}") from exc
+            msg = captured.get(deadline - time.monotonic())
+        if msg is None:
+            raise SensorFailure(f"no picture within {read.timeout_s:g} s", where=where)
+        if msg.capture_result != 1:
+            raise SensorFailure("the camera could not take the picture", where=where)
+        url = _text(msg.file_url)
+        image, fmt, width, height = _fetch_picture(
+            url, max(0.1, deadline - time.monotonic()), where
+        )
+        taken_ms = msg.time_utc // 1000 if msg.time_utc > 0 else int(time.time() * 1000)
+        try:
+            at = Position(msg.lat / 1e7, msg.lon / 1e7, self.depot.alt + msg.relative_alt / 1000)
+        except ValueError:
+            at = self._position
+        fields = {"width": width, "height": height, "format": fmt}
+        return Sample(fields=fields, epoch_ms=int(taken_ms), position=at, image=image)
+
+    def _sample(self, read: SensorRead, fields: dict[str, Any]) -> Sample:
+        """The reading as the vehicle took it: now (the vehicle's message just came) and where
+        its telemetry says it is."""
+        return Sample(fields=fields, epoch_ms=int(time.time() * 1000), position=self._position)
 
     # --- queries (the driver API) -----------------------------------------------------------
 
@@ -741,3 +919,42 @@ class MavlinkDriver:
 
     def _on_link_regained(self) -> None:
         logger.warning("%s: link regained", self.name)
+
+
+def _is(kind: str) -> Callable[[Any], bool]:
+    return lambda msg: bool(msg.get_type() == kind)
+
+
+def _text(value: Any) -> str:
+    """A MAVLink char[] field as text (pymavlink gives str or bytes, NUL-padded or not)."""
+    if isinstance(value, bytes):
+        value = value.decode("ascii", errors="replace")
+    return str(value).rstrip("\x00")
+
+
+def _fetch_picture(url: str, timeout_s: float, where: str) -> tuple[bytes, str, int, int]:
+    """The picture a camera published at ``url`` (http or https), checked to be a PNG or a
+    JPEG: its bytes, format ("png" or "jpeg"), width and height."""
+    if urllib.parse.urlsplit(url).scheme not in ("http", "https"):
+        raise SensorFailure("the camera gave no picture address", where=f"{where}: {url!r}")
+    try:
+        with urllib.request.urlopen(url, timeout=timeout_s) as answer:
+            data = answer.read(_MAX_PICTURE_BYTES + 1)
+    except (OSError, ValueError) as exc:
+        raise SensorFailure(
+            "the camera's picture could not be fetched", where=f"{where}: {url}: {exc}"
+        ) from exc
+    if len(data) > _MAX_PICTURE_BYTES:
+        raise SensorFailure("the camera's picture is too large", where=f"{where}: {url}")
+    try:
+        with PIL.Image.open(io.BytesIO(data)) as picture:
+            fmt, width, height = str(picture.format or "").lower(), picture.width, picture.height
+    except (OSError, ValueError) as exc:
+        raise SensorFailure(
+            "the camera's picture is not an image", where=f"{where}: {url}"
+        ) from exc
+    if fmt not in ("png", "jpeg"):
+        raise SensorFailure(
+            f"the camera's picture is {fmt or 'unknown'}, not PNG or JPEG", where=where
+        )
+    return data, fmt, width, height

@@ -116,8 +116,9 @@ class CommandAck:
 class _Waiter:
     """Collects the messages a pending request is waiting for (filled by the reader thread)."""
 
-    def __init__(self, match: Callable[[Any], bool]) -> None:
+    def __init__(self, match: Callable[[Any], bool], *, any_component: bool = False) -> None:
         self.match = match
+        self.any_component = any_component  # also the vehicle's other components' messages
         self.messages: queue.SimpleQueue[Any] = queue.SimpleQueue()
 
     def get(self, timeout_s: float) -> Any | None:
@@ -281,6 +282,15 @@ class MavlinkLink:
         with self._lock:
             return [t for t in self._texts if t.received > since]
 
+    def next_message(
+        self, match: Callable[[Any], bool], timeout_s: float, *, any_component: bool = False
+    ) -> Any | None:
+        """The vehicle's next message that ``match`` accepts, received from now on within
+        ``timeout_s`` (``any_component``: from any of the vehicle's components, e.g. a
+        companion computer's NAMED_VALUE_FLOAT; else the autopilot's only); None if none."""
+        with self.waiting(match, any_component=any_component) as waiter:
+            return waiter.get(timeout_s)
+
     def add_listener(self, msg_type: str, callback: Callable[[Any], None]) -> Callable[[], None]:
         """Call ``callback(msg)`` on the reader thread for each such message from the vehicle.
 
@@ -318,8 +328,11 @@ class MavlinkLink:
         *,
         timeout_s: float | None = None,
         attempts: int | None = None,
+        component: int | None = None,
     ) -> CommandAck:
         """Send COMMAND_LONG (up to 7 params, the rest 0) until it is acknowledged.
+        ``component``: another component of the vehicle to command (its camera, say), which
+        acknowledges it itself; by default the autopilot.
 
         Each attempt waits ``timeout_s`` (default: the link's) for a COMMAND_ACK of this
         command; re-sent attempts count up the ``confirmation`` field, as the protocol asks, so
@@ -329,15 +342,16 @@ class MavlinkLink:
         """
         values = [float(p) for p in params][:7]
         values += [0.0] * (7 - len(values))
+        to = self.target_component if component is None else component
 
         def send_attempt(confirmation: int) -> None:
             self.send(
                 lambda mav: mav.command_long_send(
-                    self._target(), self.target_component, command, confirmation, *values
+                    self._target(), to, command, confirmation, *values
                 )
             )
 
-        return self._command(command, send_attempt, timeout_s, attempts)
+        return self._command(command, send_attempt, timeout_s, attempts, component=to)
 
     def command_int(
         self,
@@ -374,8 +388,11 @@ class MavlinkLink:
         send_attempt: Callable[[int], None],
         timeout_s: float | None,
         attempts: int | None,
+        *,
+        component: int | None = None,
     ) -> CommandAck:
         timeout = self.command_timeout_s if timeout_s is None else timeout_s
+        answering = self.target_component if component is None else component
         tries = self.command_attempts if attempts is None else attempts
 
         def is_ack(msg: Any) -> bool:
@@ -383,12 +400,14 @@ class MavlinkLink:
             return (
                 msg.get_type() == "COMMAND_ACK"
                 and msg.command == command
+                and msg.get_srcComponent() == answering
                 and getattr(msg, "target_system", 0) in (0, self.source_system)
             )
 
         # COMMAND_ACK names only the command id, so two commands of the same id in flight
         # could not be told apart: one command at a time keeps the matching exact.
-        with self._command_lock, self._waiting(is_ack) as waiter:
+        other = answering != self.target_component
+        with self._command_lock, self.waiting(is_ack, any_component=other) as waiter:
             for attempt in range(tries):
                 self._require_link()
                 send_attempt(attempt)
@@ -426,7 +445,7 @@ class MavlinkLink:
         the acknowledgement within the timeout.
         """
         timeout = self.command_timeout_s if timeout_s is None else timeout_s
-        with self._waiting(lambda msg: msg.get_msgId() == message_id) as waiter:
+        with self.waiting(lambda msg: msg.get_msgId() == message_id) as waiter:
             self.command_long(mavlink.MAV_CMD_REQUEST_MESSAGE, (message_id,), timeout_s=timeout)
             msg = waiter.get(timeout)
         if msg is None:
@@ -502,7 +521,7 @@ class MavlinkLink:
         fresh line, the last "PreArm" lines it repeated on its own (every 30 s) are the answer.
         """
         deadline = self.monotonic() + min(1.0, self.command_timeout_s)
-        with self._waiting(lambda msg: msg.get_type() == "STATUSTEXT") as waiter:
+        with self.waiting(lambda msg: msg.get_type() == "STATUSTEXT") as waiter:
             while True:
                 lines = [t.text for t in self.status_texts(since) if _explains_arming(t)]
                 if lines or self.monotonic() >= deadline:
@@ -518,7 +537,7 @@ class MavlinkLink:
     ) -> Heartbeat:
         timeout = max(2.5 * self.heartbeat_period_s, 2 * self.command_timeout_s)
         deadline = self.monotonic() + (timeout if timeout_s is None else timeout_s)
-        with self._waiting(lambda msg: msg.get_type() == "HEARTBEAT") as waiter:
+        with self.waiting(lambda msg: msg.get_type() == "HEARTBEAT") as waiter:
             while True:
                 beat = self._heartbeat
                 if beat is not None and condition(beat):
@@ -585,7 +604,7 @@ class MavlinkLink:
         self, name: str, send: Callable[[Any], None], timeout_s: float | None
     ) -> Any:
         timeout = self.command_timeout_s if timeout_s is None else timeout_s
-        with self._waiting(
+        with self.waiting(
             lambda msg: msg.get_type() == "PARAM_VALUE" and msg.param_id == name
         ) as waiter:
             for _attempt in range(self.command_attempts):
@@ -641,7 +660,7 @@ class MavlinkLink:
                 return False
             return getattr(msg, "mission_type", 0) == mission_type
 
-        with self._mission_lock, self._waiting(is_answer) as waiter:
+        with self._mission_lock, self.waiting(is_answer) as waiter:
             resend: Callable[[], None] = send_count
             requested: set[int] = set()
             silent = 0
@@ -705,7 +724,7 @@ class MavlinkLink:
             )
 
         with self._mission_lock:
-            with self._waiting(is_count) as waiter:
+            with self.waiting(is_count) as waiter:
                 count_msg = self._ask(
                     waiter,
                     lambda mav: mav.mission_request_list_send(
@@ -715,7 +734,7 @@ class MavlinkLink:
                 )
             items: list[MissionItem] = []
             for seq in range(int(count_msg.count)):
-                with self._waiting(is_item(seq)) as waiter:
+                with self.waiting(is_item(seq)) as waiter:
                     msg = self._ask(waiter, request_item(seq), timeout)
                 items.append(MissionItem.from_message(msg).with_seq(seq))
             self.send(
@@ -746,9 +765,13 @@ class MavlinkLink:
         return beat
 
     @contextlib.contextmanager
-    def _waiting(self, match: Callable[[Any], bool]) -> Iterator[_Waiter]:
-        """Register a waiter for the block's duration (before sending, so no answer is lost)."""
-        waiter = _Waiter(match)
+    def waiting(
+        self, match: Callable[[Any], bool], *, any_component: bool = False
+    ) -> Iterator[_Waiter]:
+        """Collect the vehicle's messages that ``match`` accepts for the block's duration
+        (``get(timeout_s)`` takes the next): registered before the block sends what they
+        answer, so no answer is lost. ``any_component``: from any of its components."""
+        waiter = _Waiter(match, any_component=any_component)
         with self._lock:
             self._waiters.append(waiter)
         try:
@@ -793,14 +816,16 @@ class MavlinkLink:
             return
         if kind == "STATUSTEXT":
             self._on_statustext(msg, now)
-        elif source[1] != self.target_component:
-            return  # another component of the vehicle (a gimbal, a camera)
-        if kind == "PARAM_VALUE":
+        autopilot = source[1] == self.target_component
+        if autopilot and kind == "PARAM_VALUE":
             self._param_types[msg.param_id] = int(msg.param_type)
         with self._lock:
-            self._latest[kind] = msg
-            waiters = [w for w in self._waiters if w.match(msg)]
-            listeners = list(self._listeners.get(kind, ()))
+            # Another component of the vehicle (a companion computer, a camera, a gimbal)
+            # reaches only the waiters that ask for it.
+            if autopilot:
+                self._latest[kind] = msg
+            waiters = [w for w in self._waiters if (autopilot or w.any_component) and w.match(msg)]
+            listeners = list(self._listeners.get(kind, ())) if autopilot else []
         for waiter in waiters:
             waiter.messages.put(msg)
         for listener in listeners:

@@ -116,12 +116,15 @@ class MissionItem:
         )
 
 
-def fence_polygon_items(ring: Sequence[Sequence[float]]) -> list[MissionItem]:
-    """The fence items of one inclusion polygon from a ring of (lat, lng) points.
+def fence_polygon_items(
+    ring: Sequence[Sequence[float]], *, exclusion: bool = False, first_seq: int = 0
+) -> list[MissionItem]:
+    """The fence items of one inclusion polygon (``exclusion``: an exclusion polygon, a zone
+    the vehicle must not enter) from a ring of (lat, lng) points.
 
     A closing point equal to the first is dropped, as are repeated consecutive points.
-    Returns the items numbered from 0. Raises ValueError for fewer than 3 distinct vertices or
-    a coordinate out of range.
+    Returns the items numbered from ``first_seq``. Raises ValueError for fewer than 3 distinct
+    vertices or a coordinate out of range.
     """
     vertices: list[tuple[float, float]] = []
     for point in ring:
@@ -137,15 +140,30 @@ def fence_polygon_items(ring: Sequence[Sequence[float]]) -> list[MissionItem]:
     if len(set(vertices)) < 3:
         raise ValueError("a fence polygon needs at least 3 distinct vertices")
     count = float(len(vertices))
+    command = (
+        mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+        if exclusion
+        else mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+    )
+    return [
+        MissionItem(command=command, param1=count, x=to_e7(lat), y=to_e7(lng), seq=seq)
+        for seq, (lat, lng) in enumerate(vertices, start=first_seq)
+    ]
+
+
+def rally_items(points: Sequence[tuple[float, float, float]]) -> list[MissionItem]:
+    """The rally list (MAV_MISSION_TYPE_RALLY) of (lat, lng, altitude above home) points:
+    MAV_CMD_NAV_RALLY_POINT items, frame GLOBAL_RELATIVE_ALT_INT."""
     return [
         MissionItem(
-            command=mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
-            param1=count,
+            command=mavlink.MAV_CMD_NAV_RALLY_POINT,
+            frame=mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
             x=to_e7(lat),
             y=to_e7(lng),
+            z=float(alt),
             seq=seq,
         )
-        for seq, (lat, lng) in enumerate(vertices)
+        for seq, (lat, lng, alt) in enumerate(points)
     ]
 
 
@@ -155,6 +173,15 @@ def inclusion_polygons(items: Sequence[MissionItem]) -> list[list[tuple[float, f
     Items are grouped as the protocol says: a polygon is the next param1 vertex items.
     Raises ValueError when a polygon is cut short or its items disagree on the count.
     """
+    return _polygons(items, mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION)
+
+
+def exclusion_polygons(items: Sequence[MissionItem]) -> list[list[tuple[float, float]]]:
+    """The exclusion polygons of a fence list, as ``inclusion_polygons`` reads those."""
+    return _polygons(items, mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
+
+
+def _polygons(items: Sequence[MissionItem], kind: int) -> list[list[tuple[float, float]]]:
     polygons: list[list[tuple[float, float]]] = []
     i = 0
     while i < len(items):
@@ -168,7 +195,7 @@ def inclusion_polygons(items: Sequence[MissionItem]) -> list[list[tuple[float, f
             raise ValueError(f"fence item {i}: a polygon of {count} vertices is cut short")
         if any(g.command != item.command or int(g.param1) != count for g in group):
             raise ValueError(f"fence items {i}..{i + count - 1} disagree on their polygon")
-        if item.command == mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION:
+        if item.command == kind:
             polygons.append([(g.lat, g.lng) for g in group])
         i += count
     return polygons

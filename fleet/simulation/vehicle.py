@@ -16,6 +16,7 @@ import math
 from bisect import bisect_right
 from dataclasses import dataclass
 
+from fleet.driving import Sample, SensorFailure, SensorRead
 from fleet.geo import Position, distance_m, ground_distance_m, interpolate
 
 PHASE_LANDED = "landed"
@@ -208,6 +209,11 @@ class SimVehicle:
         the depot, then land."""
         above = self.depot.with_alt(max(start.alt, self.spec.takeoff_alt_m, self.depot.alt))
         return self._duration(start, above) + self._duration(above, self.depot)
+
+    def read_sensor(self, read: SensorRead) -> Sample:
+        """A simulated vehicle has no sensors of its own: its readings come from the field
+        (``fleet.sources``), or from a plug-in on the computer that runs it."""
+        raise SensorFailure(f"a simulated vehicle has no {read.source} source", where=read.sensor)
 
     # Queries
 

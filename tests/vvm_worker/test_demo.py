@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import queue
 import signal
@@ -121,9 +122,21 @@ def test_demo_flies_the_papers_figure_3_over_mavlink(tmp_path: Path) -> None:
             "SELECT DISTINCT v.name FROM missions_task t JOIN fleet_vehicle v ON t.vehicle_id = v.id"
             " WHERE t.status = 'done'"
         ).fetchall()
+        sources = dict(db.execute("SELECT name, sensor_sources FROM fleet_vehicle").fetchall())
     assert sorted(d[:2] for d in drivers) == [("Heli One", "mavlink"), ("Heli Two", "mavlink")]
     assert all(url.startswith("udpout:127.0.0.1:") for _, _, url in drivers)
     assert sorted(flown) == [("Heli One",), ("Heli Two",)]
+    # Every reading came over MAVLink, as its copter published it (issue 24).
+    for name in ("Heli One", "Heli Two"):
+        assert json.loads(sources[name]) == {
+            "Altimeter": {"source": "telemetry"},
+            "Barometer": {"source": "telemetry"},
+            "CO2": {"source": "named_value", "name": "CO2"},
+            "Camera 640x480": {"source": "camera"},
+            "GPS": {"source": "telemetry"},
+            "NOx": {"source": "named_value", "name": "NOx"},
+            "Thermometer": {"source": "telemetry"},
+        }
 
 
 def test_a_second_ctrl_c_right_after_the_first_hurries_the_stop_instead_of_breaking_it() -> None:

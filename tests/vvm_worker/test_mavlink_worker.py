@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from fleet.geo import Position, distance_m
 from fleet.mavlink import MavSim
+from fleet.mavlink.sim.companion import FieldSensors
 from fleet.models import Driver, Vehicle, VehicleStatus
 from fleet.simulation.vehicle import VehicleSpec
 from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
@@ -30,7 +32,7 @@ def _vv1_only(vehicles: list[dict]) -> dict:
     return data
 
 
-def _mavlink(vehicle: Vehicle) -> MavSim:
+def _mavlink(vehicle: Vehicle, **options: Any) -> MavSim:
     """Make ``vehicle`` a MAVLink vehicle and start its copter, which its worker will reach."""
     port = free_udp_port()
     vehicle.driver, vehicle.driver_url = Driver.MAVLINK, f"udpout:127.0.0.1:{port}"
@@ -41,7 +43,12 @@ def _mavlink(vehicle: Vehicle) -> MavSim:
         battery_s=vehicle.battery_s,
     )
     return MavSim(
-        f"udpin:127.0.0.1:{port}", spec=spec, depot=vehicle.depot, speed=SPEED, name=vehicle.name
+        f"udpin:127.0.0.1:{port}",
+        spec=spec,
+        depot=vehicle.depot,
+        speed=SPEED,
+        name=vehicle.name,
+        **options,
     ).start()
 
 
@@ -124,3 +131,43 @@ def test_a_link_cut_in_flight_hands_the_vv_to_another_rv_and_nothing_is_read_twi
         what="the RV back in service",
         details=workers.logs,
     )
+
+
+def test_a_vv_on_a_mavlink_rv_gets_the_readings_of_the_vehicles_own_sensors(
+    workers, copters, tmp_path: Path, monkeypatch
+) -> None:
+    """Issue 24: CO2 from the companion computer (NAMED_VALUE_FLOAT), the temperature from the
+    autopilot (SCALED_PRESSURE), the picture through the camera protocol. The copter's world
+    measures what the platform's simulated field never gives."""
+    measured = {"co2": 1234.5, "nox": 42.25, "temperature": 21.5, "pressure": 1000.25}
+    monkeypatch.setattr(FieldSensors, "value", lambda self, quantity, *_: measured[quantity])
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    load(_vv1_only(data["vehicles"]), tmp_path, monkeypatch)
+    heli = Vehicle.objects.get(name="Heli One")
+    heli.sensor_sources = {
+        "CO2": {"source": "named_value", "name": "CO2"},
+        "Thermometer": {"source": "telemetry"},
+        "Camera 640x480": {"source": "camera", "timeout_s": 10},
+    }
+    heli.save(update_fields=["sensor_sources"])
+    copters.append(_mavlink(heli, payload=True))
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    vv = VirtualVehicle.objects.get()
+    assert vv.status == VVStatus.FINISHED, vv.error
+    stored = {d.key: d.value for d in vv.storage.all()}
+    assert set(stored) == KEYS
+    tasks = list(vv.tasks.filter(status=TaskStatus.DONE).order_by("q"))
+    assert len(tasks) == 4
+    for n, task in enumerate(tasks):
+        co2, temperature, picture = (stored[f"p{n}.{k}"] for k in range(3))
+        assert (co2["sensor"], co2["value"], co2["unit"]) == ("CO2", 1234.5, "ppm")
+        assert (temperature["value"], temperature["unit"]) == (21.5, "°C")
+        assert (picture["width"], picture["height"], picture["format"]) == (640, 480, "png")
+        assert picture["image"].startswith("readings/") and picture["image"].endswith(".png")
+        # Where the vehicle was when it took them: at the task, within its tolerance.
+        for reading in (co2, temperature, picture):
+            where = reading["position"]
+            here = Position(where["lat"], where["lng"], where["alt"])
+            assert distance_m(here, task.position) <= task.tolerance_m + 0.5

@@ -7,7 +7,7 @@ import contextlib
 import dataclasses
 import time
 from collections.abc import Sequence
-from typing import TypedDict
+from typing import Any, TypedDict
 
 from django.core.exceptions import ValidationError
 from django.db import connection, transaction
@@ -15,7 +15,7 @@ from django.db.models.functions import Now
 
 from cpcc_site.prepared import deferred, update_row
 from fleet.geo import Position
-from fleet.models import GroundStation, Vehicle, VehicleStatus
+from fleet.models import GroundStation, NoFlyZone, RallyPoint, Vehicle, VehicleStatus
 from missions.models import (
     ACTIVE_STATUSES,
     ENDED_STATUSES,
@@ -56,6 +56,7 @@ class VehicleConfig(TypedDict, total=False):
     max_speed_mps: float
     climb_rate_mps: float
     battery_s: float | None
+    sensor_sources: dict[str, Any]
 
 
 class GroundStationConfig(TypedDict, total=False):
@@ -236,6 +237,51 @@ def vehicle_reconfigured(*, vehicle: Vehicle, vvm: VVM) -> None:
         vehicle_register(vehicle=vehicle, vvm=vvm)
 
 
+def no_fly_zone_save(*, zone: NoFlyZone, vvm: VVM) -> NoFlyZone:
+    """Add or change a no-fly zone. The tasks planned on every RV are routed again (a task
+    now inside the zone ends rejected with the reason, as any task no RV may serve), and each
+    RV's worker gives its autopilot the zones anew. Raises ValidationError naming the field
+    (an area that is not a closed ring, altitudes upside down, a name in use)."""
+    with transaction.atomic():
+        zone.full_clean()
+        zone.save()
+    _airspace_changed(vvm=vvm, reroute=True)
+    return zone
+
+
+def no_fly_zone_delete(*, zone: NoFlyZone, vvm: VVM) -> None:
+    """Remove a no-fly zone: the RVs may serve tasks there again."""
+    zone.delete()
+    _airspace_changed(vvm=vvm, reroute=True)
+
+
+def rally_point_save(*, point: RallyPoint, vvm: VVM) -> RallyPoint:
+    """Add or change a rally point: each RV's worker gives its autopilot the rally points
+    anew. Raises ValidationError naming the field."""
+    with transaction.atomic():
+        point.full_clean()
+        point.save()
+    _airspace_changed(vvm=vvm, reroute=False)
+    return point
+
+
+def rally_point_delete(*, point: RallyPoint, vvm: VVM) -> None:
+    point.delete()
+    _airspace_changed(vvm=vvm, reroute=False)
+
+
+def _airspace_changed(*, vvm: VVM, reroute: bool) -> None:
+    """The no-fly zones or rally points changed: each RV's worker hears of it (and uploads
+    its autopilot's fence again); with ``reroute`` the tasks planned on the RVs are routed
+    again too."""
+    for vehicle in Vehicle.objects.exclude(status=VehicleStatus.REMOVED):
+        if reroute:
+            vehicle_reconfigured(vehicle=vehicle, vvm=vvm)
+        else:
+            with transaction.atomic():
+                vvm.dispatcher.vehicle_changed(vehicle.pk)
+
+
 def vehicle_create(*, config: VehicleConfig, sensors: Sequence[str], vvm: VVM) -> Vehicle:
     """Add an RV to the fleet, in service: it takes work at once (``vehicle_register``).
 
@@ -272,6 +318,8 @@ def vehicle_update(
         vehicle.save()
         if entries is not None:
             vehicle.sensors.set(entries)
+        if "sensor_sources" in config and not reach_changed:
+            vvm.dispatcher.vehicle_changed(vehicle.pk)  # its worker reads them from now on
     if reach_changed:
         vehicle_reconfigured(vehicle=vehicle, vvm=vvm)
     return vehicle

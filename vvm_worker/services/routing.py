@@ -17,7 +17,7 @@ from shapely.geometry import Point
 
 from cpcc_site.prepared import Many, PreparedRead, deferred, insert_rows
 from fleet.geo import Position
-from fleet.models import GroundStation, Vehicle, VehicleStatus
+from fleet.models import GroundStation, NoFlyZone, Vehicle, VehicleStatus
 from missions.events import migration_event, task_event
 from missions.models import (
     HostKind,
@@ -28,7 +28,7 @@ from missions.models import (
     VirtualVehicle,
     VVStatus,
 )
-from vvm_worker.mapping import MapDecision, VehicleCaps, map_task
+from vvm_worker.mapping import ExclusionZone, MapDecision, VehicleCaps, map_task
 from vvm_worker.runtime import (
     PendingRequest,
     TaskRequest,
@@ -64,6 +64,14 @@ def vehicle_caps(
     )
 
 
+def no_fly_zones() -> tuple[ExclusionZone, ...]:
+    """The provider's no-fly zones as the mapper checks them."""
+    return tuple(
+        ExclusionZone(z.area_polygon, z.min_altitude_m, z.max_altitude_m)
+        for z in NoFlyZone.objects.all()
+    )
+
+
 def _sensor_names(vehicle: Vehicle) -> frozenset[str]:
     # From the prefetched sensors when the caller prefetched them, else one query.
     return frozenset(s.name for s in vehicle.sensors.all())
@@ -80,6 +88,7 @@ class _FleetShape:
     ids: tuple[int, ...]  # in the order of the index's geometries
     index: STRtree
     overlaps: dict[int, frozenset[int]]
+    zones: tuple[ExclusionZone, ...]  # the provider's no-fly zones
 
     def covering(self, requests: Iterable[TaskRequest]) -> set[int]:
         """The RVs whose areas hold any of the requests' points (border included)."""
@@ -105,6 +114,10 @@ def _vehicles_changed(**kwargs: Any) -> None:
 
 
 post_save.connect(_vehicles_changed, sender=Vehicle, dispatch_uid="cpcc-fleet-shape-save")
+post_save.connect(_vehicles_changed, sender=NoFlyZone, dispatch_uid="cpcc-fleet-shape-zone")
+post_delete.connect(
+    _vehicles_changed, sender=NoFlyZone, dispatch_uid="cpcc-fleet-shape-zone-delete"
+)
 post_delete.connect(_vehicles_changed, sender=Vehicle, dispatch_uid="cpcc-fleet-shape-delete")
 m2m_changed.connect(
     _vehicles_changed, sender=Vehicle.sensors.through, dispatch_uid="cpcc-fleet-shape-sensors"
@@ -121,14 +134,19 @@ def _fleet_shape() -> _FleetShape:
         return seen[2]
     generation = _generation
     version = Vehicle.objects.aggregate(count=Count("id"), changed=Max("updated"), top=Max("id"))
-    key = (version["count"], version["changed"], version["top"])
+    zoned = NoFlyZone.objects.aggregate(count=Count("id"), changed=Max("updated"))
+    key = (version["count"], version["changed"], version["top"], zoned["count"], zoned["changed"])
     shape = _shapes_seen.get(key)
     if shape is None:
         vehicles = list(
             Vehicle.objects.exclude(status=VehicleStatus.REMOVED).prefetch_related("sensors")
         )
+        zones = no_fly_zones()
         # The live fields come with each call; a vehicle that never flew is at its depot.
-        caps = {v.pk: dataclasses.replace(vehicle_caps(v), position=v.depot) for v in vehicles}
+        caps = {
+            v.pk: dataclasses.replace(vehicle_caps(v), position=v.depot, no_fly=zones)
+            for v in vehicles
+        }
         ids = tuple(caps)
         areas = [caps[i].area for i in ids]
         index = STRtree(areas)
@@ -138,7 +156,7 @@ def _fleet_shape() -> _FleetShape:
             overlaps[a] = frozenset(
                 b for b in near if caps[a].area.intersection(caps[b].area).area > 0.0
             )
-        shape = _FleetShape(caps, {v.pk: v for v in vehicles}, ids, index, overlaps)
+        shape = _FleetShape(caps, {v.pk: v for v in vehicles}, ids, index, overlaps, zones)
         _shapes_seen.clear()
         _shapes_seen[key] = shape
     _shape_seen_at = (generation, now, shape)
@@ -286,7 +304,9 @@ def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None 
         # The common case needs no look at the rest of the fleet: the RV aboard can go on, and
         # no other RV's area overlaps its own. (Its area, altitudes and sensors are the
         # shape's, of the version just read.)
-        caps = shape.caps.get(host.pk) or vehicle_caps(host)
+        caps = shape.caps.get(host.pk) or dataclasses.replace(
+            vehicle_caps(host), no_fly=shape.zones
+        )
         mine = _servable(caps, open_tasks)
         if mine and not shape.overlaps.get(host.pk):
             tasks_assign(tasks=mine, vehicle=host, vvm=vvm)

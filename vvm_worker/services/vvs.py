@@ -44,6 +44,7 @@ from vvm_worker.runtime import (
     SyntaxProblem,
     VVError,
     answer_part,
+    answer_reject,
     answer_task,
     check_syntax,
 )
@@ -654,11 +655,16 @@ def task_complete(
     vehicle_id: int | None = None,
     vv_id: uuid.UUID | None = None,
     arrival: VehicleState | None = None,
+    failure: str | None = None,
 ) -> bool:
     """Record an RV's readings as the answer to a task and resume the VV on that RV: one unit
     of work (one transaction) with the VV's step and the routing of its next request, and
     with ``arrival``, the RV's report of where it stopped to serve it (``vehicle_id``'s state,
     on the track of the VVs aboard), which is recorded only if the answer is.
+
+    ``failure``: the RV could not take the readings (a sensor that did not answer, said in
+    words the customer may read): the task ends rejected with it, and so does the VV's
+    request (a whole ``executeAll`` batch), which the program sees as a ``TaskRejectedError``.
 
     Returns False (and changes nothing) when the task is no longer open or no longer this
     vehicle's (``vehicle_id``): a duplicate delivery, or a VV that was cancelled or moved on
@@ -670,14 +676,16 @@ def task_complete(
         vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
     try:
         with transaction.atomic(), pipelined():
-            return _answer_and_advance(task_id, readings, vvm, vehicle_id, vv_id, arrival)
+            return _answer_and_advance(
+                task_id, readings, vvm, vehicle_id, vv_id, arrival, failure=failure
+            )
     except _StepBroke as broke:
         # Retried, the step would break again and again. The transaction is rolled back, so
         # nothing of the step is half-applied: the answer is recorded again on its own, and
         # the VV ends, in a transaction of its own.
         with transaction.atomic():
             answered = _answer_and_advance(
-                task_id, readings, vvm, vehicle_id, vv_id, arrival, advance=False
+                task_id, readings, vvm, vehicle_id, vv_id, arrival, advance=False, failure=failure
             )
         _end_broken(vv_id=vv_id, cause=broke.cause, vvm=vvm)
         return answered
@@ -692,6 +700,7 @@ def _answer_and_advance(
     arrival: VehicleState | None,
     *,
     advance: bool = True,
+    failure: str | None = None,
 ) -> bool:
     # The VV first (held until the end of the transaction), then its task: the order every
     # service takes them in, so two workers cannot deadlock.
@@ -702,13 +711,23 @@ def _answer_and_advance(
     if pending is None or (vehicle_id is not None and vv.host_rv_id != vehicle_id):
         return False
     now = vvm.clock.now_s()
-    task = _answer_task(task_id, vv, q=pending.q, vehicle_id=vehicle_id, now=now, readings=readings)
+    task = _answer_task(
+        task_id,
+        vv,
+        q=pending.q,
+        vehicle_id=vehicle_id,
+        now=now,
+        readings=[] if failure is not None else readings,
+        status=TaskStatus.DONE if failure is None else TaskStatus.REJECTED,
+    )
     if task is None:
         return False
     served_by = task.vehicle_id
     before = _row(vv)
     time_ms = vvm.clock.epoch_ms(now)
-    if pending.kind == "batch":
+    if failure is not None:
+        entry = _reading_failed(vv, task, pending, failure, now=now, vvm=vvm)
+    elif pending.kind == "batch":
         entry = answer_part(pending, index=task.index, time_ms=time_ms, data=readings)
     else:
         entry = answer_task(pending, time_ms=time_ms, data=readings)
@@ -740,6 +759,36 @@ def _answer_and_advance(
     return True
 
 
+def _reading_failed(
+    vv: VirtualVehicle,
+    task: Task,
+    pending: PendingRequest,
+    failure: str,
+    *,
+    now: float,
+    vvm: VVM,
+) -> dict[str, Any]:
+    """The task (answered rejected by the caller) ends with the RV's failure to read its
+    sensors, and the VV's request with it: the journal entry that rejects it. The other open
+    tasks of a batch end rejected too, off the RVs they were planned on."""
+    message = f"the vehicle took no reading: {failure}"
+    if pending.kind == "batch":
+        message = f"task {task.index} of the batch: {message}"
+    task.message = message
+    Task.objects.filter(pk=task.pk).update(message=message)
+    others = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN))
+    if others:
+        vv_release_tasks(vv=vv, vvm=vvm, open_tasks=others)
+        Task.objects.filter(pk__in=[t.pk for t in others]).update(
+            status=TaskStatus.REJECTED, message=message, done_s=now
+        )
+        for other in others:
+            other.status, other.message, other.done_s = TaskStatus.REJECTED, message, now
+        vvm.announce(lambda: [task_event(t, vv.customer_id) for t in others])
+    logger.warning("reading failed", extra={**_about(vv), "reason": failure})
+    return answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message)
+
+
 def _answer_task(
     task_id: int,
     vv: VirtualVehicle,
@@ -748,6 +797,7 @@ def _answer_task(
     vehicle_id: int | None,
     now: float,
     readings: list[dict[str, Any]],
+    status: TaskStatus = TaskStatus.DONE,
 ) -> Task | None:
     """Mark the task done with its readings, if it is still open, of the VV's request ``q``
     and (``vehicle_id``) on this RV's list: a fenced UPDATE, which gives back what the answer
@@ -764,7 +814,7 @@ def _answer_task(
         cursor.execute(
             _answer_sql(connection.vendor, on_vehicle=vehicle_id is not None),
             [
-                TaskStatus.DONE.value,
+                status.value,
                 now,
                 meta.get_field("readings").get_db_prep_save(readings, connection),
                 *fence,
@@ -782,7 +832,7 @@ def _answer_task(
         lat=lat,
         lng=lng,
         alt=alt,
-        status=TaskStatus.DONE,
+        status=status,
         vehicle_id=served_by,
         requested_s=requested_s,
         done_s=now,

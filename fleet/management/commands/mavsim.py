@@ -2,11 +2,14 @@
 
 It flies like the vehicle's record says (depot, maximum speed, climb rate, battery endurance)
 and speaks MAVLink like ArduCopter, so the RV worker's MAVLink driver, MAVProxy or
-QGroundControl can fly it. Runs in the foreground until Ctrl-C or SIGTERM.
+QGroundControl can fly it. Unless ``--no-payload``, it also carries a companion computer
+sending the simulated field's CO2 and NOx and a camera whose images it serves over HTTP
+(``--field-seed`` picks that world). Runs in the foreground until Ctrl-C or SIGTERM.
 """
 
 from __future__ import annotations
 
+import argparse
 import signal
 import threading
 from typing import Any
@@ -47,6 +50,23 @@ class Command(BaseCommand):
         parser.add_argument(
             "--battery", type=float, default=1.0, help="the charge it starts with, 0..1"
         )
+        parser.add_argument(
+            "--field-seed",
+            type=int,
+            default=0,
+            help="seed of the simulated sensor field its sensors read (the platform's is 0)",
+        )
+        parser.add_argument(
+            "--payload",
+            action=argparse.BooleanOptionalAction,
+            default=True,
+            help="the companion computer (CO2, NOx) and the camera as MAVLink components",
+        )
+        parser.add_argument(
+            "--camera-host",
+            default="127.0.0.1",
+            help="where the camera's image server listens, and the host its image URLs name",
+        )
 
     def handle(self, *args: Any, **options: Any) -> None:
         name = options["name"]
@@ -74,6 +94,9 @@ class Command(BaseCommand):
                 autopilot=options["autopilot"],
                 battery=options["battery"],
                 name=name,
+                field_seed=options["field_seed"],
+                payload=options["payload"],
+                camera_url_host=options["camera_host"],
             )
         except (LinkError, ValueError) as exc:
             raise CommandError(str(exc)) from None
@@ -87,7 +110,15 @@ class Command(BaseCommand):
         )
         self.stdout.flush()
         try:
-            sim.serve(stop)
+            sim.serve(stop, ready=lambda: self._ready(sim))
         except LinkError as exc:
             raise CommandError(str(exc)) from None
         self.stdout.write(f"mavsim {name}: stopped")
+
+    def _ready(self, sim: MavSim) -> None:
+        if sim.camera_port is not None:
+            self.stdout.write(
+                f"mavsim {sim.name}: camera images on "
+                f"http://{sim.camera_url_host}:{sim.camera_port}/images/"
+            )
+            self.stdout.flush()

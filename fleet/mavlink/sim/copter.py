@@ -1,5 +1,5 @@
-"""The simulated copter itself: flight, commands, telemetry, parameters (see the package's
-docstring)."""
+"""The simulated copter itself: its flight, modes and arming, the loop that runs it, and the
+wiring of the sub-protocols that live in the sibling modules (see the package's docstring)."""
 
 from __future__ import annotations
 
@@ -13,48 +13,40 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from fleet.geo import Position
-from fleet.mavlink import params as param_codec
+from fleet.geo import Position, distance_m
 from fleet.mavlink.endpoint import parse_endpoint
 from fleet.mavlink.errors import LinkError
 from fleet.mavlink.mission import MissionItem, inclusion_polygons
 from fleet.mavlink.modes import Autopilot, custom_mode_of, mode_name, px4_custom_mode
-from fleet.mavlink.sim.flavours import FLAVOURS, Param, initial_params
+from fleet.mavlink.sim import camera as camera_protocol
+from fleet.mavlink.sim import companion as companion_protocol
+from fleet.mavlink.sim import telemetry
+from fleet.mavlink.sim.auto import MissionRunner
+from fleet.mavlink.sim.camera import Camera, Shot
+from fleet.mavlink.sim.commands import CommandServer, Outcome, addressee
+from fleet.mavlink.sim.companion import Companion, FieldSensors
+from fleet.mavlink.sim.fence import (
+    LANDING_ACTIONS,
+    REPORT_ONLY,
+    Fence,
+    FenceStatus,
+    breach_type,
+    fence_names,
+)
+from fleet.mavlink.sim.flavours import FLAVOURS, initial_params
+from fleet.mavlink.sim.guided import Guided
 from fleet.mavlink.sim.missions import MissionServer
+from fleet.mavlink.sim.params import ParamServer
+from fleet.mavlink.sim.telemetry import LOW_BATTERY, Streams
 from fleet.mavlink.wire import BAD_DATA, connect, drop_closed_tcp_client, encode_text, mavlink
 from fleet.simulation.vehicle import SimVehicle, VehicleSpec
 
 logger = logging.getLogger("cpcc.mavsim")
 
-_M_PER_DEG = 111_320.0  # metres per degree of latitude (for velocities only)
-_CELLS = 4  # a 4S LiPo: 16.8 V full, 14.0 V empty
-_CELL_FULL_V = 4.2
-_CELL_EMPTY_V = 3.5
-_LOW_BATTERY = 0.2
-_CRITICAL_BATTERY = 0.1
 _SETPOINT_LOSS_S = 1.0  # PX4's COM_OF_LOSS_T default
-_POSITION_IGNORE = (
-    mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE
-    | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
-    | mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE
-)
-_SENSORS = (
-    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
-    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
-    | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
-)
-_CAPABILITIES = (
-    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-)
+_SAME_TARGET_M = 1e-3  # a guided target this close to the last one is the same again
+_MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+_FENCE = mavlink.MAV_MISSION_TYPE_FENCE
 
 
 class MavSim:
@@ -67,6 +59,12 @@ class MavSim:
     or "px4". ``ground_amsl_m``: the ground's altitude above mean sea level (the world is
     flat at the depot's ground). ``battery``: the charge it starts with (0..1).
     ``arm_min_battery``: below this it refuses to arm. ``clock``: the wall clock (injectable).
+    ``field_seed``: the seed of the ``SensorField`` its sensors read and its camera sees (the
+    platform's own simulated field is seed 0). ``payload``: also be the companion computer
+    with the gas sensors (component 191) and the camera (component 100), each with its own
+    HEARTBEAT; off by default, as a bare ArduCopter (a plain GCS then hears only the
+    autopilot). ``camera_url_host``: where the camera's image server listens (port chosen by
+    the OS) and the host its ``file_url`` names.
     Raises LinkError for a malformed connection string, ValueError for a bad speed.
     """
 
@@ -83,9 +81,12 @@ class MavSim:
         ground_amsl_m: float = 0.0,
         battery: float = 1.0,
         battery_capacity_mah: int = 5000,
-        arm_min_battery: float = _LOW_BATTERY,
+        arm_min_battery: float = LOW_BATTERY,
         clock: Callable[[], float] = time.monotonic,
         name: str = "mavsim",
+        field_seed: int = 0,
+        payload: bool = False,
+        camera_url_host: str = "127.0.0.1",
     ) -> None:
         if not (math.isfinite(speed) and speed >= 0):
             raise ValueError(f"speed must be a finite number >= 0, got {speed!r}")
@@ -102,6 +103,8 @@ class MavSim:
         self.battery_capacity_mah = battery_capacity_mah
         self.arm_min_battery = arm_min_battery
         self.clock = clock
+        self.payload = payload
+        self.camera_url_host = camera_url_host
 
         self._spec = spec
         self._lock = threading.RLock()
@@ -118,7 +121,10 @@ class MavSim:
         self._armed = False
         self._armed_wall = 0.0
         self._mode = self.flavour.initial_mode
-        self._stage: str | None = None  # "takeoff", "goto", "return", "landing"
+        # What it is doing: "takeoff", "goto" (a target, then hovering there), "hover" (a
+        # mission's hold time), "return" and "approach" (then "landing"), or None (landed or
+        # holding where it is).
+        self._stage: str | None = None
         self._stage_end_s = 0.0
         self._target: Position | None = None
         self._battery_base = min(1.0, max(0.0, battery))
@@ -129,38 +135,90 @@ class MavSim:
         self._setpoints: deque[float] = deque(maxlen=8)  # when the last setpoints came (wall)
 
         # Protocol state.
-        self._params: dict[str, Param] = initial_params(
-            self.flavour,
-            spec,
-            system_id=system_id,
-            battery_capacity_mah=battery_capacity_mah,
+        self._params = ParamServer(
+            initial_params(
+                self.flavour, spec, system_id=system_id, battery_capacity_mah=battery_capacity_mah
+            ),
+            self._send,
+            bytewise=self.flavour.bytewise_params,
+            on_set=self._on_param_set,
         )
-        self._intervals: dict[int, float] = {
-            mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-            mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 1.0,
-            mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-        }
-        self._next_due: dict[int, float] = {}
         self._missions = MissionServer(self._send, self._wall, name)
-        self._last_command: tuple[tuple[int, tuple[float, ...]], int] | None = None
-        self._statustext_on = True
-        self._announced: tuple[bool, str] | None = None  # (armed, mode) of the last HEARTBEAT
-        self._streams = {
-            mavlink.MAVLINK_MSG_ID_HEARTBEAT: self._send_heartbeat,
-            mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._send_position,
-            mavlink.MAVLINK_MSG_ID_SYS_STATUS: self._send_sys_status,
-            mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: self._send_battery_status,
-            mavlink.MAVLINK_MSG_ID_HOME_POSITION: self._send_home,
-            mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._send_extended_state,
-            mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._send_autopilot_version,
+        self._pilot = _Pilot(self)
+        self._auto = MissionRunner(
+            self._pilot,
+            lambda: self._missions.missions.get(_MISSION, ()),
+            self._send,
+            lambda text: self._text(mavlink.MAV_SEVERITY_INFO, text),
+            first_seq=self.flavour.mission_first_seq,
+        )
+        self._fence = Fence(
+            self._params.get,
+            lambda: self._missions.missions.get(_FENCE, ()),
+            depot,
+        )
+        self._fence_status = FenceStatus()
+        self._guided = Guided(
+            self._pilot,
+            self._fence,
+            mode=self.flavour.follows_targets,
+            home=depot,
+            ground_amsl_m=ground_amsl_m,
+            send=self._send,
+            text=self._text,
+        )
+
+        # The other components: the companion computer with the gas sensors and the camera,
+        # each sending with its own MAVLink sender (component id and sequence numbers).
+        self._component_mavs: dict[int, Any] = {}
+        self._sensors = FieldSensors(field_seed)
+        self._companion = Companion(
+            self._sensors,
+            lambda build: self._send_as(companion_protocol.COMPONENT_ID, build),
+            self._where,
+            self._wall,
+        )
+        self._camera = Camera(
+            lambda build: self._send_as(camera_protocol.COMPONENT_ID, build),
+            self._shot,
+            self._wall,
+            seed=field_seed,
+            host=camera_url_host,
+        )
+        self._commands = CommandServer(self._execute, self._send)
+        self._payload_commands = {
+            camera_protocol.COMPONENT_ID: CommandServer(
+                lambda command, p, frame: self._camera.command(command, p),
+                lambda build: self._send_as(camera_protocol.COMPONENT_ID, build),
+            ),
+            # The companion only reports: it says so to any command.
+            companion_protocol.COMPONENT_ID: CommandServer(
+                lambda command, p, frame: (int(mavlink.MAV_RESULT_UNSUPPORTED), None),
+                lambda build: self._send_as(companion_protocol.COMPONENT_ID, build),
+            ),
         }
+        self._announced: tuple[bool, str] | None = None  # (armed, mode) of the last HEARTBEAT
+        self._streams = Streams(
+            {
+                mavlink.MAVLINK_MSG_ID_HEARTBEAT: self._send_heartbeat,
+                mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._send_position,
+                mavlink.MAVLINK_MSG_ID_SYS_STATUS: self._send_sys_status,
+                mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: self._send_battery_status,
+                mavlink.MAVLINK_MSG_ID_HOME_POSITION: self._send_home,
+                mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._send_extended_state,
+                mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._send_autopilot_version,
+                mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: self._auto.send_current,
+                mavlink.MAVLINK_MSG_ID_FENCE_STATUS: self._send_fence_status,
+                mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE: self._send_scaled_pressure,
+                mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: self._send_gps_raw,
+            },
+            self._wall,
+        )
 
         # Test hooks and what the tests read back.
         self._link_cut = False
-        self._ignored: set[int] = set()
         self._drops: dict[str, int] = defaultdict(int)
         self._prearm_failure: str | None = None
-        self._commands_seen: dict[int, list[int]] = defaultdict(list)
         self._texts_sent: list[str] = []
         self._gcs_heartbeats = 0
         self._gcs_seen: set[tuple[int, int]] = set()
@@ -186,12 +244,15 @@ class MavSim:
         self._thread = None
         self._close()
 
-    def serve(self, stop: threading.Event) -> None:
-        """Run in the calling thread until ``stop`` is set (what ``manage.py mavsim`` does).
+    def serve(self, stop: threading.Event, ready: Callable[[], None] | None = None) -> None:
+        """Run in the calling thread until ``stop`` is set (what ``manage.py mavsim`` does);
+        ``ready`` is called once the link (and the image server) are open.
 
         Raises LinkError when the connection cannot be opened.
         """
         self._open()
+        if ready is not None:
+            ready()
         self._stop = stop
         try:
             self._loop()
@@ -242,17 +303,17 @@ class MavSim:
     def param(self, name: str) -> float:
         """A parameter's value. Raises KeyError for an unknown name."""
         with self._lock:
-            return self._params[name].value
+            return self._params.value(name)
 
     def message_interval_s(self, message_id: int) -> float | None:
         """The interval a message is sent at (wall seconds), or None when it is not streamed."""
         with self._lock:
-            return self._intervals.get(message_id)
+            return self._streams.intervals.get(message_id)
 
     def commands_seen(self, command: int) -> list[int]:
         """The ``confirmation`` of every COMMAND_LONG of this id received (0 for COMMAND_INT)."""
         with self._lock:
-            return list(self._commands_seen.get(command, []))
+            return list(self._commands.seen.get(command, []))
 
     def mission_items(
         self, mission_type: int = mavlink.MAV_MISSION_TYPE_FENCE
@@ -264,6 +325,25 @@ class MavSim:
     def fence_polygons(self) -> list[list[tuple[float, float]]]:
         """The inclusion polygons of the uploaded fence, as (lat, lng) vertices."""
         return inclusion_polygons(self.mission_items(mavlink.MAV_MISSION_TYPE_FENCE))
+
+    def mission_current(self) -> int:
+        """The mission item AUTO flies (or begins with)."""
+        with self._lock:
+            return self._auto.current
+
+    def fence_status(self) -> FenceStatus:
+        """What FENCE_STATUS reports now (a copy)."""
+        with self._lock:
+            return replace(self._fence_status)
+
+    def camera_captures(self) -> list[camera_protocol.Capture]:
+        """The images taken so far, in order (index, where, when)."""
+        return self._camera.captures
+
+    @property
+    def camera_port(self) -> int | None:
+        """The image server's port while the link is open."""
+        return self._camera.port
 
     def texts_sent(self) -> list[str]:
         """Every STATUSTEXT sent, oldest first."""
@@ -293,9 +373,9 @@ class MavSim:
         """Never acknowledge (nor execute) a command id; ``commands_seen`` still counts it."""
         with self._lock:
             if ignore:
-                self._ignored.add(command)
+                self._commands.ignored.add(command)
             else:
-                self._ignored.discard(command)
+                self._commands.ignored.discard(command)
 
     def drop_incoming(self, msg_type: str, count: int = 1) -> None:
         """Lose the next ``count`` received messages of a type, e.g. "MISSION_COUNT"."""
@@ -326,6 +406,16 @@ class MavSim:
             raise LinkError(f"{self.endpoint}: serial links need pyserial ({exc})") from exc
         except (OSError, ValueError) as exc:
             raise LinkError(f"mavsim cannot open {self.endpoint}: {exc}") from exc
+        self._component_mavs = {
+            component: mavlink.MAVLink(self._conn, self.system_id, component)
+            for component in (companion_protocol.COMPONENT_ID, camera_protocol.COMPONENT_ID)
+        }
+        try:
+            if self.payload:
+                self._camera.open()
+        except OSError as exc:
+            self._close()
+            raise LinkError(f"mavsim cannot serve images: {exc}") from exc
         logger.info(
             "mavsim %s: %s copter on %s (speed %g)",
             self.name,
@@ -335,6 +425,8 @@ class MavSim:
         )
 
     def _close(self) -> None:
+        self._camera.close()
+        self._component_mavs = {}
         if self._conn is not None:
             with contextlib.suppress(OSError):
                 self._conn.close()
@@ -379,123 +471,135 @@ class MavSim:
             return
         build(self._conn.mav)
 
+    def _send_as(self, component: int, build: Callable[[Any], None]) -> None:
+        mav = self._component_mavs.get(component)
+        if self._link_cut or mav is None:
+            return
+        build(mav)
+
     def _text(self, severity: int, text: str) -> None:
         self._texts_sent.append(text)
         logger.info("mavsim %s: %s", self.name, text)
-        if self._statustext_on:
+        if self._streams.statustext_on:
             self._send(lambda mav: mav.statustext_send(severity, encode_text(text, 50)))
 
     def _send_heartbeat(self) -> None:
-        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-        if self._armed:
-            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-        if self._battery_failsafe:
-            status = mavlink.MAV_STATE_CRITICAL
-        else:
-            status = mavlink.MAV_STATE_ACTIVE if self._armed else mavlink.MAV_STATE_STANDBY
-        custom = custom_mode_of(self.flavour.autopilot, self._mode)
         self._announced = (self._armed, self._mode)
+        autopilot = self.flavour.heartbeat_autopilot
+        custom = custom_mode_of(self.flavour.autopilot, self._mode)
+        armed, critical = self._armed, self._battery_failsafe
         self._send(
-            lambda mav: mav.heartbeat_send(
-                mavlink.MAV_TYPE_QUADROTOR, self.flavour.heartbeat_autopilot, base, custom, status
+            lambda mav: telemetry.heartbeat(
+                mav, autopilot=autopilot, custom_mode=custom, armed=armed, critical=critical
             )
+        )
+
+    def _velocity(self, now: float) -> tuple[float, float, float]:
+        """North, east, down in m/s: the plan's next simulated tenth of a second."""
+        ahead = self._vehicle.position_at(now + 0.1)
+        return telemetry.velocity_ned(self._vehicle.position_at(now), ahead, 0.1)
+
+    def _heading_deg(self, now: float) -> float | None:
+        """The direction of travel, or None when it hovers or stands."""
+        north, east, _ = self._velocity(now)
+        if math.hypot(north, east) <= 0.1:
+            return None
+        return math.degrees(math.atan2(east, north)) % 360
+
+    def _where(self) -> tuple[Position, float]:
+        now = self._now()
+        return self._vehicle.position_at(now), now
+
+    def _shot(self) -> Shot:
+        now = self._now()
+        here = self._vehicle.position_at(now)
+        return Shot(
+            position=here,
+            amsl_m=self.ground_amsl_m + here.alt,
+            relative_m=here.alt - self.home.alt,
+            heading_deg=self._heading_deg(now),
+            time_s=now,
         )
 
     def _send_position(self) -> None:
         now = self._now()
         here = self._vehicle.position_at(now)
-        # Velocity over the next simulated tenth of a second of the plan (NED, cm/s).
-        ahead = self._vehicle.position_at(now + 0.1)
-        north = (ahead.lat - here.lat) * _M_PER_DEG / 0.1
-        east = (ahead.lng - here.lng) * _M_PER_DEG * math.cos(math.radians(here.lat)) / 0.1
-        down = -(ahead.alt - here.alt) / 0.1
-        heading = 65535  # UINT16_MAX: unknown
-        if math.hypot(north, east) > 0.1:
-            heading = round(math.degrees(math.atan2(east, north)) % 360 * 100) % 36000
+        velocity, heading = self._velocity(now), self._heading_deg(now)
+        boot_ms = self._boot_ms()
         self._send(
-            lambda mav: mav.global_position_int_send(
-                self._boot_ms(),
-                round(here.lat * 1e7),
-                round(here.lng * 1e7),
-                round((self.ground_amsl_m + here.alt) * 1000),
-                round((here.alt - self.home.alt) * 1000),
-                _clamp16(north * 100),
-                _clamp16(east * 100),
-                _clamp16(down * 100),
-                heading,
+            lambda mav: telemetry.global_position(
+                mav,
+                boot_ms=boot_ms,
+                here=here,
+                home=self.home,
+                ground_amsl_m=self.ground_amsl_m,
+                velocity=velocity,
+                heading_deg=heading,
             )
         )
 
     def _send_sys_status(self) -> None:
         fraction = self._battery(self._now())
-        health = _SENSORS
-        if self._arming_refusal() is None:
-            health |= mavlink.MAV_SYS_STATUS_PREARM_CHECK
-        present = _SENSORS | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+        prearm_ok = self._arming_refusal() is None
+        on_ground = self._on_ground
         self._send(
-            lambda mav: mav.sys_status_send(
-                present,
-                present,
-                health,
-                200,  # load, per mille
-                self._voltage_mv(fraction),
-                self._current_ca(),
-                round(fraction * 100),
-                0,
-                0,
-                0,
-                0,
-                0,
-                0,
+            lambda mav: telemetry.sys_status(
+                mav, fraction=fraction, prearm_ok=prearm_ok, on_ground=on_ground
             )
         )
 
     def _send_battery_status(self) -> None:
         fraction = self._battery(self._now())
-        if fraction <= 0.0:
-            state = mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY
-        elif fraction < _CRITICAL_BATTERY:
-            state = mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL
-        elif fraction < _LOW_BATTERY:
-            state = mavlink.MAV_BATTERY_CHARGE_STATE_LOW
-        else:
-            state = mavlink.MAV_BATTERY_CHARGE_STATE_OK
-        battery_s = self._spec.battery_s
-        remaining_s = round(fraction * battery_s) if battery_s is not None else 0
-        cell_mv = self._voltage_mv(fraction) // _CELLS
-        # Per-cell voltages, the unused cells UINT16_MAX as the message asks.
-        cells = [cell_mv] * _CELLS + [65535] * (10 - _CELLS)
+        on_ground = self._on_ground
         self._send(
-            lambda mav: mav.battery_status_send(
-                0,
-                mavlink.MAV_BATTERY_FUNCTION_ALL,
-                mavlink.MAV_BATTERY_TYPE_LIPO,
-                32767,  # INT16_MAX: temperature unknown
-                cells,
-                self._current_ca(),
-                round((1.0 - fraction) * self.battery_capacity_mah),
-                -1,  # energy consumed: unknown
-                round(fraction * 100),
-                remaining_s,
-                state,
+            lambda mav: telemetry.battery_status(
+                mav,
+                fraction=fraction,
+                battery_s=self._spec.battery_s,
+                capacity_mah=self.battery_capacity_mah,
+                on_ground=on_ground,
             )
         )
 
     def _send_home(self) -> None:
         self._send(
-            lambda mav: mav.home_position_send(
-                round(self.home.lat * 1e7),
-                round(self.home.lng * 1e7),
-                round((self.ground_amsl_m + self.home.alt) * 1000),
-                0.0,
-                0.0,
-                0.0,
-                [1.0, 0.0, 0.0, 0.0],
-                0.0,
-                0.0,
-                0.0,
+            lambda mav: telemetry.home_position(
+                mav, home=self.home, ground_amsl_m=self.ground_amsl_m
             )
         )
+
+    def _send_scaled_pressure(self) -> None:
+        # The barometer and thermometer of the default catalog, read from the simulated field.
+        here, now = self._where()
+        pressure = self._sensors.value("pressure", here, now)
+        temperature = self._sensors.value("temperature", here, now)
+        boot_ms = self._boot_ms()
+        self._send(
+            lambda mav: telemetry.scaled_pressure(
+                mav, boot_ms=boot_ms, pressure_hpa=pressure, temperature_c=temperature
+            )
+        )
+
+    def _send_gps_raw(self) -> None:
+        # The receiver's own fix, a few metres off the position GLOBAL_POSITION_INT reports.
+        here, now = self._where()
+        fix = self._sensors.gps(here, now)
+        north, east, _ = self._velocity(now)
+        heading = self._heading_deg(now)
+        boot_ms = self._boot_ms()
+        self._send(
+            lambda mav: telemetry.gps_raw(
+                mav,
+                boot_ms=boot_ms,
+                fix=fix,
+                ground_amsl_m=self.ground_amsl_m,
+                speed_mps=math.hypot(north, east),
+                heading_deg=heading,
+            )
+        )
+
+    def _send_fence_status(self) -> None:
+        self._send(self._fence_status.send)
 
     def _send_extended_state(self) -> None:
         if self._on_ground:
@@ -506,32 +610,14 @@ class MavSim:
             landed = mavlink.MAV_LANDED_STATE_LANDING
         else:
             landed = mavlink.MAV_LANDED_STATE_IN_AIR
-        self._send(
-            lambda mav: mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
-        )
+        self._send(lambda mav: telemetry.extended_sys_state(mav, landed_state=landed))
 
     def _send_autopilot_version(self) -> None:
-        capabilities = _CAPABILITIES | (
-            mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-            if self.flavour.bytewise_params
-            else mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
-        )
-        version = 4 << 24 | 5 << 16 | 0 << 8 | mavlink.FIRMWARE_VERSION_TYPE_OFFICIAL
-        self._send(
-            lambda mav: mav.autopilot_version_send(
-                capabilities, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0
-            )
-        )
+        bytewise = self.flavour.bytewise_params
+        self._send(lambda mav: telemetry.autopilot_version(mav, bytewise_params=bytewise))
 
     def _boot_ms(self) -> int:
         return int(self._wall() * 1000) & 0xFFFFFFFF
-
-    def _voltage_mv(self, fraction: float) -> int:
-        cell = _CELL_EMPTY_V + (_CELL_FULL_V - _CELL_EMPTY_V) * fraction
-        return round(cell * _CELLS * 1000)
-
-    def _current_ca(self) -> int:
-        return 50 if self._on_ground else 1500  # 0.5 A idle, 15 A hovering or cruising
 
     # --- receiving ------------------------------------------------------------------------
 
@@ -544,20 +630,23 @@ class MavSim:
             return
         if getattr(msg, "target_system", 0) not in (0, self.system_id):
             return  # addressed to another vehicle
+        if kind in ("MISSION_ITEM", "MISSION_ITEM_INT") and msg.current == 2:
+            # ArduPilot's "guided mode waypoint", not an item of the mission.
+            self._guided.on_item(msg, self._reply_to(msg))
+            return
         handler = {
             "HEARTBEAT": self._on_heartbeat,
             "COMMAND_LONG": self._on_command,
             "COMMAND_INT": self._on_command,
             "SET_MODE": self._on_set_mode,
             "SET_POSITION_TARGET_GLOBAL_INT": self._on_position_target,
-            "PARAM_REQUEST_LIST": self._on_param_request_list,
-            "PARAM_REQUEST_READ": self._on_param_request_read,
-            "PARAM_SET": self._on_param_set,
-            "REQUEST_DATA_STREAM": self._on_request_data_stream,
+            "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            "MISSION_SET_CURRENT": self._on_mission_set_current,
+            "REQUEST_DATA_STREAM": self._streams.on_request_data_stream,
         }.get(kind)
         if handler is not None:
             handler(msg)
-        else:
+        elif not self._params.handle(msg):
             self._missions.handle(msg)
 
     def _on_heartbeat(self, msg: Any) -> None:
@@ -568,7 +657,7 @@ class MavSim:
         if source not in self._gcs_seen:
             # A new ground station hears a heartbeat at once instead of within a second.
             self._gcs_seen.add(source)
-            self._next_due[mavlink.MAVLINK_MSG_ID_HEARTBEAT] = self._wall()
+            self._streams.due_now(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
 
     def _reply_to(self, msg: Any) -> tuple[int, int]:
         return int(msg.get_srcSystem()), int(msg.get_srcComponent())
@@ -576,50 +665,14 @@ class MavSim:
     # --- commands -------------------------------------------------------------------------
 
     def _on_command(self, msg: Any) -> None:
-        command = int(msg.command)
-        is_int = msg.get_type() == "COMMAND_INT"
-        confirmation = 0 if is_int else int(msg.confirmation)
-        self._commands_seen[command].append(confirmation)
-        if command in self._ignored:
-            return
-        if is_int:
-            # COMMAND_INT carries positions in x/y (degrees * 1e7) where COMMAND_LONG has
-            # param5/param6; both end up as the same seven numbers here.
-            values = (
-                msg.param1,
-                msg.param2,
-                msg.param3,
-                msg.param4,
-                msg.x / 1e7,
-                msg.y / 1e7,
-                msg.z,
-            )
-        else:
-            values = (
-                msg.param1,
-                msg.param2,
-                msg.param3,
-                msg.param4,
-                msg.param5,
-                msg.param6,
-                msg.param7,
-            )
-        key = (command, tuple(float(v) for v in values))
-        after: Callable[[], None] | None = None
-        if confirmation > 0 and self._last_command is not None and self._last_command[0] == key:
-            # A retransmission of the command just executed (its ACK was lost): answer again
-            # without doing it twice, which is what the confirmation counter is for.
-            result = self._last_command[1]
-        else:
-            result, after = self._execute(command, key[1])
-        self._last_command = (key, result)
-        system, component = self._reply_to(msg)
-        self._send(lambda mav: mav.command_ack_send(command, result, 0, 0, system, component))
-        if after is not None:
-            after()
+        server = self._commands
+        if self.payload:
+            server = self._payload_commands.get(addressee(msg), server)
+        server.handle(msg, self._reply_to(msg))
 
-    def _execute(self, command: int, p: tuple[float, ...]) -> tuple[int, Callable[[], None] | None]:
-        """Run a command; returns its MAV_RESULT and what to send after the ACK, if anything."""
+    def _execute(self, command: int, p: tuple[float, ...], frame: int) -> Outcome:
+        """Run a command (``frame``: where its positions are); returns its MAV_RESULT and what
+        to send after the ACK, if anything."""
         accepted = mavlink.MAV_RESULT_ACCEPTED
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] >= 0.5:
@@ -634,16 +687,16 @@ class MavSim:
         if command == mavlink.MAV_CMD_NAV_LAND:
             return self._change_mode(self.flavour.land), None
         if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
-            return self._set_interval(round(p[0]), p[1]), None
+            return self._streams.set_interval(round(p[0]), p[1]), None
         if command == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
             message_id = round(p[0])
-            interval = self._intervals.get(message_id)
+            interval = self._streams.intervals.get(message_id)
             interval_us = round(interval * 1e6) if interval is not None else -1
             return accepted, lambda: self._send(
                 lambda mav: mav.message_interval_send(message_id, interval_us)
             )
         if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            sender = self._streams.get(round(p[0]))
+            sender = self._streams.senders.get(round(p[0]))
             if sender is None:
                 return mavlink.MAV_RESULT_DENIED, None
             return accepted, sender
@@ -654,7 +707,16 @@ class MavSim:
         if command == mavlink.MAV_CMD_DO_FENCE_ENABLE:
             if "FENCE_ENABLE" not in self._params:
                 return mavlink.MAV_RESULT_UNSUPPORTED, None
-            self._params["FENCE_ENABLE"].value = 1.0 if p[0] >= 0.5 else 0.0
+            self._params.set("FENCE_ENABLE", 1.0 if p[0] >= 0.5 else 0.0)
+            return accepted, None
+        if command == mavlink.MAV_CMD_DO_REPOSITION:
+            return self._guided.reposition(p, frame), None
+        if command == mavlink.MAV_CMD_MISSION_START:
+            return self._mission_start(round(p[0])), None
+        if command == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
+            running = self._mode == self.flavour.mission and self._armed
+            if not self._auto.set_current(round(p[0]), running=running):
+                return mavlink.MAV_RESULT_DENIED, None
             return accepted, None
         if command == mavlink.MAV_CMD_BATTERY_RESET:
             # ArduPilot's "a fresh battery is in": param2 is its charge in percent.
@@ -724,7 +786,7 @@ class MavSim:
 
     def _supported_modes(self) -> frozenset[str]:
         f = self.flavour
-        return f.armable | f.hold | {f.follows_targets, f.rtl, f.land}
+        return f.armable | f.hold | {f.follows_targets, f.rtl, f.land, f.mission}
 
     def _change_mode(self, mode: str) -> int:
         """Switch to a mode (a name); returns the MAV_RESULT."""
@@ -738,8 +800,15 @@ class MavSim:
             return int(mavlink.MAV_RESULT_DENIED)
         if mode == self._mode:
             return int(mavlink.MAV_RESULT_ACCEPTED)
+        if mode == f.mission:
+            refusal = self._auto.refusal(armed=self._armed)
+            if refusal is not None:
+                self._text(mavlink.MAV_SEVERITY_WARNING, f"Mode change to {mode} failed: {refusal}")
+                return int(mavlink.MAV_RESULT_FAILED)
         now = self._now()
         self._mode = mode
+        if mode == f.mission:
+            self._auto.start()  # the next tick begins (or resumes) the current item
         if not self._on_ground:
             if mode == f.rtl:
                 self._start_return(now)
@@ -748,6 +817,24 @@ class MavSim:
             elif mode in f.hold or mode == f.follows_targets:
                 self._hold(now)
         return int(mavlink.MAV_RESULT_ACCEPTED)
+
+    def _mission_start(self, first: int) -> int:
+        """MAV_CMD_MISSION_START: AUTO from item ``first`` (0: where it stands)."""
+        f = self.flavour
+        if self._mode != f.mission:
+            if self._change_mode(f.mission) != mavlink.MAV_RESULT_ACCEPTED:
+                return int(mavlink.MAV_RESULT_FAILED)
+        elif self._auto.complete:
+            self._auto.start()
+        if first > 0 and not self._auto.set_current(first, running=True):
+            return int(mavlink.MAV_RESULT_DENIED)
+        return int(mavlink.MAV_RESULT_ACCEPTED)
+
+    def _on_mission_set_current(self, msg: Any) -> None:
+        # The older MISSION_SET_CURRENT has no ACK: MISSION_CURRENT says where the mission is.
+        running = self._mode == self.flavour.mission and self._armed
+        if not self._auto.set_current(int(msg.seq), running=running):
+            self._auto.send_current()  # unchanged: where it still is
 
     def _takeoff(self, altitude: float) -> int:
         f = self.flavour
@@ -766,50 +853,38 @@ class MavSim:
             above_ground = self.home.alt + altitude
         if not math.isfinite(above_ground) or above_ground <= self.home.alt:
             return int(mavlink.MAV_RESULT_DENIED)
-        now = self._now()
-        here = self._vehicle.position_at(now)
-        top = here.with_alt(above_ground)
-        self._on_ground = False
-        self._target = top
-        self._stage = "takeoff"
-        self._stage_end_s = self._vehicle.fly_to(top, now)
+        self._lift_off(above_ground)
         if f.takeoff_mode is not None:
             self._mode = f.takeoff_mode
         return int(mavlink.MAV_RESULT_ACCEPTED)
 
-    def _on_position_target(self, msg: Any) -> None:
-        f = self.flavour
-        self._setpoints.append(self._wall())
-        self._last_setpoint_wall = self._wall()
-        if msg.type_mask & _POSITION_IGNORE:
-            return  # velocity or acceleration targets: not simulated
-        if self._mode != f.follows_targets or not self._armed or self._on_ground:
-            return  # ArduCopter ignores targets outside GUIDED and before take-off
-        frame = int(msg.coordinate_frame)
-        if frame in (
-            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-        ):
-            alt = self.home.alt + float(msg.alt)
-        elif frame in (mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL):
-            alt = float(msg.alt) - self.ground_amsl_m
-        elif frame in (
-            mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
-            mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT,
-        ):
-            alt = float(msg.alt)  # flat world: above terrain is above ground
-        else:
-            return
-        try:
-            target = Position(msg.lat_int / 1e7, msg.lon_int / 1e7, alt)
-        except ValueError:
-            return
-        if target == self._target and self._stage == "goto":
-            return  # the same target again (targets are re-sent against packet loss)
+    def _lift_off(self, above_ground: float) -> None:
         now = self._now()
+        top = self._vehicle.position_at(now).with_alt(above_ground)
+        self._on_ground = False
+        self._fly(top, "takeoff", now)
+
+    def _fly(self, target: Position, stage: str, now: float) -> None:
         self._target = target
-        self._stage = "goto"
+        self._stage = stage
         self._stage_end_s = self._vehicle.fly_to(target, now)
+
+    def _idle(self, now: float) -> bool:
+        """No manoeuvre under way: landed, or hovering (a target reached, a wait over)."""
+        return self._stage is None or (
+            self._stage in ("goto", "hover") and now >= self._stage_end_s
+        )
+
+    def _fly_guided(self, target: Position) -> None:
+        same = self._target is not None and distance_m(target, self._target) < _SAME_TARGET_M
+        if same and self._stage == "goto":
+            return  # the same target again (targets are re-sent against packet loss)
+        self._fly(target, "goto", self._now())
+
+    def _on_position_target(self, msg: Any) -> None:
+        self._setpoints.append(self._wall())  # PX4's offboard mode wants a live stream
+        self._last_setpoint_wall = self._wall()
+        self._guided.on_position_target(msg)
 
     def _setpoints_live(self) -> bool:
         wall = self._wall()
@@ -824,13 +899,18 @@ class MavSim:
     def _start_return(self, now: float) -> None:
         here = self._vehicle.position_at(now)
         name, unit = self.flavour.rtl_alt_param
-        rtl_alt = self.home.alt + self._params[name].value * unit
+        rtl_alt = self.home.alt + self._params.value(name) * unit
         # As SimVehicle.return_to_depot: cruise home at the current altitude (at least the
         # return altitude), then land vertically.
         above = self.home.with_alt(max(here.alt, rtl_alt, self.home.alt))
         self._target = above
         self._stage = "return"
         self._stage_end_s = self._vehicle.fly_to(above, now)
+
+    def _start_approach(self, spot: Position, now: float) -> None:
+        # NAV_LAND at a place: fly there at the altitude it is at, then land.
+        here = self._vehicle.position_at(now)
+        self._fly(spot.with_alt(here.alt), "approach", now)
 
     def _start_landing(self, now: float) -> None:
         here = self._vehicle.position_at(now)
@@ -862,11 +942,15 @@ class MavSim:
             self._stage = None
             if f.after_takeoff is not None and self._mode == f.takeoff_mode:
                 self._mode = f.after_takeoff
-        if self._stage == "return" and now >= self._stage_end_s:
+        if self._stage in ("return", "approach") and now >= self._stage_end_s:
             self._start_landing(self._stage_end_s)
             now = self._now()
         if self._stage == "landing" and now >= self._stage_end_s:
             self._touchdown(self._stage_end_s)
+        if self._mode == f.mission:
+            self._auto.tick()
+            now = self._now()
+        self._check_fence(now)
         self._check_battery(now)
         self._check_auto_disarm()
         self._check_setpoint_stream()
@@ -876,14 +960,46 @@ class MavSim:
             # heartbeat (ArduPilot waits for the next one): a GCS that confirms a change by
             # the heartbeat then waits milliseconds, not a second.
             self._send_heartbeat()
-            self._next_due[mavlink.MAVLINK_MSG_ID_HEARTBEAT] = self._wall() + self._intervals.get(
-                mavlink.MAVLINK_MSG_ID_HEARTBEAT, 1.0
-            )
-        self._send_due()
+            self._streams.sent_now(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
+        self._streams.send_due()
+        if self.payload:
+            # After the autopilot's messages: a new ground station hears the autopilot first.
+            self._companion.tick()
+            self._camera.tick()
+
+    def _check_fence(self, now: float) -> None:
+        """A fence breach while flying: FENCE_STATUS, "Polygon fence breached" and the
+        FENCE_ACTION (ArduCopter's Copter::fence_check)."""
+        if not self._armed or self._on_ground or self._stage == "landing":
+            return  # ArduCopter never acts on a breach in the final stage of landing either
+        status = self._fence_status
+        breaches = self._fence.breaches(self._vehicle.position_at(now))
+        if breaches == status.breaches:
+            return
+        new = breaches & ~status.breaches
+        status.breaches = breaches
+        status.breach_type = breach_type(breaches)
+        if new:
+            status.count += 1
+            status.time_ms = self._boot_ms()
+            self._text(mavlink.MAV_SEVERITY_NOTICE, f"{fence_names(new)} breached")
+        self._send_fence_status()
+        if new:
+            self._fence_action()
+
+    def _fence_action(self) -> None:
+        f = self.flavour
+        action = round(self._params.get("FENCE_ACTION", REPORT_ONLY))
+        if action == REPORT_ONLY or self._mode == f.land:
+            return
+        if action in LANDING_ACTIONS:
+            self._change_mode(f.land)
+        elif self._mode != f.rtl and self._change_mode(f.rtl) != mavlink.MAV_RESULT_ACCEPTED:
+            self._change_mode(f.land)  # RTL or, when that fails, land
 
     def _check_battery(self, now: float) -> None:
         fraction = self._battery(now)
-        if fraction < _LOW_BATTERY and not self._battery_warned and not self._on_ground:
+        if fraction < LOW_BATTERY and not self._battery_warned and not self._on_ground:
             self._battery_warned = True
             self._text(mavlink.MAV_SEVERITY_WARNING, "Battery 1 is low")
         if fraction <= 0.0 and not self._on_ground and self._stage != "landing":
@@ -894,7 +1010,7 @@ class MavSim:
             self._start_landing(now)
 
     def _check_auto_disarm(self) -> None:
-        delay = self._params[self.flavour.disarm_delay_param].value
+        delay = self._params.value(self.flavour.disarm_delay_param)
         if (
             self._armed
             and self._on_ground
@@ -914,61 +1030,6 @@ class MavSim:
             # PX4 leaves offboard when the setpoints stop (COM_OF_LOSS_T) and holds.
             self._text(mavlink.MAV_SEVERITY_WARNING, "Offboard lost: holding position")
             self._change_mode("AUTO.LOITER")
-
-    def _send_due(self) -> None:
-        wall = self._wall()
-        for message_id, interval in list(self._intervals.items()):
-            sender = self._streams.get(message_id)
-            if sender is None:
-                continue
-            due = self._next_due.get(message_id, wall)
-            if wall >= due:
-                sender()
-                # Keep the cadence, but never try to catch up a backlog.
-                self._next_due[message_id] = max(due + interval, wall)
-
-    def _set_interval(self, message_id: int, interval_us: float) -> int:
-        if message_id == mavlink.MAVLINK_MSG_ID_STATUSTEXT:
-            # STATUSTEXT is sent when there is something to say; -1 silences it.
-            self._statustext_on = interval_us >= 0
-            return int(mavlink.MAV_RESULT_ACCEPTED)
-        if message_id not in self._streams:
-            return int(mavlink.MAV_RESULT_DENIED)
-        if interval_us < 0:
-            self._intervals.pop(message_id, None)
-        elif interval_us == 0:
-            # 0: the default rate (what it streams at start, otherwise off).
-            if message_id in (
-                mavlink.MAVLINK_MSG_ID_HEARTBEAT,
-                mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
-                mavlink.MAVLINK_MSG_ID_SYS_STATUS,
-            ):
-                self._intervals[message_id] = 1.0
-            else:
-                self._intervals.pop(message_id, None)
-        else:
-            self._intervals[message_id] = max(interval_us / 1e6, 0.005)
-        self._next_due.pop(message_id, None)
-        return int(mavlink.MAV_RESULT_ACCEPTED)
-
-    def _on_request_data_stream(self, msg: Any) -> None:
-        # The older rate interface MAVProxy and QGroundControl still use with ArduPilot.
-        streams = {
-            mavlink.MAV_DATA_STREAM_POSITION: [mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT],
-            mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: [
-                mavlink.MAVLINK_MSG_ID_SYS_STATUS,
-                mavlink.MAVLINK_MSG_ID_BATTERY_STATUS,
-                mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
-            ],
-        }
-        if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL:
-            ids = [i for group in streams.values() for i in group]
-        else:
-            ids = streams.get(msg.req_stream_id, [])
-        rate = float(msg.req_message_rate)
-        for message_id in ids:
-            interval_us = 1e6 / rate if msg.start_stop and rate > 0 else -1.0
-            self._set_interval(message_id, interval_us)
 
     # --- battery --------------------------------------------------------------------------
 
@@ -990,50 +1051,66 @@ class MavSim:
 
     # --- parameters -----------------------------------------------------------------------
 
-    def _send_param(self, name: str) -> None:
-        names = list(self._params)
-        param = self._params[name]
-        wire = param_codec.encode(param.value, param.type, bytewise=self.flavour.bytewise_params)
-        self._send(
-            lambda mav: mav.param_value_send(
-                encode_text(name, 16), wire, param.type, len(names), names.index(name)
-            )
-        )
-
-    def _on_param_request_list(self, msg: Any) -> None:
-        for name in self._params:
-            self._send_param(name)
-
-    def _on_param_request_read(self, msg: Any) -> None:
-        names = list(self._params)
-        if msg.param_index >= 0:
-            if msg.param_index < len(names):
-                self._send_param(names[msg.param_index])
-        elif msg.param_id in self._params:
-            self._send_param(msg.param_id)
-        # An unknown parameter gets no answer, as on ArduPilot.
-
-    def _on_param_set(self, msg: Any) -> None:
-        name = str(msg.param_id)
-        param = self._params.get(name)
-        if param is None:
-            return
-        value = param_codec.decode(
-            float(msg.param_value), param.type, bytewise=self.flavour.bytewise_params
-        )
-        if not math.isfinite(value):
-            self._send_param(name)  # refused: the echo shows the value kept
-            return
-        if param_codec.is_integer_type(param.type):
-            value = float(round(value))
-        param.value = value
+    def _on_param_set(self, name: str, value: float) -> None:
         for param_name, field, unit in self.flavour.speed_params:
             if name == param_name and value > 0:
                 # A GCS changing the speed changes the kinematics from the next leg on.
                 self._spec = replace(self._spec, **{field: value * unit})
                 self._vehicle.spec = self._spec
-        self._send_param(name)
 
 
-def _clamp16(value: float) -> int:
-    return max(-32768, min(32767, round(value)))
+class _Pilot:
+    """The copter's flight as AUTO and GUIDED see it (``auto.Flight``, ``guided.Vehicle``)."""
+
+    def __init__(self, sim: MavSim) -> None:
+        self._sim = sim
+
+    @property
+    def on_ground(self) -> bool:
+        return self._sim._on_ground
+
+    @property
+    def armed(self) -> bool:
+        return self._sim._armed
+
+    @property
+    def mode(self) -> str:
+        return self._sim._mode
+
+    def change_mode(self, mode: str) -> int:
+        return self._sim._change_mode(mode)
+
+    def idle(self) -> bool:
+        return self._sim._idle(self._sim._now())
+
+    def here(self) -> Position:
+        return self._sim._vehicle.position_at(self._sim._now())
+
+    def item_target(self, item: MissionItem) -> Position:
+        here = self.here()
+        lat, lng = (here.lat, here.lng) if item.x == 0 and item.y == 0 else (item.lat, item.lng)
+        return self._sim._guided.target(item.frame, lat, lng, item.z)
+
+    def climb_to(self, alt: float) -> None:
+        sim = self._sim
+        if sim._on_ground:
+            sim._lift_off(alt)
+        else:
+            sim._fly(self.here().with_alt(alt), "goto", sim._now())
+
+    def go_to(self, target: Position) -> None:
+        self._sim._fly_guided(target)
+
+    def hover_for(self, seconds: float) -> None:
+        sim = self._sim
+        now = sim._now()
+        sim._hold(now)
+        # A stage with an end: the instant clock (speed 0) moves on to it as to any other.
+        sim._stage = "hover"
+        sim._stage_end_s = now + seconds
+
+    def return_home(self) -> None:
+        self._sim._start_return(self._sim._now())
+
+    def land_at(self, spot: Position) -> None:
+        self._sim._start_approach(spot, self._sim._now())

@@ -23,6 +23,8 @@ class Flavour:
     follows_targets: str  # the mode that flies SET_POSITION_TARGET_GLOBAL_INT
     rtl: str
     land: str
+    mission: str  # the mode that flies the uploaded mission
+    mission_first_seq: int  # ArduPilot keeps home in item 0 and starts at 1
     takeoff_in: frozenset[str] | None  # modes NAV_TAKEOFF is accepted in (None: any)
     takeoff_mode: str | None  # the mode NAV_TAKEOFF switches to
     after_takeoff: str | None  # the mode the vehicle is in once up
@@ -44,6 +46,8 @@ ARDUCOPTER = Flavour(
     follows_targets="GUIDED",
     rtl="RTL",
     land="LAND",
+    mission="AUTO",
+    mission_first_seq=1,
     takeoff_in=frozenset({"GUIDED"}),
     takeoff_mode=None,
     after_takeoff=None,
@@ -67,6 +71,8 @@ PX4 = Flavour(
     follows_targets="OFFBOARD",
     rtl="AUTO.RTL",
     land="AUTO.LAND",
+    mission="AUTO.MISSION",
+    mission_first_seq=0,
     takeoff_in=None,
     takeoff_mode="AUTO.TAKEOFF",
     after_takeoff="AUTO.LOITER",

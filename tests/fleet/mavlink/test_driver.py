@@ -70,9 +70,9 @@ def test_connect_asks_for_telemetry_and_uploads_the_geofence(
     assert {i.param1 for i in items} == {4.0}
     # ... with the altitude ceiling, and the fence on.
     assert sim.param("FENCE_ALT_MAX") == 120.0
-    assert int(sim.param("FENCE_TYPE")) & (1 | 4) == 5
+    assert int(sim.param("FENCE_TYPE")) & (1 | 2 | 4) == 5  # altitude and polygon, no circle
     assert sim.param("FENCE_ENABLE") == 1.0
-    assert driver.fence is not None and driver.fence[1:] == (10.0, 120.0)
+    assert driver.fence is not None and driver.fence[1:3] == (10.0, 120.0)
 
     # The area changes: upload again.
     smaller = [[48.110, 12.860], [48.110, 12.862], [48.112, 12.862], [48.110, 12.860]]

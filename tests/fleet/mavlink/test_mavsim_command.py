@@ -1,25 +1,75 @@
 """``manage.py mavsim NAME``: a simulated copter from the fleet's database, in a process of
-its own, answering a plain pymavlink ground station."""
+its own, answering a plain pymavlink ground station; by default it carries its payload (the
+companion computer and the camera), reads the seeded field (``--field-seed``) and says where
+its images are served."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
 import sys
 import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from contextlib import closing
 from pathlib import Path
+from typing import Any
 
 import pytest
 from django.core.management import CommandError, call_command
 from pymavlink import mavutil
 
+from fleet.geo import Position
 from fleet.mavlink.wire import mavlink
+from fleet.simulation import SensorField
 from tests.factories import VehicleFactory
 from tests.fleet.mavlink.conftest import free_udp_port
+from tests.fleet.mavlink.test_mavsim_sensors import sdc
 from tests.live import database_url
 
 ROOT = Path(__file__).resolve().parents[3]
+SEED = 11
+DEPOT = Position(48.1135, 12.86, 0.0)
+
+
+@contextlib.contextmanager
+def mavsim(name: str, *args: str, tmp_path: Path) -> Iterator[tuple[subprocess.Popen[bytes], Path]]:
+    """``manage.py mavsim NAME ARGS`` in a process of its own (and its log), killed at the end
+    if the test did not stop it."""
+    log = tmp_path / "mavsim.log"
+    with log.open("wb") as out:
+        process = subprocess.Popen(
+            [sys.executable, "manage.py", "mavsim", name, *args],
+            cwd=ROOT,
+            env={
+                **os.environ,
+                "DATABASE_URL": database_url(),
+                "CPCC_VAR_DIR": str(tmp_path / "var"),
+                "CPCC_LOG_LEVEL": "INFO",
+            },
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+    try:
+        yield process, log
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+
+
+def receive(gcs: Any, kind: str, condition: Any, deadline: float) -> Any:
+    """The next message of a kind that ``condition`` accepts, saying hello meanwhile."""
+    while time.monotonic() < deadline:
+        gcs.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        msg = gcs.recv_match(type=kind, blocking=True, timeout=0.2)
+        if msg is not None and condition(msg):
+            return msg
+    raise AssertionError(f"no {kind}")
 
 
 @pytest.mark.slow
@@ -36,23 +86,10 @@ def test_mavsim_flies_a_vehicle_of_the_fleet(tmp_path: Path) -> None:
         driver="mavlink",
         driver_url=f"udpout:127.0.0.1:{port}",  # mavsim listens on the other end
     )
-    log = tmp_path / "mavsim.log"
-    with log.open("wb") as out:
-        process = subprocess.Popen(
-            [sys.executable, "manage.py", "mavsim", "Heli MAV", "--speed", "10"],
-            cwd=ROOT,
-            env={
-                **os.environ,
-                "DATABASE_URL": database_url(),
-                "CPCC_VAR_DIR": str(tmp_path / "var"),
-                "CPCC_LOG_LEVEL": "INFO",
-            },
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
-    gcs = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255)
-    try:
+    with (
+        mavsim("Heli MAV", "--speed", "10", tmp_path=tmp_path) as (process, log),
+        closing(mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255)) as gcs,
+    ):
         # Django starts in a second or two: say hello until the copter answers.
         deadline = time.monotonic() + 60
         beat = None
@@ -78,11 +115,6 @@ def test_mavsim_flies_a_vehicle_of_the_fleet(tmp_path: Path) -> None:
         os.killpg(process.pid, signal.SIGTERM)
         assert process.wait(timeout=15) == 0
         assert "mavsim Heli MAV: ardupilot copter on udpin:127.0.0.1:" in log.read_text()
-    finally:
-        gcs.close()
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
 
 
 @pytest.mark.django_db
@@ -94,3 +126,49 @@ def test_mavsim_needs_a_vehicle_and_a_connection() -> None:
         call_command("mavsim", "Heli One")
     with pytest.raises(CommandError, match="unknown MAVLink connection"):
         call_command("mavsim", "Heli One", "--connection", "bluetooth:heli")
+
+
+@pytest.mark.slow
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
+def test_mavsim_command_flies_with_its_payload(tmp_path: Path) -> None:
+    port = free_udp_port()
+    VehicleFactory(
+        name="Heli Payload",
+        depot_lat=DEPOT.lat,
+        depot_lng=DEPOT.lng,
+        driver="mavlink",
+        driver_url=f"udpout:127.0.0.1:{port}",
+    )
+    with (
+        mavsim("Heli Payload", "--field-seed", str(SEED), tmp_path=tmp_path) as (process, log),
+        closing(mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255)) as gcs,
+    ):
+        # Django starts in a second or two.
+        deadline = time.monotonic() + 60
+        pressure = receive(gcs, "SCALED_PRESSURE", lambda m: True, deadline)
+        expected = SensorField(SEED).sample(sdc("pressure"), DEPOT, 0.0)["value"]
+        assert abs(pressure.press_abs - expected) < 0.5  # the seeded world, not seed 0's
+        companion = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+        co2 = receive(
+            gcs,
+            "NAMED_VALUE_FLOAT",
+            lambda m: m.get_srcComponent() == companion and m.name == "CO2",
+            time.monotonic() + 10,
+        )
+        assert co2.value > 350
+        receive(
+            gcs,
+            "HEARTBEAT",
+            lambda m: m.get_srcComponent() == mavlink.MAV_COMP_ID_CAMERA,
+            time.monotonic() + 10,
+        )
+        # The command says where the images are; the server answers there.
+        line = next(x for x in log.read_text().splitlines() if "camera images on" in x)
+        url = line.split("camera images on ")[1]
+        assert url.startswith("http://127.0.0.1:")
+        with pytest.raises(urllib.error.HTTPError) as none_yet:
+            urllib.request.urlopen(url + "0.png", timeout=5)
+        assert none_yet.value.code == 404
+
+        os.killpg(process.pid, signal.SIGTERM)
+        assert process.wait(timeout=15) == 0

@@ -29,6 +29,7 @@ from django.core.management.base import BaseCommand, CommandError, CommandParser
 
 from cpcc_site.embedded_redis import EmbeddedRedis
 from fleet.models import Driver, Vehicle
+from fleet.sources import autopilot_source
 from missions.models import ENDED_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.platform import platform_vvm
 from vvm_worker.scenario import FleetEvent, Scenario, ScenarioError, load_scenario
@@ -261,9 +262,19 @@ class Command(BaseCommand):
                 with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
                     probe.bind(("127.0.0.1", 0))
                     port = probe.getsockname()[1]
+                # Every reading over MAVLink too, as mavsim publishes it (from the same
+                # simulated world the platform would read otherwise).
+                sources = {
+                    sensor.name: autopilot_source(sensor.as_catalog_entry()).as_json()
+                    for sensor in vehicle.sensors.all()
+                }
                 vehicle = vehicle_update(
                     vehicle=vehicle,
-                    config={"driver": Driver.MAVLINK, "driver_url": f"udpout:127.0.0.1:{port}"},
+                    config={
+                        "driver": Driver.MAVLINK,
+                        "driver_url": f"udpout:127.0.0.1:{port}",
+                        "sensor_sources": sources,
+                    },
                     sensors=None,
                     vvm=platform_vvm(),
                 )
