@@ -18,42 +18,39 @@ mission protocol's request/item exchange with timeouts. Every failure is a typed
 
 Listener callbacks and the link-loss callbacks run on the link's threads: keep them short, and
 never call a blocking request (a command) from them.
+
+This module is the transport (connection, threads, heartbeats, dispatch to waiters and
+listeners); each sub-protocol is a part of ``MavlinkLink`` in a module of its own:
+``commanding`` (commands, rates, modes, arming), ``parameters``, ``mission_transfer``
+(missions, the fence, rally points), over what ``exchange.LinkCore`` says they share.
 """
 
 from __future__ import annotations
 
 import contextlib
-import functools
 import logging
 import math
-import queue
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
 from typing import Any
 
-from fleet.mavlink import params as param_codec
+from fleet.mavlink.commanding import Commanding
 from fleet.mavlink.endpoint import parse_endpoint
 from fleet.mavlink.errors import (
-    CommandDenied,
-    CommandTimeout,
     LinkError,
     LinkLost,
-    MavlinkError,
-    MissionRejected,
-    MissionTimeout,
-    ModeChangeFailed,
-    ParamRejected,
-    ParamTimeout,
-    PreArmFailed,
 )
-from fleet.mavlink.mission import MissionItem
-from fleet.mavlink.modes import Autopilot, custom_mode_of, mode_name, same_mode, set_mode_params
-from fleet.mavlink.wire import BAD_DATA, connect, drop_closed_tcp_client, encode_text, mavlink
+from fleet.mavlink.exchange import CommandAck, Heartbeat, StatusText, Waiter
+from fleet.mavlink.mission_transfer import MissionTransfer
+from fleet.mavlink.modes import Autopilot
+from fleet.mavlink.parameters import Parameters
+from fleet.mavlink.wire import BAD_DATA, connect, drop_closed_tcp_client, mavlink
 
 logger = logging.getLogger("cpcc.mavlink")
+
+__all__ = ["CommandAck", "Heartbeat", "MavlinkLink", "StatusText"]
 
 # Heartbeats of these types come from ground stations, companions and accessories, never from
 # the vehicle's autopilot (pymavlink's probably_vehicle_heartbeat uses the same list).
@@ -65,70 +62,10 @@ _NOT_A_VEHICLE = frozenset(
         mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
     }
 )
-# STATUSTEXT lines that explain a refused arming: ArduPilot's "PreArm: ..." and "Arm: ...",
-# PX4's "Preflight Fail: ..." and "Arming denied ...".
-_ARMING_PREFIXES = ("prearm", "arm", "preflight", "arming")
 _STATUSTEXT_CHUNK = 50  # STATUSTEXT.text is char[50]; a longer text is sent in chunks
 
 
-@dataclass(frozen=True)
-class Heartbeat:
-    """The vehicle's last HEARTBEAT, decoded. ``received`` is on the link's monotonic clock."""
-
-    system_id: int
-    component_id: int
-    mav_type: int
-    autopilot: Autopilot
-    base_mode: int
-    custom_mode: int
-    system_status: int
-    received: float
-
-    @property
-    def armed(self) -> bool:
-        return bool(self.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-
-    @property
-    def mode(self) -> str:
-        """The flight mode's name, e.g. "GUIDED" (ArduCopter) or "AUTO.LOITER" (PX4)."""
-        return mode_name(self.autopilot, self.custom_mode)
-
-
-@dataclass(frozen=True)
-class StatusText:
-    """One STATUSTEXT line from the vehicle (chunks already joined)."""
-
-    severity: int
-    text: str
-    received: float
-
-
-@dataclass(frozen=True)
-class CommandAck:
-    """The COMMAND_ACK that ended a command (its result is ACCEPTED when returned)."""
-
-    command: int
-    result: int
-    progress: int
-    result_param2: int
-
-
-class _Waiter:
-    """Collects the messages a pending request is waiting for (filled by the reader thread)."""
-
-    def __init__(self, match: Callable[[Any], bool], *, any_component: bool = False) -> None:
-        self.match = match
-        self.any_component = any_component  # also the vehicle's other components' messages
-        self.messages: queue.SimpleQueue[Any] = queue.SimpleQueue()
-
-    def get(self, timeout_s: float) -> Any | None:
-        try:
-            return self.messages.get(timeout=max(0.0, timeout_s))
-        except queue.Empty:
-            return None
-
-
-class MavlinkLink:
+class MavlinkLink(Commanding, Parameters, MissionTransfer):
     """A link to one vehicle. See the module docstring for what it does.
 
     ``connection``: a connection string (``fleet.mavlink.endpoint``). ``source_system`` and
@@ -189,7 +126,7 @@ class MavlinkLink:
         self._latest: dict[str, Any] = {}
         self._texts: deque[StatusText] = deque(maxlen=200)
         self._chunks: dict[int, list[str]] = {}
-        self._waiters: list[_Waiter] = []
+        self._waiters: list[Waiter] = []
         self._listeners: dict[str, list[Callable[[Any], None]]] = {}
         self._param_types: dict[str, int] = {}
 
@@ -319,440 +256,6 @@ class MavlinkLink:
         with self._send_lock:
             build(conn.mav)
 
-    # --- commands -------------------------------------------------------------------------
-
-    def command_long(
-        self,
-        command: int,
-        params: Sequence[float] = (),
-        *,
-        timeout_s: float | None = None,
-        attempts: int | None = None,
-        component: int | None = None,
-    ) -> CommandAck:
-        """Send COMMAND_LONG (up to 7 params, the rest 0) until it is acknowledged.
-        ``component``: another component of the vehicle to command (its camera, say), which
-        acknowledges it itself; by default the autopilot.
-
-        Each attempt waits ``timeout_s`` (default: the link's) for a COMMAND_ACK of this
-        command; re-sent attempts count up the ``confirmation`` field, as the protocol asks, so
-        the vehicle can tell a retransmission from a new command. An IN_PROGRESS answer keeps
-        waiting without re-sending. Returns the ACCEPTED ack. Raises CommandDenied for any
-        other result, CommandTimeout after the last attempt, LinkLost when the link is down.
-        """
-        values = [float(p) for p in params][:7]
-        values += [0.0] * (7 - len(values))
-        to = self.target_component if component is None else component
-
-        def send_attempt(confirmation: int) -> None:
-            self.send(
-                lambda mav: mav.command_long_send(
-                    self._target(), to, command, confirmation, *values
-                )
-            )
-
-        return self._command(command, send_attempt, timeout_s, attempts, component=to)
-
-    def command_int(
-        self,
-        command: int,
-        params: Sequence[float] = (),
-        *,
-        frame: int = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-        x: int = 0,
-        y: int = 0,
-        z: float = 0.0,
-        timeout_s: float | None = None,
-        attempts: int | None = None,
-    ) -> CommandAck:
-        """Send COMMAND_INT (param1..4, x/y as degrees * 1e7, z) until it is acknowledged.
-
-        Like ``command_long``, except that COMMAND_INT has no ``confirmation`` field: a
-        retransmission is the same message again. Raises as ``command_long`` does.
-        """
-        values = [float(p) for p in params][:4]
-        values += [0.0] * (4 - len(values))
-
-        def send_attempt(_confirmation: int) -> None:
-            self.send(
-                lambda mav: mav.command_int_send(
-                    self._target(), self.target_component, frame, command, 0, 0, *values, x, y, z
-                )
-            )
-
-        return self._command(command, send_attempt, timeout_s, attempts)
-
-    def _command(
-        self,
-        command: int,
-        send_attempt: Callable[[int], None],
-        timeout_s: float | None,
-        attempts: int | None,
-        *,
-        component: int | None = None,
-    ) -> CommandAck:
-        timeout = self.command_timeout_s if timeout_s is None else timeout_s
-        answering = self.target_component if component is None else component
-        tries = self.command_attempts if attempts is None else attempts
-
-        def is_ack(msg: Any) -> bool:
-            # MAVLink 2 acks name who asked (0 from senders that leave it out).
-            return (
-                msg.get_type() == "COMMAND_ACK"
-                and msg.command == command
-                and msg.get_srcComponent() == answering
-                and getattr(msg, "target_system", 0) in (0, self.source_system)
-            )
-
-        # COMMAND_ACK names only the command id, so two commands of the same id in flight
-        # could not be told apart: one command at a time keeps the matching exact.
-        other = answering != self.target_component
-        with self._command_lock, self.waiting(is_ack, any_component=other) as waiter:
-            for attempt in range(tries):
-                self._require_link()
-                send_attempt(attempt)
-                deadline = self.monotonic() + timeout
-                while True:
-                    ack = waiter.get(deadline - self.monotonic())
-                    if ack is None:
-                        break
-                    if ack.result == mavlink.MAV_RESULT_IN_PROGRESS:
-                        deadline = self.monotonic() + timeout  # still working: keep waiting
-                        continue
-                    result = CommandAck(
-                        command, int(ack.result), int(ack.progress), int(ack.result_param2)
-                    )
-                    if result.result != mavlink.MAV_RESULT_ACCEPTED:
-                        raise CommandDenied(command, result.result)
-                    return result
-                logger.info("%s: no COMMAND_ACK (attempt %d of %d)", command, attempt + 1, tries)
-        raise CommandTimeout(command, tries)
-
-    def set_message_interval(self, message_id: int, rate_hz: float) -> None:
-        """Ask the vehicle to send a message at ``rate_hz`` (0 or less: stop sending it).
-
-        MAV_CMD_SET_MESSAGE_INTERVAL: param1 is the message id, param2 the interval in
-        microseconds (-1 disables the stream, 0 would mean "your default"). Raises as
-        ``command_long`` does.
-        """
-        interval_us = 1e6 / rate_hz if rate_hz > 0 else -1.0
-        self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (message_id, interval_us))
-
-    def request_message(self, message_id: int, *, timeout_s: float | None = None) -> Any:
-        """Ask for one message now (MAV_CMD_REQUEST_MESSAGE) and return it when it comes.
-
-        Raises as ``command_long`` does, and CommandTimeout if the message does not follow
-        the acknowledgement within the timeout.
-        """
-        timeout = self.command_timeout_s if timeout_s is None else timeout_s
-        with self.waiting(lambda msg: msg.get_msgId() == message_id) as waiter:
-            self.command_long(mavlink.MAV_CMD_REQUEST_MESSAGE, (message_id,), timeout_s=timeout)
-            msg = waiter.get(timeout)
-        if msg is None:
-            raise CommandTimeout(mavlink.MAV_CMD_REQUEST_MESSAGE, 1)
-        return msg
-
-    def set_mode(self, name: str, *, timeout_s: float | None = None) -> None:
-        """Switch the flight mode by name ("GUIDED", "RTL", "OFFBOARD", "AUTO.LOITER", ...).
-
-        MAV_CMD_DO_SET_MODE, then waits until a heartbeat shows the mode (an autopilot may
-        accept the command and still stay where it is). Does nothing when already in the mode.
-        Raises MavlinkError (permanent) for a name unknown for this autopilot, CommandDenied
-        when refused, ModeChangeFailed when no heartbeat shows the mode in time.
-        """
-        beat = self._require_link()
-        try:
-            wanted = custom_mode_of(beat.autopilot, name)
-            params = set_mode_params(beat.autopilot, name)
-        except KeyError:
-            raise MavlinkError(
-                f"unknown flight mode {name!r} for {beat.autopilot.value}", permanent=True
-            ) from None
-        if same_mode(beat.autopilot, beat.custom_mode, wanted):
-            return
-        self.command_long(mavlink.MAV_CMD_DO_SET_MODE, params)
-        self._await_heartbeat(
-            lambda hb: same_mode(hb.autopilot, hb.custom_mode, wanted),
-            timeout_s,
-            f"the vehicle acknowledged mode {name} but its heartbeat does not show it",
-        )
-
-    def arm(self, *, timeout_s: float | None = None) -> None:
-        """Arm the motors (MAV_CMD_COMPONENT_ARM_DISARM, param1 = 1); nothing if armed.
-
-        Raises PreArmFailed with the vehicle's STATUSTEXT reasons when arming is refused,
-        ModeChangeFailed when it is acknowledged but the heartbeat never shows "armed", and as
-        ``command_long`` does otherwise.
-        """
-        beat = self._require_link()
-        if beat.armed:
-            return
-        sent = self.monotonic()
-        try:
-            self.command_long(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,))
-        except CommandDenied as exc:
-            raise PreArmFailed(exc.result, self._arming_reasons(sent)) from None
-        self._await_heartbeat(
-            lambda hb: hb.armed, timeout_s, "arming was acknowledged but the vehicle is not armed"
-        )
-
-    def disarm(self, *, force: bool = False, timeout_s: float | None = None) -> None:
-        """Disarm the motors; nothing if disarmed.
-
-        ``force`` sends the magic 21196 in param2, which makes ArduPilot and PX4 disarm even in
-        flight (the vehicle falls): only for emergencies. Raises as ``command_long`` does, and
-        ModeChangeFailed when the heartbeat still shows "armed".
-        """
-        beat = self._require_link()
-        if not beat.armed:
-            return
-        self.command_long(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0.0, 21196.0 if force else 0.0))
-        self._await_heartbeat(
-            lambda hb: not hb.armed,
-            timeout_s,
-            "disarming was acknowledged but the vehicle is armed",
-        )
-
-    def _arming_reasons(self, since: float) -> list[str]:
-        """The STATUSTEXT lines explaining a refused arming.
-
-        ArduPilot sends its "PreArm: ..." lines before the COMMAND_ACK, but rate-limits
-        STATUSTEXT, so a reason can also arrive just after it: wait briefly for one. Without a
-        fresh line, the last "PreArm" lines it repeated on its own (every 30 s) are the answer.
-        """
-        deadline = self.monotonic() + min(1.0, self.command_timeout_s)
-        with self.waiting(lambda msg: msg.get_type() == "STATUSTEXT") as waiter:
-            while True:
-                lines = [t.text for t in self.status_texts(since) if _explains_arming(t)]
-                if lines or self.monotonic() >= deadline:
-                    break
-                waiter.get(deadline - self.monotonic())
-        if not lines:
-            recent = self.status_texts(since - 30.0)
-            lines = [t.text for t in recent if t.text.lower().startswith("prearm")]
-        return list(dict.fromkeys(lines))
-
-    def _await_heartbeat(
-        self, condition: Callable[[Heartbeat], bool], timeout_s: float | None, failure: str
-    ) -> Heartbeat:
-        timeout = max(2.5 * self.heartbeat_period_s, 2 * self.command_timeout_s)
-        deadline = self.monotonic() + (timeout if timeout_s is None else timeout_s)
-        with self.waiting(lambda msg: msg.get_type() == "HEARTBEAT") as waiter:
-            while True:
-                beat = self._heartbeat
-                if beat is not None and condition(beat):
-                    return beat
-                remaining = deadline - self.monotonic()
-                if remaining <= 0:
-                    raise ModeChangeFailed(failure)
-                waiter.get(min(remaining, 0.5))
-
-    # --- parameters -----------------------------------------------------------------------
-
-    def param_get(self, name: str, *, timeout_s: float | None = None) -> float:
-        """Read one parameter (PARAM_REQUEST_READ by name); returns its value.
-
-        Integer parameters come back as whole floats (byte-wise encoding undone for PX4).
-        Raises ParamTimeout when no PARAM_VALUE comes after every attempt (an unknown name
-        gets no answer either), LinkLost when the link is down.
-        """
-        msg = self._param_exchange(
-            name,
-            lambda mav: mav.param_request_read_send(
-                self._target(), self.target_component, encode_text(name, 16), -1
-            ),
-            timeout_s,
-        )
-        return self._decode_param(msg)
-
-    def param_set(
-        self,
-        name: str,
-        value: float,
-        *,
-        param_type: int | None = None,
-        timeout_s: float | None = None,
-    ) -> float:
-        """Write one parameter and wait for the vehicle's PARAM_VALUE with the new value.
-
-        ``param_type`` (MAV_PARAM_TYPE) is taken from an earlier PARAM_VALUE when not given
-        (the parameter is read first if none was seen). Returns the value the vehicle holds.
-        Raises ParamRejected (permanent) when the echo shows another value, ParamTimeout when
-        no echo comes, ValueError when the value does not fit an integer type.
-        """
-        if param_type is None:
-            param_type = self._param_types.get(name)
-            if param_type is None:
-                self.param_get(name, timeout_s=timeout_s)
-                param_type = self._param_types.get(name, param_codec.REAL32)
-        bytewise = self.autopilot is Autopilot.PX4
-        wire = param_codec.encode(value, param_type, bytewise=bytewise)
-        wanted = param_codec.decode(param_codec.as_float32(wire), param_type, bytewise=bytewise)
-        msg = self._param_exchange(
-            name,
-            lambda mav: mav.param_set_send(
-                self._target(), self.target_component, encode_text(name, 16), wire, param_type
-            ),
-            timeout_s,
-        )
-        held = self._decode_param(msg)
-        if param_codec.as_float32(held) != param_codec.as_float32(wanted):
-            raise ParamRejected(f"parameter {name}: wrote {value!r}, the vehicle holds {held!r}")
-        return held
-
-    def _param_exchange(
-        self, name: str, send: Callable[[Any], None], timeout_s: float | None
-    ) -> Any:
-        timeout = self.command_timeout_s if timeout_s is None else timeout_s
-        with self.waiting(
-            lambda msg: msg.get_type() == "PARAM_VALUE" and msg.param_id == name
-        ) as waiter:
-            for _attempt in range(self.command_attempts):
-                self._require_link()
-                self.send(send)
-                msg = waiter.get(timeout)
-                if msg is not None:
-                    return msg
-        raise ParamTimeout(name, self.command_attempts)
-
-    def _decode_param(self, msg: Any) -> float:
-        return param_codec.decode(
-            float(msg.param_value),
-            int(msg.param_type),
-            bytewise=self.autopilot is Autopilot.PX4,
-        )
-
-    # --- missions (and fences) ------------------------------------------------------------
-
-    def upload_mission(
-        self,
-        items: Sequence[MissionItem],
-        mission_type: int,
-        *,
-        timeout_s: float | None = None,
-    ) -> None:
-        """Upload a list with the mission protocol (the fence with MAV_MISSION_TYPE_FENCE).
-
-        MISSION_COUNT, then the vehicle asks for each item (MISSION_REQUEST_INT, or the older
-        MISSION_REQUEST) and gets a MISSION_ITEM_INT, and ends with MISSION_ACK. When the
-        vehicle goes quiet the last message is sent again (``command_attempts`` times in a row
-        at most). An empty list clears the vehicle's list. Raises MissionRejected with the
-        vehicle's MAV_MISSION_RESULT, MissionTimeout when it stalls, LinkLost.
-        """
-        timeout = self.command_timeout_s if timeout_s is None else timeout_s
-        numbered = [item.with_seq(seq) for seq, item in enumerate(items)]
-
-        def send_count() -> None:
-            self.send(
-                lambda mav: mav.mission_count_send(
-                    self._target(), self.target_component, len(numbered), mission_type
-                )
-            )
-
-        def send_item(item: MissionItem) -> None:
-            self.send(
-                lambda mav: item.send(mav, self._target(), self.target_component, mission_type)
-            )
-
-        def is_answer(msg: Any) -> bool:
-            kind = msg.get_type()
-            if kind not in ("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"):
-                return False
-            return getattr(msg, "mission_type", 0) == mission_type
-
-        with self._mission_lock, self.waiting(is_answer) as waiter:
-            resend: Callable[[], None] = send_count
-            requested: set[int] = set()
-            silent = 0
-            self._require_link()
-            send_count()
-            while True:
-                msg = waiter.get(timeout)
-                if msg is None:
-                    silent += 1
-                    if silent >= self.command_attempts:
-                        raise MissionTimeout(
-                            f"mission upload (type {mission_type}) stalled after "
-                            f"{len(requested)} of {len(numbered)} items"
-                        )
-                    self._require_link()
-                    resend()
-                    continue
-                silent = 0
-                if msg.get_type() == "MISSION_ACK":
-                    if msg.type != mavlink.MAV_MISSION_ACCEPTED:
-                        raise MissionRejected(int(msg.type), mission_type)
-                    if len(requested) == len(numbered):
-                        return
-                    # An ACCEPTED ack before every item was asked for answers an earlier,
-                    # abandoned transfer: keep going with this one.
-                    continue
-                seq = int(msg.seq)
-                if not 0 <= seq < len(numbered):
-                    continue
-                requested.add(seq)
-                item = numbered[seq]
-                # MISSION_ITEM_INT answers MISSION_REQUEST too: ArduPilot and PX4 accept it,
-                # and it keeps the coordinates exact (MISSION_ITEM's are float32 degrees).
-                send_item(item)
-                resend = functools.partial(send_item, item)
-
-    def download_mission(
-        self, mission_type: int, *, timeout_s: float | None = None
-    ) -> list[MissionItem]:
-        """Read a list back from the vehicle (MISSION_REQUEST_LIST, then each item).
-
-        Returns the items in order. Raises MissionTimeout when the vehicle stops answering,
-        LinkLost.
-        """
-        timeout = self.command_timeout_s if timeout_s is None else timeout_s
-        target = self._target
-
-        def is_count(msg: Any) -> bool:
-            return bool(msg.get_type() == "MISSION_COUNT" and msg.mission_type == mission_type)
-
-        def is_item(seq: int) -> Callable[[Any], bool]:
-            return lambda msg: bool(
-                msg.get_type() == "MISSION_ITEM_INT"
-                and msg.seq == seq
-                and msg.mission_type == mission_type
-            )
-
-        def request_item(seq: int) -> Callable[[Any], None]:
-            return lambda mav: mav.mission_request_int_send(
-                target(), self.target_component, seq, mission_type
-            )
-
-        with self._mission_lock:
-            with self.waiting(is_count) as waiter:
-                count_msg = self._ask(
-                    waiter,
-                    lambda mav: mav.mission_request_list_send(
-                        target(), self.target_component, mission_type
-                    ),
-                    timeout,
-                )
-            items: list[MissionItem] = []
-            for seq in range(int(count_msg.count)):
-                with self.waiting(is_item(seq)) as waiter:
-                    msg = self._ask(waiter, request_item(seq), timeout)
-                items.append(MissionItem.from_message(msg).with_seq(seq))
-            self.send(
-                lambda mav: mav.mission_ack_send(
-                    target(), self.target_component, mavlink.MAV_MISSION_ACCEPTED, mission_type
-                )
-            )
-            return items
-
-    def _ask(self, waiter: _Waiter, send: Callable[[Any], None], timeout: float) -> Any:
-        for _attempt in range(self.command_attempts):
-            self._require_link()
-            self.send(send)
-            msg = waiter.get(timeout)
-            if msg is not None:
-                return msg
-        raise MissionTimeout(f"mission download: no answer after {self.command_attempts} attempts")
-
     # --- internals ------------------------------------------------------------------------
 
     def _target(self) -> int:
@@ -767,11 +270,11 @@ class MavlinkLink:
     @contextlib.contextmanager
     def waiting(
         self, match: Callable[[Any], bool], *, any_component: bool = False
-    ) -> Iterator[_Waiter]:
+    ) -> Iterator[Waiter]:
         """Collect the vehicle's messages that ``match`` accepts for the block's duration
         (``get(timeout_s)`` takes the next): registered before the block sends what they
         answer, so no answer is lost. ``any_component``: from any of its components."""
-        waiter = _Waiter(match, any_component=any_component)
+        waiter = Waiter(match, any_component=any_component)
         with self._lock:
             self._waiters.append(waiter)
         try:
@@ -929,7 +432,3 @@ class MavlinkLink:
                 self.on_link_lost()
             except Exception:
                 logger.exception("on_link_lost callback")
-
-
-def _explains_arming(text: StatusText) -> bool:
-    return text.text.lower().startswith(_ARMING_PREFIXES)

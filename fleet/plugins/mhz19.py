@@ -83,7 +83,7 @@ class MHZ19(SensorPlugin):
         """The sensor's answer frame (FF 86 ...), whatever came before it."""
         got = b""
         while time.monotonic() < deadline:
-            got += line.read(FRAME)
+            got += bytes(line.read(FRAME))
             start = got.find(b"\xff\x86")
             if start >= 0 and len(got) - start >= FRAME:
                 return got[start : start + FRAME]
