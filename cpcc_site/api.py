@@ -211,8 +211,9 @@ def error_body(errors: dict[str, Any]) -> dict[str, Any]:
 
 def _first_problem(errors: dict[str, Any]) -> str:
     field, messages = next(iter(errors.items()))
-    while isinstance(messages, dict) and messages:
-        field, messages = next(iter(messages.items()))
+    while isinstance(messages, dict) and messages:  # a nested field: its path, dotted
+        key, messages = next(iter(messages.items()))
+        field = f"{field}.{key}"
     first = messages[0] if isinstance(messages, list) and messages else messages
     more = len(errors) - 1
     return f"{field}: {first}" + (f" (and {more} more field(s))" if more > 0 else "")

@@ -21,6 +21,8 @@ MODELS = [
     ("fleet", "sensortype"),
     ("fleet", "groundstation"),
     ("fleet", "vehicle"),
+    ("fleet", "noflyzone"),
+    ("fleet", "rallypoint"),
     ("missions", "virtualvehicle"),
     ("missions", "task"),
     ("missions", "storagedocument"),
@@ -429,3 +431,24 @@ def test_the_fleet_overview_is_closed_to_customers_and_staff_without_permission(
     client.force_login(UserFactory(username="helpdesk", is_staff=True))
     assert client.get(overview).status_code == 403
     assert f'href="{overview}"' not in client.get(reverse("admin:index")).text
+
+
+def test_a_no_fly_zone_drawn_in_the_admin_is_refused_when_open_and_kept_when_closed(
+    client, staff, db
+) -> None:
+    """Issue 24: the zone's ring is checked as an RV's area is, and saved through the service
+    (which tells every RV's worker)."""
+    from fleet.models import NoFlyZone
+
+    client.force_login(staff)
+    ring = [[48.1105, 12.861], [48.1105, 12.8625], [48.1115, 12.8625], [48.1105, 12.861]]
+    form = {"name": "Prison", "min_altitude_m": "0", "max_altitude_m": ""}
+    add = reverse("admin:fleet_noflyzone_add")
+    page = client.get(add)
+    assert 'class="cpcc-area-json' in page.text  # drawn on the map widget
+    refused = client.post(add, {**form, "area": json.dumps(ring[:3])})
+    assert refused.status_code == 200 and "must be closed" in refused.text
+    saved = client.post(add, {**form, "area": json.dumps(ring)})
+    assert saved.status_code == 302, saved.content.decode()[:2000]
+    zone = NoFlyZone.objects.get()
+    assert (zone.area, zone.max_altitude_m) == (ring, None)

@@ -103,6 +103,12 @@ def test_staff_add_a_vehicle_that_gets_work_at_once(
         ({"depot": [48.1, 200]}, "depot", "longitude 200"),
         ({"max_speed_mps": 0}, "max_speed_mps", "greater than or equal to 0.1"),
         ({"driver": "rocket"}, "driver", '"rocket" is not a valid choice'),
+        (
+            {"sensor_sources": {"CO2": {"source": "telemetry"}}},
+            "sensor_sources",
+            "sensor 'CO2': telemetry needs a vehicle that speaks MAVLink",
+        ),
+        ({"sensor_sources": {"CO2": "field"}}, "sensor_sources", "Expected a dictionary"),
     ],
 )
 def test_bad_configurations_are_refused_naming_the_field(
@@ -140,6 +146,29 @@ def test_staff_change_a_configuration(api_staff, heli_one, register_calls) -> No
     bad = api_staff.patch(url, {"area": AREA_TWO[:3]}, format="json")
     assert bad.status_code == 400 and "closed" in str(bad.json()["area"])
     assert api_staff.put(url, NEW, format="json").status_code == 405
+
+
+def test_staff_wire_a_vehicles_sensors(api_staff, heli_one, register_calls) -> None:
+    """Issue 24: where each sensor's readings come from, shown back as configured."""
+    url = f"/api/v1/vehicles/{heli_one.pk}/"
+    assert api_staff.get(url).json()["sensor_sources"] == {}
+    sources = {
+        "CO2": {"source": "named_value", "name": "CO2"},
+        "Thermometer": {"source": "telemetry", "timeout_s": 5},
+    }
+    response = api_staff.patch(
+        url,
+        {"driver": "mavlink", "driver_url": "udpin:0.0.0.0:14550", "sensor_sources": sources},
+        format="json",
+    )
+    assert response.status_code == 200, response.content
+    assert response.json()["sensor_sources"] == sources
+    unknown = api_staff.patch(
+        url, {"sensor_sources": {"CO2": {"source": "plugin", "plugin": "geiger"}}}, format="json"
+    )
+    assert unknown.status_code == 400
+    assert "no sensor plug-in named 'geiger' (plug-ins: mhz19)" in str(unknown.json())
+    assert api_staff.get(url).json()["sensor_sources"] == sources
 
 
 def test_a_vehicle_that_loses_a_sensor_hands_its_vv_to_one_that_has_it(
