@@ -376,6 +376,7 @@ class HostedRV:
         )
         self.driver = self.rig.driver
         self.loop = self.rig.loop
+        self._sources = vehicle.sensor_sources  # as the rig's sensing reads them
         # What the map was told last (without its time) and when: an RV whose state does not
         # change (landed, idle) is told again only every BEACON_KEYFRAME_S.
         self._told: tuple[dict[str, Any], float] | None = None
@@ -388,10 +389,12 @@ class HostedRV:
         from the sources configured now, and give a MAVLink vehicle its new geofence if its
         area, altitudes, the no-fly zones or the rally points changed."""
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
-        try:
-            self.rig.sensing.configure(vehicle.parsed_sources())
-        except ValueError:  # a plug-in gone since it was configured: the old sources stay
-            logger.exception("sensor sources not changed", extra=self._log())
+        if vehicle.sensor_sources != self._sources:  # not at every wake-up: only a change
+            try:
+                self.rig.sensing.configure(vehicle.parsed_sources())
+                self._sources = vehicle.sensor_sources
+            except ValueError:  # a plug-in gone since it was configured: the old ones stay
+                logger.exception("sensor sources not changed", extra=self._log())
         if isinstance(self.driver, MavlinkDriver) and self.driver.link_ok:
             fence = vehicle_fence(vehicle=vehicle)
             if self.driver.fence is None or _fence_differs(self.driver.fence, fence, vehicle):

@@ -50,6 +50,11 @@ def save_image(data: bytes, extension: str) -> str:
     return name
 
 
+def save_picture(data: bytes, fmt: str) -> str:
+    """``save_image`` for a camera's picture of this format ("png", "jpeg" or "jpg")."""
+    return save_image(data, "jpg" if fmt.lower() in ("jpeg", "jpg") else "png")
+
+
 def read_sensors(
     *,
     field: SensorField,
@@ -72,9 +77,8 @@ def read_sensors(
         }
         reading.update(field.sample(spec, position, time_s, battery_fraction=battery_fraction))
         if spec.kind == "camera":
-            fmt = str(spec.params.get("format", "png")).lower()
             image = render_camera(spec, position, time_s, seed=seed)
-            reading["image"] = save_image(image, "jpg" if fmt in ("jpeg", "jpg") else "png")
+            reading["image"] = save_picture(image, str(spec.params.get("format", "png")))
         readings.append(reading)
     return readings
 
@@ -97,6 +101,6 @@ def vehicle_reading(entry: Mapping[str, Any], sample: Sample) -> dict[str, Any]:
     elif spec.kind == "camera":
         if not sample.image:
             raise SensorFailure("the camera gave no picture", where=spec.name)
-        fmt = str(sample.fields.get("format") or spec.params.get("format", "png")).lower()
-        reading["image"] = save_image(sample.image, "jpg" if fmt in ("jpeg", "jpg") else "png")
+        fmt = str(sample.fields.get("format") or spec.params.get("format", "png"))
+        reading["image"] = save_picture(sample.image, fmt)
     return reading

@@ -452,7 +452,7 @@ class MavlinkDriver:
                 what,
                 any_component=True,
             )
-            return self._sample(read, {"value": round(float(msg.value), 4)})
+            return self._sample({"value": round(float(msg.value), 4)})
         if read.source == "camera":
             return self._capture(read)
         if read.source != "telemetry":
@@ -463,7 +463,7 @@ class MavlinkDriver:
                 raise SensorFailure("the autopilot has no position fix", where=read.sensor)
             alt = self.depot.alt + msg.relative_alt / 1000
             if read.kind != "gps":
-                return self._sample(read, {"value": round(alt, 2)})
+                return self._sample({"value": round(alt, 2)})
             fields: dict[str, Any] = {"lat": msg.lat / 1e7, "lng": msg.lon / 1e7, "alt": alt}
             raw = self.link.last_message("GPS_RAW_INT")
             if raw is not None:
@@ -471,18 +471,18 @@ class MavlinkDriver:
                     None if raw.satellites_visible == 255 else raw.satellites_visible
                 )
                 fields["hdop"] = None if raw.eph == 65535 else round(raw.eph / 100, 2)
-            return self._sample(read, fields)
+            return self._sample(fields)
         if quantity in ("pressure", "temperature"):
             msg = self._next(_is("SCALED_PRESSURE"), read, "SCALED_PRESSURE")
             value = msg.press_abs if quantity == "pressure" else msg.temperature / 100
-            return self._sample(read, {"value": round(float(value), 2)})
+            return self._sample({"value": round(float(value), 2)})
         if quantity == "battery":
             msg = self._next(
                 lambda m: m.get_type() == "SYS_STATUS" and m.battery_remaining >= 0,
                 read,
                 "SYS_STATUS with the battery's charge",
             )
-            return self._sample(read, {"value": float(msg.battery_remaining)})
+            return self._sample({"value": float(msg.battery_remaining)})
         raise SensorFailure(
             f"the autopilot's telemetry has no {quantity or read.kind}", where=read.sensor
         )
@@ -552,7 +552,7 @@ class MavlinkDriver:
         fields = {"width": width, "height": height, "format": fmt}
         return Sample(fields=fields, epoch_ms=int(taken_ms), position=at, image=image)
 
-    def _sample(self, read: SensorRead, fields: dict[str, Any]) -> Sample:
+    def _sample(self, fields: dict[str, Any]) -> Sample:
         """The reading as the vehicle took it: now (the vehicle's message just came) and where
         its telemetry says it is."""
         return Sample(fields=fields, epoch_ms=int(time.time() * 1000), position=self._position)

@@ -109,3 +109,14 @@ class LinkCore:
 
     def _require_link(self) -> Heartbeat:
         raise NotImplementedError
+
+    def _ask(self, waiter: Waiter, send: Callable[[Any], None], timeout: float) -> Any | None:
+        """Send a request until ``waiter`` gets its answer, ``command_attempts`` times at most
+        (``timeout`` each); the answer, or None."""
+        for _attempt in range(self.command_attempts):
+            self._require_link()
+            self.send(send)
+            msg = waiter.get(timeout)
+            if msg is not None:
+                return msg
+        return None

@@ -118,7 +118,7 @@ class MissionTransfer(LinkCore):
 
         with self._mission_lock:
             with self.waiting(is_count) as waiter:
-                count_msg = self._ask(
+                count_msg = self._answer(
                     waiter,
                     lambda mav: mav.mission_request_list_send(
                         target(), self.target_component, mission_type
@@ -128,7 +128,7 @@ class MissionTransfer(LinkCore):
             items: list[MissionItem] = []
             for seq in range(int(count_msg.count)):
                 with self.waiting(is_item(seq)) as waiter:
-                    msg = self._ask(waiter, request_item(seq), timeout)
+                    msg = self._answer(waiter, request_item(seq), timeout)
                 items.append(MissionItem.from_message(msg).with_seq(seq))
             self.send(
                 lambda mav: mav.mission_ack_send(
@@ -137,11 +137,10 @@ class MissionTransfer(LinkCore):
             )
             return items
 
-    def _ask(self, waiter: Waiter, send: Callable[[Any], None], timeout: float) -> Any:
-        for _attempt in range(self.command_attempts):
-            self._require_link()
-            self.send(send)
-            msg = waiter.get(timeout)
-            if msg is not None:
-                return msg
-        raise MissionTimeout(f"mission download: no answer after {self.command_attempts} attempts")
+    def _answer(self, waiter: Waiter, send: Callable[[Any], None], timeout: float) -> Any:
+        msg = self._ask(waiter, send, timeout)
+        if msg is None:
+            raise MissionTimeout(
+                f"mission download: no answer after {self.command_attempts} attempts"
+            )
+        return msg

@@ -74,13 +74,10 @@ class Parameters(LinkCore):
         with self.waiting(
             lambda msg: msg.get_type() == "PARAM_VALUE" and msg.param_id == name
         ) as waiter:
-            for _attempt in range(self.command_attempts):
-                self._require_link()
-                self.send(send)
-                msg = waiter.get(timeout)
-                if msg is not None:
-                    return msg
-        raise ParamTimeout(name, self.command_attempts)
+            msg = self._ask(waiter, send, timeout)
+        if msg is None:
+            raise ParamTimeout(name, self.command_attempts)
+        return msg
 
     def _decode_param(self, msg: Any) -> float:
         return param_codec.decode(

@@ -274,12 +274,14 @@ def _airspace_changed(*, vvm: VVM, reroute: bool) -> None:
     """The no-fly zones or rally points changed: each RV's worker hears of it (and uploads
     its autopilot's fence again); with ``reroute`` the tasks planned on the RVs are routed
     again too."""
-    for vehicle in Vehicle.objects.exclude(status=VehicleStatus.REMOVED):
-        if reroute:
+    vehicles = Vehicle.objects.exclude(status=VehicleStatus.REMOVED)
+    if reroute:
+        for vehicle in vehicles:
             vehicle_reconfigured(vehicle=vehicle, vvm=vvm)
-        else:
-            with transaction.atomic():
-                vvm.dispatcher.vehicle_changed(vehicle.pk)
+        return
+    with transaction.atomic():  # the messages go once it commits
+        for vehicle_id in vehicles.values_list("pk", flat=True):
+            vvm.dispatcher.vehicle_changed(vehicle_id)
 
 
 def vehicle_create(*, config: VehicleConfig, sensors: Sequence[str], vvm: VVM) -> Vehicle:

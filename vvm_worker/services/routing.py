@@ -468,16 +468,24 @@ def vv_reject_request(
     )
     if open_tasks is None:
         open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN))
-    for task in open_tasks:
+    tasks_reject(vv=vv, tasks=open_tasks, message=message, now=now, vvm=vvm)
+    vv.pending = None
+    logger.info("task rejected", extra={"vv": str(vv.id), "reason": message})
+
+
+def tasks_reject(
+    *, vv: VirtualVehicle, tasks: Sequence[Task], message: str, now: float, vvm: VVM
+) -> None:
+    """These open tasks of the VV end rejected with ``message`` (those not saved yet only in
+    memory, their caller saves them so); the map hears of the saved ones."""
+    for task in tasks:
         task.status, task.message, task.done_s = TaskStatus.REJECTED, message, now
-    saved = [t.pk for t in open_tasks if t.pk is not None]
+    saved = [t.pk for t in tasks if t.pk is not None]
     if saved:
         Task.objects.filter(pk__in=saved).update(
             status=TaskStatus.REJECTED, message=message, done_s=now
         )
-        vvm.announce(lambda: [task_event(t, vv.customer_id) for t in open_tasks if t.pk])
-    vv.pending = None
-    logger.info("task rejected", extra={"vv": str(vv.id), "reason": message})
+        vvm.announce(lambda: [task_event(t, vv.customer_id) for t in tasks if t.pk])
 
 
 def vv_record_migration(

@@ -62,7 +62,12 @@ from vvm_worker.services.base import (
 from vvm_worker.services.customers import customer_limits
 from vvm_worker.services.fleet import vehicle_record_state
 from vvm_worker.services.journal import JournalView, journal_append, journal_full
-from vvm_worker.services.routing import vv_record_migration, vv_release_tasks, vv_route
+from vvm_worker.services.routing import (
+    tasks_reject,
+    vv_record_migration,
+    vv_release_tasks,
+    vv_route,
+)
 
 
 class NotACustomer(PermissionError):
@@ -779,12 +784,7 @@ def _reading_failed(
     others = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN))
     if others:
         vv_release_tasks(vv=vv, vvm=vvm, open_tasks=others)
-        Task.objects.filter(pk__in=[t.pk for t in others]).update(
-            status=TaskStatus.REJECTED, message=message, done_s=now
-        )
-        for other in others:
-            other.status, other.message, other.done_s = TaskStatus.REJECTED, message, now
-        vvm.announce(lambda: [task_event(t, vv.customer_id) for t in others])
+        tasks_reject(vv=vv, tasks=others, message=message, now=now, vvm=vvm)
     logger.warning("reading failed", extra={**_about(vv), "reason": failure})
     return answer_reject(pending, time_ms=vvm.clock.epoch_ms(now), message=message)
 
