@@ -70,7 +70,10 @@ class Sample:
 
 class Driver(Protocol):
     """The vehicle link: commands (which may raise ``DriverError``) and what the vehicle
-    reports or the kinematics estimate, at platform time ``t`` (seconds)."""
+    reports or the kinematics estimate, at platform time ``t`` (seconds). ``depot``: where it
+    takes off and lands."""
+
+    depot: Position
 
     def fly_to(self, target: Position, now_s: float) -> float:
         """Send the vehicle to ``target``; returns the estimated arrival time."""
@@ -93,6 +96,9 @@ class Driver(Protocol):
     def battery_remaining_s(self, t: float) -> float | None: ...
     def time_to_s(self, target: Position, now_s: float) -> float: ...
     def time_home_s(self, start: Position) -> float: ...
+    def leg_s(self, a: Position, b: Position) -> float:
+        """Estimated seconds of a straight leg in the air from ``a`` to ``b``."""
+        ...
 
     def read_sensor(self, read: SensorRead) -> Sample:
         """A reading of one of the vehicle's own sensors; raises ``SensorFailure`` when it

@@ -188,3 +188,4 @@ def _fresh_fleet_shape() -> None:
     from vvm_worker.services import routing
 
     routing._shape_seen_at = None
+    routing._airspace_seen = None

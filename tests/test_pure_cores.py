@@ -12,6 +12,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PURE = [
     "fleet.geo",
+    "fleet.airspace",
+    "fleet.driving",
+    "fleet.sources",
     "fleet.simulation",
     "vvm_worker.runtime",
     "vvm_worker.planning",
@@ -20,6 +23,7 @@ PURE = [
     "vvm_worker.scenario_gen",
     "vvm_worker.dispatch",
     "vvm_worker.clock",
+    "vvm_worker.control",
     "fleet.catalog",
     "fleet.mavlink",
     "missions.readings",

@@ -11,12 +11,15 @@ the next task, reads the sensors there for every task within tolerance and compl
 tasks (which resumes their VVs). It asks the planner again when it arrives and, when the
 planner ``retargets``, whenever work is added in flight. With nothing left to do it waits in
 the air at its standby position for a while (planners that ``stand_by``) and then flies home
-and lands. A battery that cannot take the vehicle to its next task and home with its reserve
-sends it home to recharge, out of service meanwhile.
+and lands. Every flight keeps clear of the provider's no-fly zones (``fleet.airspace``): where
+a straight leg would cross one, the vehicle flies the way around it, turn point by turn point,
+and the planner weighs the way's length. A battery that cannot take the vehicle to its next
+task and home with its reserve sends it home to recharge, out of service meanwhile.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -24,6 +27,7 @@ from typing import Any, Protocol
 
 from shapely.geometry import Polygon
 
+from fleet.airspace import NO_ZONES, Airspace
 from fleet.driving import Driver, DriverError, SensorFailure
 from fleet.geo import Position, within_m
 from vvm_worker.planning import Planner, PlanTask, standby_position
@@ -44,6 +48,11 @@ ARRIVAL_POLL_S = 0.2
 ARRIVAL_OVERDUE_S = 60.0
 # Altitudes of this many tasks served last place the standby position.
 RECENT_TASKS = 20
+# A turn point of a way around a no-fly zone is passed within this (ArduCopter's default
+# waypoint radius).
+TURN_TOLERANCE_M = 2.0
+# Why a task no way reaches fails, in a customer's words.
+NO_WAY = "no way around the no-fly zones reaches the task's position"
 
 
 @dataclass(frozen=True)
@@ -172,6 +181,7 @@ class ControlLoop:
         sensing: Sensing = no_sensors,
         config: LoopConfig = LoopConfig(),
         plan_timer: Callable[[], float] | None = None,
+        airspace: Airspace = NO_ZONES,
     ) -> None:
         self.name = name
         self.driver = driver
@@ -181,14 +191,21 @@ class ControlLoop:
         self.clock = clock
         self.sensing = sensing
         self.config = config
+        self.airspace = airspace
         # Endurance kept for the unexpected: never planned away (seconds of flight).
         self.reserve_s = config.reserve * config.battery_s if config.battery_s else 0.0
         self.standby_until: float | None = None  # waiting in the air for work until then
         self.recent_alts: list[float] = []
         self._charged_at: float | None = None  # when a charge under way is done
         self.target: int | None = None  # the task the vehicle is flying to
-        # The leg to the target: where it ends, within what, and when it is estimated there.
+        # The leg flown now: where it ends, within what, and when it is estimated there.
         self._leg: tuple[Position, float, float] | None = None
+        # The points still to fly through after this leg (around no-fly zones), the last one
+        # the target's (or above home's, then the landing follows), and the target's
+        # tolerance.
+        self._via: list[Position] = []
+        self._tolerance_m = 0.0
+        self._homing = False  # flying the way home: it lands at the end
         self.returning = False
         self._token = 0  # invalidates the arrival of a leg that was replaced
         # What the live map shows between two plans: the status and the open tasks in the
@@ -211,7 +228,12 @@ class ControlLoop:
         """The vehicle's tasks or status changed: re-plan, unless its target still stands and
         its planner keeps targets until it gets there."""
         now = self.clock()
-        if self.config.wake_defers_to_arrival and self.target is not None and self._leg:
+        if (
+            self.config.wake_defers_to_arrival
+            and self.target is not None
+            and self._leg
+            and not self._via
+        ):
             position, tolerance_m, due_s = self._leg
             if due_s <= now and self.driver.has_arrived(position, tolerance_m, now):
                 return  # the arrival, due, plans with the change (see LoopConfig)
@@ -247,11 +269,22 @@ class ControlLoop:
             # look again shortly, and fly there anew if it is far overdue (a gust, a fence).
             if now - due_s > ARRIVAL_OVERDUE_S:
                 logger.warning("arrival overdue: flying there again", extra=self._log())
+                self.target = None  # not "still the best target": it is sent there anew
+                self._homing = False
                 self._plan(now)
             else:
                 self.scheduler.call_at(
                     now + ARRIVAL_POLL_S, lambda: self._arrive(token, target, tolerance_m, due_s)
                 )
+            return
+        if self._via:  # a turn point on the way around a no-fly zone: on to the next
+            self._record(now)
+            self._next_leg(token, now)
+            return
+        if self._homing:
+            self._homing = False
+            self._record(now)
+            self._land(now, token)
             return
         self.target = None
         # The end of the leg is on the track of the VVs aboard, before any of them leaves, and
@@ -298,7 +331,7 @@ class ControlLoop:
         remaining = self.driver.battery_remaining_s(now)
         if remaining is None:
             return True
-        need = self.driver.time_to_s(target, now) + self.driver.time_home_s(target)
+        need = self._time_to_s(target, now) + self._time_home_s(target)
         if remaining - need >= self.reserve_s:
             return True
         if self.driver.is_landed_at(now) and remaining >= (self.config.battery_s or 0.0):
@@ -358,35 +391,74 @@ class ControlLoop:
         self._token += 1
         token = self._token
         if choice is not None:
+            way = self.airspace.way(here, choice.position)
+            if way is None:
+                logger.warning("task walled in by no-fly zones", extra=self._log())
+                self.target = None
+                self.store.fail(choice, NO_WAY, now)
+                self._plan(now)
+                return
             self.target = choice.id
             self._leg = None
             self.returning = False
+            self._homing = False
             self.standby_until = None
-            try:
-                arrival = self.driver.fly_to(choice.position, now)
-            except DriverError as exc:
-                self._failed(exc)
-                return
-            position, tolerance_m = choice.position, choice.tolerance_m
-            self._leg = (position, tolerance_m, arrival)
-            self.scheduler.call_at(
-                arrival, lambda: self._arrive(token, position, tolerance_m, arrival)
-            )
+            self._via, self._tolerance_m = way, choice.tolerance_m
+            self._next_leg(token, now)
         else:
             self.target = None
             if not self.driver.is_landed_at(now) and not self._stand_by(now, token):
                 self._go_home(now, token)
         self._record(now)
 
+    def _next_leg(self, token: int, now: float) -> None:
+        """Fly the next leg of the way (``_via``): to a turn point, or to the way's end."""
+        point = self._via.pop(0)
+        tolerance_m = TURN_TOLERANCE_M if self._via or self._homing else self._tolerance_m
+        try:
+            arrival = self.driver.fly_to(point, now)
+        except DriverError as exc:
+            self._failed(exc)
+            return
+        self._leg = (point, tolerance_m, arrival)
+        self.scheduler.call_at(arrival, lambda: self._arrive(token, point, tolerance_m, arrival))
+
     def _go_home(self, now: float, token: int) -> None:
         self.returning = True
         self.standby_until = None
+        self._via = []
+        if not self.driver.is_landed_at(now):
+            here = self.driver.position_at(now)
+            way = self.airspace.way(here, self.driver.depot.with_alt(here.alt))
+            if way is None:
+                logger.warning("home walled in by no-fly zones: flying straight", extra=self._log())
+            elif len(way) > 1:  # around the zones to the last turn point, then home
+                self._homing = True
+                self._via = way[:-1]
+                self._next_leg(token, now)
+                return
+        self._land(now, token)
+
+    def _land(self, now: float, token: int) -> None:
         try:
             landing = self.driver.return_to_depot(now)
         except DriverError as exc:
             self._failed(exc)
             return
         self.scheduler.call_at(landing, lambda: self._landed(token, landing))
+
+    def _time_to_s(self, target: Position, now: float) -> float:
+        """Estimated seconds to fly to ``target`` now, around the no-fly zones."""
+        way = self.airspace.way(self.driver.position_at(now), target) or [target]
+        first = self.driver.time_to_s(way[0], now)
+        return first + sum(self.driver.leg_s(a, b) for a, b in itertools.pairwise(way))
+
+    def _time_home_s(self, start: Position) -> float:
+        """Estimated seconds to return home from ``start``, around the no-fly zones."""
+        way = self.airspace.way(start, self.driver.depot.with_alt(start.alt)) or [start]
+        turns = [start, *way[:-1]]
+        around = sum(self.driver.leg_s(a, b) for a, b in itertools.pairwise(turns))
+        return around + self.driver.time_home_s(turns[-1])
 
     def _stand_by(self, now: float, token: int) -> bool:
         """Wait in the air at the standby position, if the planner wants it and the battery
@@ -410,13 +482,16 @@ class ControlLoop:
             min_altitude_m=area.min_altitude_m,
             max_altitude_m=area.max_altitude_m,
         )
+        if self.airspace.way(self.driver.position_at(now), spot) != [spot]:
+            return False  # no straight way there (a no-fly zone): home instead
         wait_s = self.config.standby_s
         remaining = self.driver.battery_remaining_s(now)
         if remaining is not None:
             spare = remaining - self.reserve_s - self.driver.time_to_s(spot, now)
-            wait_s = min(wait_s, spare - self.driver.time_home_s(spot))
+            wait_s = min(wait_s, spare - self._time_home_s(spot))
             if wait_s <= 0:
                 return False
+        self._via = []
         try:
             there = self.driver.fly_to(spot, now)
         except DriverError as exc:
@@ -448,7 +523,12 @@ class ControlLoop:
     def live_state(self, now: float) -> dict[str, Any]:
         """The RV as the live map shows it now (positions as [lat, lng])."""
         here = self.driver.position_at(now)
-        ahead = [t.position for t in self.route] if not self.returning else []
+        ahead: list[Position] = []
+        if not self.returning:
+            # The turn points still ahead on the way to the target, then the tasks.
+            if self._via and self._leg is not None:
+                ahead += [self._leg[0], *self._via[:-1]]
+            ahead += [t.position for t in self.route]
         return {
             "lat": here.lat,
             "lng": here.lng,

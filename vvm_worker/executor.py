@@ -20,6 +20,7 @@ from django.db import transaction
 from django.db.models import F
 
 from cpcc_site.prepared import PreparedRead
+from fleet.airspace import Airspace
 from fleet.driving import Driver, Sample, SensorFailure, SensorRead
 from fleet.geo import Position, within_m
 from fleet.models import SensorType, Vehicle, VehicleStatus
@@ -37,7 +38,7 @@ from vvm_worker.control import (
     Scheduler,
     VehicleState,
 )
-from vvm_worker.planning import TravelTime, make_planner
+from vvm_worker.planning import Planner, TravelTime, make_planner
 from vvm_worker.sensing import read_sensors, vehicle_reading
 from vvm_worker.services import (
     VVM,
@@ -47,7 +48,7 @@ from vvm_worker.services import (
     vehicle_set_status,
 )
 from vvm_worker.services.base import LocalRV, Settled
-from vvm_worker.services.routing import planned_order
+from vvm_worker.services.routing import fleet_airspace, planned_order
 
 _SDC_TTL_S = 10.0
 _TASK_FIELDS = ("id", "lat", "lng", "alt", "tolerance_m", "requested_s", "sensors", "vv_id", "q")
@@ -443,6 +444,17 @@ class VehicleRig:
     store: DatabaseStore
     loop: ControlLoop
     sensing: VehicleSensing
+    planner_for: Callable[[Airspace], Planner]  # a new planner of the RV's kind
+
+    def fly_in(self, airspace: Airspace) -> None:
+        """The provider's no-fly zones are now these: the loop flies around them and its
+        planner (a new one, with the old one's state) weighs the ways around them."""
+        if airspace is self.loop.airspace:
+            return
+        planner = self.planner_for(airspace)
+        planner.restore(self.loop.planner.state())
+        self.loop.planner = planner
+        self.loop.airspace = airspace
 
     def changed(self) -> Callable[[], None]:
         """The RV's tasks or status were just changed: forget what the store read, and the
@@ -535,14 +547,21 @@ def build_rig(
     readings = VehicleSensing(
         sensing or PlatformSensing(vvm), driver=driver, sources=vehicle.parsed_sources()
     )
-    loop = ControlLoop(
-        name=vehicle.name,
-        driver=driver,
-        planner=make_planner(
+
+    def planner_for(airspace: Airspace) -> Planner:
+        return make_planner(
             planner,
             travel_time=TravelTime(spec.max_speed_mps, spec.climb_rate_mps),
             time_limit_s=plan_time_limit_s,
-        ),
+            airspace=airspace,
+        )
+
+    airspace = fleet_airspace()
+    loop = ControlLoop(
+        name=vehicle.name,
+        driver=driver,
+        planner=planner_for(airspace),
+        airspace=airspace,
         store=store,
         scheduler=scheduler,
         clock=vvm.clock.now_s,
@@ -556,4 +575,4 @@ def build_rig(
             wake_defers_to_arrival=wake_defers_to_arrival,
         ),
     )
-    return VehicleRig(vehicle.pk, vehicle.name, driver, store, loop, readings)
+    return VehicleRig(vehicle.pk, vehicle.name, driver, store, loop, readings, planner_for)

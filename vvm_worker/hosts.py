@@ -56,7 +56,7 @@ from vvm_worker.services import (
     vvs_reroute_waiting,
 )
 from vvm_worker.services.base import db_time_ago
-from vvm_worker.services.routing import online_vehicles
+from vvm_worker.services.routing import fleet_airspace, online_vehicles
 
 logger = logging.getLogger("cpcc.hosts")
 
@@ -386,8 +386,9 @@ class HostedRV:
 
     def changed(self) -> None:
         """The vehicle's work, status or configuration changed: re-plan, read its sensors
-        from the sources configured now, and give a MAVLink vehicle its new geofence if its
-        area, altitudes, the no-fly zones or the rally points changed."""
+        from the sources configured now, fly around the no-fly zones as they are now, and give
+        a MAVLink vehicle its new geofence if its area, altitudes, the no-fly zones or the
+        rally points changed."""
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
         if vehicle.sensor_sources != self._sources:  # not at every wake-up: only a change
             try:
@@ -408,6 +409,7 @@ class HostedRV:
                     )
                 except MavlinkError:
                     logger.exception("geofence not uploaded", extra=self._log())
+        self.rig.fly_in(fleet_airspace())
         self.rig.store.changed()
         self.loop.wake()
 

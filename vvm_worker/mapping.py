@@ -10,29 +10,15 @@ from dataclasses import dataclass
 
 from shapely.geometry import Point, Polygon
 
+from fleet.airspace import ExclusionZone
 from fleet.geo import Position
 from vvm_worker.planning import TravelTime, insertion_cost
 from vvm_worker.runtime.types import TaskRequest
 
+__all__ = ["QUEUE_PENALTY_S", "ExclusionZone", "MapDecision", "VehicleCaps", "map_task"]
+
 # Cost of one task queued on a vehicle whose route the mapper does not know, in seconds.
 QUEUE_PENALTY_S = 30.0
-
-
-@dataclass(frozen=True)
-class ExclusionZone:
-    """A no-fly zone: no RV serves a point inside ``area`` ((lng, lat) coordinates, border
-    included) between ``min_altitude_m`` and ``max_altitude_m`` (None: no ceiling)."""
-
-    area: Polygon
-    min_altitude_m: float = 0.0
-    max_altitude_m: float | None = None
-
-    def holds(self, task: TaskRequest) -> bool:
-        if task.alt < self.min_altitude_m:
-            return False
-        if self.max_altitude_m is not None and task.alt > self.max_altitude_m:
-            return False
-        return bool(self.area.covers(Point(task.lng, task.lat)))
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ __all__ = [
     "CustomerSpec",
     "FleetEvent",
     "GroundStationSpec",
+    "NoFlyZoneSpec",
     "Scenario",
     "ScenarioError",
     "SensorSpecEntry",
@@ -119,6 +120,16 @@ class VehicleSpec:
 
 
 @dataclass(frozen=True)
+class NoFlyZoneSpec:
+    """A no-fly zone (closed ring of (lat, lng)) between two altitudes (None: no ceiling)."""
+
+    name: str
+    area: tuple[tuple[float, float], ...]
+    min_altitude_m: float = 0.0
+    max_altitude_m: float | None = None
+
+
+@dataclass(frozen=True)
 class CustomerSpec:
     """A customer (tenant) and its quotas; a quota left as None keeps the platform default."""
 
@@ -183,6 +194,7 @@ class Scenario:
     events: tuple[FleetEvent, ...]
     path: Path | None
     description: str | None = None
+    no_fly_zones: tuple[NoFlyZoneSpec, ...] = ()
 
 
 # --- public functions --------------------------------------------------------------------------
@@ -270,7 +282,9 @@ class _JsonObject(dict[str, Any]):
 
 
 _TOP_REQUIRED = ("ground_stations", "vehicles", "customers", "vvs")
-_TOP_OPTIONAL = ("name", "description", "sensors", "events")
+_TOP_OPTIONAL = ("name", "description", "sensors", "events", "no_fly_zones")
+_ZONE_REQUIRED = ("name", "area")
+_ZONE_OPTIONAL = ("min_altitude_m", "max_altitude_m")
 _GS_REQUIRED = ("name", "position")
 _VEHICLE_REQUIRED = (
     "name",
@@ -496,6 +510,13 @@ class _Parser:
                 "ground_stations", "at least one ground station is required when there are VVs"
             )
         events = self.events(_list(doc.get("events", []), "events"), vehicles)
+        zones = tuple(
+            self.no_fly_zone(item, f"no_fly_zones[{i}]")
+            for i, item in enumerate(_list(doc.get("no_fly_zones", []), "no_fly_zones"))
+        )
+        _check_unique(
+            ((z.name, f"no_fly_zones[{i}].name") for i, z in enumerate(zones)), "no-fly zone"
+        )
         return Scenario(
             name=name,
             ground_stations=ground_stations,
@@ -506,6 +527,7 @@ class _Parser:
             events=events,
             path=None,
             description=description,
+            no_fly_zones=zones,
         )
 
     def ground_station(self, value: Any, path: str) -> GroundStationSpec:
@@ -565,6 +587,24 @@ class _Parser:
             battery_s=battery_s,
             climb_rate_mps=climb_rate,
             driver_url=driver_url,
+        )
+
+    def no_fly_zone(self, value: Any, path: str) -> NoFlyZoneSpec:
+        obj = _object(value, path, _ZONE_REQUIRED, _ZONE_OPTIONAL)
+        low = _non_negative(obj.get("min_altitude_m", 0.0), _join(path, "min_altitude_m"))
+        high = None
+        if obj.get("max_altitude_m") is not None:
+            high = _non_negative(obj["max_altitude_m"], _join(path, "max_altitude_m"))
+            if high < low:
+                raise ScenarioError(
+                    _join(path, "max_altitude_m"),
+                    f"max_altitude_m ({high:g}) is below min_altitude_m ({low:g})",
+                )
+        return NoFlyZoneSpec(
+            name=_string(obj["name"], _join(path, "name")),
+            area=_area(obj["area"], _join(path, "area")),
+            min_altitude_m=low,
+            max_altitude_m=high,
         )
 
     def customer(self, value: Any, path: str) -> CustomerSpec:

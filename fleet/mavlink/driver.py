@@ -640,17 +640,18 @@ class MavlinkDriver:
         seconds = 0.0
         if self.is_landed_at(now_s):
             top = here.with_alt(max(target.alt, self.spec.takeoff_alt_m, here.alt))
-            seconds += self._leg_s(here, top)
+            seconds += self.leg_s(here, top)
             here = top
-        return seconds + self._leg_s(here, target)
+        return seconds + self.leg_s(here, target)
 
     def time_home_s(self, start: Position) -> float:
         """Estimated seconds to return from ``start`` in the air: cruise to above the depot at
         the current altitude (at least the take-off altitude), then land."""
         above = self.depot.with_alt(max(start.alt, self.spec.takeoff_alt_m, self.depot.alt))
-        return self._leg_s(start, above) + self._leg_s(above, self.depot)
+        return self.leg_s(start, above) + self.leg_s(above, self.depot)
 
-    def _leg_s(self, a: Position, b: Position) -> float:
+    def leg_s(self, a: Position, b: Position) -> float:
+        """Estimated seconds of a straight leg in the air from ``a`` to ``b``."""
         horizontal = ground_distance_m(a, b) / self.spec.max_speed_mps
         vertical = abs(b.alt - a.alt) / self.spec.climb_rate_mps
         return max(horizontal, vertical)

@@ -210,6 +210,10 @@ class SimVehicle:
         above = self.depot.with_alt(max(start.alt, self.spec.takeoff_alt_m, self.depot.alt))
         return self._duration(start, above) + self._duration(above, self.depot)
 
+    def leg_s(self, a: Position, b: Position) -> float:
+        """How long a straight leg in the air from ``a`` to ``b`` takes."""
+        return self._duration(a, b)
+
     def read_sensor(self, read: SensorRead) -> Sample:
         """A simulated vehicle has no sensors of its own: its readings come from the field
         (``fleet.sources``), or from a plug-in on the computer that runs it."""

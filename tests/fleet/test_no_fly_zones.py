@@ -13,8 +13,9 @@ from missions.models import TaskStatus, VVStatus
 from tests.factories import VehicleFactory
 from tests.fleet.mavlink.conftest import AREA, DEPOT
 from vvm_worker.mapping import ExclusionZone, VehicleCaps, map_task
+from vvm_worker.planning import AroundZones
 from vvm_worker.runtime.types import TaskRequest
-from vvm_worker.services import no_fly_zone_save, vv_submit
+from vvm_worker.services import fleet_airspace, no_fly_zone_save, vv_submit
 
 # A square inside Heli One's area (tests/factories' AREA_ONE), around (48.1111, 12.8619).
 ZONE = [[48.1105, 12.8610], [48.1105, 12.8625], [48.1115, 12.8625], [48.1115, 12.8610],
@@ -119,3 +120,22 @@ def test_a_zone_drawn_while_a_task_waits_for_its_rv_routes_it_again(
     assert name == "TaskRejectedError" and message.endswith("it is inside a no-fly zone")
     statuses = list(vv.tasks.order_by("q").values_list("status", flat=True))
     assert statuses == [TaskStatus.REJECTED, TaskStatus.DONE]
+
+
+@pytest.mark.django_db
+def test_a_worker_told_of_a_new_zone_flies_round_it_and_its_planner_keeps_its_state(
+    platform,
+) -> None:
+    rig = platform.add_vehicle_loop(VehicleFactory(name="Heli One"))
+    assert not rig.loop.airspace
+    state = rig.loop.planner.state()
+    no_fly_zone_save(zone=NoFlyZone(name="Prison", area=ZONE), vvm=platform.vvm)
+    airspace = fleet_airspace()
+    assert airspace.holds(TaskRequest(48.1111, 12.8619, 50.0, 2.0, ()))
+    rig.fly_in(airspace)
+    assert rig.loop.airspace is airspace
+    assert isinstance(rig.loop.planner.cost, AroundZones)
+    assert rig.loop.planner.state() == state
+    planner = rig.loop.planner
+    rig.fly_in(fleet_airspace())  # the same zones: the same airspace, nothing to change
+    assert rig.loop.planner is planner

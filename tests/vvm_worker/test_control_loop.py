@@ -9,9 +9,18 @@ from typing import Any
 
 from shapely.geometry import Polygon
 
+from fleet.airspace import Airspace, ExclusionZone
 from fleet.geo import Position, offset
 from fleet.simulation import SimVehicle, VehicleSpec
-from vvm_worker.control import ACTIVE, Area, ControlLoop, LoopConfig, LoopTask, VehicleState
+from vvm_worker.control import (
+    ACTIVE,
+    NO_WAY,
+    Area,
+    ControlLoop,
+    LoopConfig,
+    LoopTask,
+    VehicleState,
+)
 from vvm_worker.planning import PlanTask, TravelTime, make_planner
 
 DEPOT = Position(47.0, 8.0, 0.0)
@@ -130,3 +139,79 @@ def test_without_deferral_a_wake_up_at_the_target_plans_at_once() -> None:
     store.open[2] = _task(2, 200.0)
     loop.wake()
     assert planner.plans == 2
+
+
+class FailingStore(Store):
+    def __init__(self) -> None:
+        super().__init__()
+        self.failed: list[tuple[int, str]] = []
+
+    def fail(self, task: LoopTask, reason: str, now_s: float) -> None:
+        del self.open[task.id]
+        self.failed.append((task.id, reason))
+
+
+def _zone(corners: list[tuple[float, float]]) -> ExclusionZone:
+    points = [offset(DEPOT, north_m=n, east_m=e) for n, e in corners]
+    return ExclusionZone(Polygon([(p.lng, p.lat) for p in points]))
+
+
+def _fly_all(clock: Clock) -> None:
+    while clock.timers:
+        clock.now = clock.timers[0][0]
+        clock.run_due()
+
+
+def test_the_vehicle_flies_round_a_no_fly_zone_to_its_task_and_home() -> None:
+    # A wall between the depot and the task: out round its end and back the same way.
+    wall = _zone([(-100, 50), (-100, 70), (100, 70), (100, 50)])
+    airspace = Airspace([wall])
+    store, clock = FailingStore(), Clock()
+    driver = SimVehicle(VehicleSpec(max_speed_mps=10.0, climb_rate_mps=3.0), DEPOT)
+    loop = ControlLoop(
+        name="RV",
+        driver=driver,
+        planner=make_planner("latency", travel_time=TravelTime(10.0, 3.0), airspace=airspace),
+        store=store,
+        scheduler=clock,
+        clock=lambda: clock.now,
+        airspace=airspace,
+    )
+    store.open[1] = _task(1, 150.0)
+    loop.wake()
+    shown = loop.live_state(0.0)["route"]
+    assert len(shown) > 2  # the map draws the turn points before the task
+    _fly_all(clock)
+    assert [task for task, _ in store.served] == [1]
+    assert driver.is_landed_at(clock.now) and driver.position_at(clock.now) == DEPOT
+    samples = [driver.position_at(t / 4) for t in range(int(clock.now * 4) + 1)]
+    assert not any(wall.holds(p) for p in samples)
+    # Round the wall's end and back: about 2 x (100 + 150) m, not 2 x 150 m.
+    assert driver.distance_m(clock.now) > 450.0
+
+
+def test_a_task_no_way_reaches_fails_with_the_reason_and_the_next_is_served() -> None:
+    box = Airspace(
+        [
+            _zone([(-100, 100), (-100, 300), (-80, 300), (-80, 100)]),
+            _zone([(80, 100), (80, 300), (100, 300), (100, 100)]),
+            _zone([(-100, 100), (-100, 120), (100, 120), (100, 100)]),
+            _zone([(-100, 280), (-100, 300), (100, 300), (100, 280)]),
+        ]
+    )
+    store, clock = FailingStore(), Clock()
+    loop = ControlLoop(
+        name="RV",
+        driver=SimVehicle(VehicleSpec(max_speed_mps=10.0, climb_rate_mps=3.0), DEPOT),
+        planner=make_planner("latency", travel_time=TravelTime(10.0, 3.0), airspace=box),
+        store=store,
+        scheduler=clock,
+        clock=lambda: clock.now,
+        airspace=box,
+    )
+    store.open[1] = _task(1, 200.0)  # inside the box of zones
+    store.open[2] = _task(2, -100.0)
+    loop.wake()
+    _fly_all(clock)
+    assert [task for task, _ in store.served] == [2]
+    assert store.failed == [(1, NO_WAY)]

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
+from shapely.geometry import LineString, Polygon
 
 from fleet.geo import offset
-from vvm_worker.scenario import parse_scenario
+from missions.models import TrackPoint
+from vvm_worker.scenario import load_scenario, parse_scenario
 from vvm_worker.scenario_gen import GRID_ORIGIN, ONE_TASK, grid_scenario
 from vvm_worker.simulation import Simulation
 
@@ -65,3 +68,29 @@ def test_an_idle_rv_waits_in_the_middle_of_its_area_and_is_quicker_there() -> No
     # The first task starts from the depot either way; each later one from the middle.
     assert waits["latency"][0] == pytest.approx(waits["nearest"][0])
     assert all(a < b for a, b in zip(waits["latency"][1:], waits["nearest"][1:], strict=True))
+
+
+NO_FLY = Path(__file__).resolve().parents[2] / "examples" / "scenarios" / "no-fly-zone.json"
+
+
+def _flown(vv_name: str) -> LineString:
+    track = TrackPoint.objects.filter(vv__name=vv_name).order_by("t_s", "id")
+    return LineString([(p.lng, p.lat) for p in track])
+
+
+@pytest.mark.django_db
+@pytest.mark.parametrize("zoned", [True, False])
+def test_simulate_flies_round_a_no_fly_zone_and_over_one_with_a_ceiling(zoned: bool) -> None:
+    scenario = load_scenario(NO_FLY)
+    substation = Polygon([(lng, lat) for lat, lng in scenario.no_fly_zones[0].area])
+    if not zoned:  # the same run through the zones: the test would see it
+        scenario = dataclasses.replace(scenario, no_fly_zones=())
+    summary = Simulation(scenario).run()
+    (vv,) = summary["vvs"]
+    assert (vv["status"], vv["tasks_done"]) == ("finished", 5)  # the one above the stadium too
+    assert sorted(vv["storage"]) == [f"co2.{n}" for n in range(5)]
+    flown = _flown("Both sides")
+    assert flown.intersects(substation) is not zoned
+    distance = summary["vehicles"][0]["distance_m"]
+    # Three times across, each time round the substation's end: 1,900 m straight, 2,200 round.
+    assert (distance > 2050.0) is zoned

@@ -595,3 +595,52 @@ def test_errors_from_a_file_name_the_file_and_resolve_programs_next_to_it(
     assert err.path == "vehicles[0].max_speed_mps"
     restored = pickle.loads(pickle.dumps(err))
     assert (str(restored), restored.path) == (str(err), err.path)
+
+
+# --- no-fly zones --------------------------------------------------------------------------------
+
+ZONE = [[48.004, 12.004], [48.004, 12.006], [48.006, 12.006], [48.006, 12.004], [48.004, 12.004]]
+
+
+def test_no_fly_zones_are_parsed_with_their_bands() -> None:
+    scenario = parse(
+        variant(
+            (
+                "no_fly_zones",
+                [
+                    {"name": "Substation", "area": ZONE},
+                    {"name": "Stadium", "area": ZONE, "min_altitude_m": 5, "max_altitude_m": 40},
+                ],
+            )
+        )
+    )
+    first, second = scenario.no_fly_zones
+    assert (first.name, first.min_altitude_m, first.max_altitude_m) == ("Substation", 0.0, None)
+    assert first.area[0] == (48.004, 12.004)
+    assert (second.min_altitude_m, second.max_altitude_m) == (5.0, 40.0)
+    assert parse(VALID).no_fly_zones == ()
+
+
+@pytest.mark.parametrize(
+    ("zone", "pattern"),
+    [
+        ({"name": "Z", "area": ZONE[:-1]}, r"^no_fly_zones\[0\]\.area: the polygon is not closed"),
+        (
+            {"name": "Z", "area": ZONE, "min_altitude_m": 50, "max_altitude_m": 40},
+            r"^no_fly_zones\[0\]\.max_altitude_m: max_altitude_m \(40\) is below "
+            r"min_altitude_m \(50\)",
+        ),
+        ({"name": "Z", "area": ZONE, "ceiling": 3}, r"^no_fly_zones\[0\]: unknown key 'ceiling'"),
+        ({"area": ZONE}, r"^no_fly_zones\[0\]: missing required key 'name'"),
+    ],
+)
+def test_a_bad_no_fly_zone_names_where(zone: dict[str, Any], pattern: str) -> None:
+    raises(variant(("no_fly_zones", [zone])), pattern)
+
+
+def test_two_no_fly_zones_of_one_name() -> None:
+    zone = {"name": "Z", "area": ZONE}
+    raises(
+        variant(("no_fly_zones", [zone, zone])),
+        r"^no_fly_zones\[1\]\.name: duplicate no-fly zone name 'Z' \(also at no_fly_zones\[0\]",
+    )

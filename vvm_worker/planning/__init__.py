@@ -6,7 +6,7 @@ draws `route(...)` on the live map and persists `state()` / `restore()` with the
 """
 
 from .base import CostFn, Planner, PlanTask
-from .costs import TravelTime
+from .costs import NO_WAY_COST, AroundZones, TravelTime
 from .exact import ExactResult, solve_open_path
 from .planners import (
     DEFAULT_PLANNER,
@@ -25,8 +25,10 @@ from .standby import STANDBY_S, standby_position
 __all__ = [
     "DEFAULT_PLANNER",
     "GATED_TOUR_LIMIT",
+    "NO_WAY_COST",
     "PLANNER_NAMES",
     "STANDBY_S",
+    "AroundZones",
     "CostFn",
     "ExactResult",
     "FcfsPlanner",

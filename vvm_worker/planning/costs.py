@@ -8,13 +8,15 @@ would take a second for 1,000 tasks.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
+from fleet.airspace import Airspace
 from fleet.geo import Position, distance_m, ground_distance_m
 
 from .base import CostFn
@@ -72,6 +74,44 @@ class TravelTime:
             ground_distance_m(a, b) / self.max_speed_mps,
             abs(b.alt - a.alt) / self.climb_rate_mps,
         )
+
+
+NO_WAY_COST = 1e9
+"""The cost of a leg no way around the no-fly zones makes (finite, as costs must be): the
+planners put such a task last, and the vehicle that gets there fails it."""
+
+# Legs `AroundZones` remembers; a vehicle re-plans over mostly the same tasks.
+_WAYS_KEPT = 50_000
+
+
+@dataclass(frozen=True)
+class AroundZones:
+    """A cost along the way around the no-fly zones (`Airspace.way`): the `inner` cost (a
+    straight leg's: `distance_m`, `TravelTime`) summed over the way's legs, `NO_WAY_COST`
+    where there is no way. The way's altitude changes evenly, so for `TravelTime` the sum is
+    what flying it takes. Legs near a zone are remembered (the way costs a graph search)."""
+
+    inner: CostFn
+    airspace: Airspace
+    _kept: dict[tuple[Position, Position], float] = field(
+        default_factory=dict, compare=False, hash=False, repr=False
+    )
+
+    def __call__(self, a: Position, b: Position) -> float:
+        known = self._kept.get((a, b))
+        if known is not None:
+            return known
+        way = self.airspace.way(a, b)
+        if way is None:
+            value = NO_WAY_COST
+        elif len(way) == 1:
+            return self.inner(a, b)
+        else:
+            value = sum(self.inner(p, q) for p, q in itertools.pairwise([a, *way]))
+        if len(self._kept) >= _WAYS_KEPT:
+            self._kept.clear()
+        self._kept[(a, b)] = value
+        return value
 
 
 def _exact_block(
@@ -138,6 +178,8 @@ def build_cost_matrix(
     above that (error below 1e-6 relative for legs under 50 km). Raises ValueError when a cost
     is negative or not finite.
     """
+    if isinstance(cost, AroundZones):
+        return _around_zones(cost, origin, positions, known)
     n = len(positions)
     values = np.zeros((n + 1, n + 1), dtype=np.float64)
     values[0, 1:] = costs_from(cost, origin, positions)
@@ -170,6 +212,21 @@ def build_cost_matrix(
         block = (block + block.T) / 2.0
     values[1:, 1:] = block
     return CostMatrix(values, symmetric=symmetric)
+
+
+def _around_zones(
+    cost: AroundZones, origin: Position, positions: Sequence[Position], known: TaskCosts | None
+) -> CostMatrix:
+    """The matrix of the straight legs, with the legs that pass near a zone costed along
+    their way around it: a way is a graph search, a straight leg a formula (or a copy)."""
+    matrix = build_cost_matrix(cost.inner, origin, positions, known=known)
+    values = matrix.values
+    nodes = [origin, *positions]
+    for i, j in cost.airspace.near_pairs(nodes):
+        values[i, j] = cost(nodes[i], nodes[j])
+        if i > 0:  # nothing returns to the vehicle's position (column 0)
+            values[j, i] = values[i, j] if matrix.symmetric else cost(nodes[j], nodes[i])
+    return matrix
 
 
 def approximate_distance_matrix(positions: Sequence[Position]) -> FloatArray:

@@ -15,10 +15,11 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from fleet.airspace import Airspace
 from fleet.geo import Position, distance_m
 
 from .base import CostFn, Planner, PlanTask, canonical_order
-from .costs import TaskCosts, TravelTime, build_cost_matrix, costs_from
+from .costs import AroundZones, TaskCosts, TravelTime, build_cost_matrix, costs_from
 from .exact import HELD_KARP_LIMIT, NODE_LIMIT, solve_open_path
 from .heuristics import (
     first_cheapest,
@@ -473,18 +474,24 @@ def make_planner(
     cost: CostFn | None = None,
     travel_time: TravelTime | None = None,
     time_limit_s: float | None = None,
+    airspace: Airspace | None = None,
 ) -> Planner:
     """A new planner of the given name (one of `PLANNER_NAMES`).
 
     `cost` between points, when given, is what every planner uses. Otherwise `latency` uses
     the vehicle's `travel_time` (seconds, climbs included) when given and the others use
-    `distance_m`, as the paper and the original implementation did. `time_limit_s` bounds the
-    time `latency` spends on one route (None: no bound, reproducible results).
-    Raises ValueError naming the unknown name and listing the valid ones.
+    `distance_m`, as the paper and the original implementation did. With an `airspace` that
+    has no-fly zones, every cost is taken along the way around them (`AroundZones`).
+    `time_limit_s` bounds the time `latency` spends on one route (None: no bound,
+    reproducible results). Raises ValueError naming the unknown name and listing the valid
+    ones.
     """
-    metres = cost or distance_m
+    metres: CostFn = cost or distance_m
+    timed: CostFn = cost or travel_time or distance_m
+    if airspace:
+        metres, timed = AroundZones(metres, airspace), AroundZones(timed, airspace)
     if name == "latency":
-        return LatencyPlanner(cost or travel_time or distance_m, time_limit_s=time_limit_s)
+        return LatencyPlanner(timed, time_limit_s=time_limit_s)
     if name == "tour":
         return TourPlanner(metres)
     if name == "nearest":

@@ -60,7 +60,7 @@ from vvm_worker.services.fleet import (
     vvs_reroute_waiting,
 )
 from vvm_worker.services.journal import JournalView
-from vvm_worker.services.routing import fleet_caps, vehicle_caps
+from vvm_worker.services.routing import fleet_airspace, fleet_caps, vehicle_caps
 from vvm_worker.services.submissions import (
     MAX_SUBMISSIONS,
     Submission,
@@ -114,6 +114,7 @@ __all__ = [
     "customer_delete",
     "customer_limits",
     "customer_update",
+    "fleet_airspace",
     "fleet_caps",
     "ground_station_create",
     "ground_station_delete",

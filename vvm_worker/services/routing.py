@@ -16,6 +16,7 @@ from shapely import STRtree
 from shapely.geometry import Point
 
 from cpcc_site.prepared import Many, PreparedRead, deferred, insert_rows
+from fleet.airspace import Airspace
 from fleet.geo import Position
 from fleet.models import GroundStation, NoFlyZone, Vehicle, VehicleStatus
 from missions.events import migration_event, task_event
@@ -89,6 +90,7 @@ class _FleetShape:
     index: STRtree
     overlaps: dict[int, frozenset[int]]
     zones: tuple[ExclusionZone, ...]  # the provider's no-fly zones
+    airspace: Airspace  # the same, with the ways around them
 
     def covering(self, requests: Iterable[TaskRequest]) -> set[int]:
         """The RVs whose areas hold any of the requests' points (border included)."""
@@ -99,6 +101,9 @@ class _FleetShape:
 
 
 _shapes_seen: dict[tuple[Any, ...], _FleetShape] = {}
+# The airspace of the zones last read, by their version: a new shape of the same zones keeps
+# it (and every way it has found).
+_airspace_seen: tuple[tuple[Any, ...], Airspace] | None = None
 # A vehicle row changed in this process (saved, deleted, its sensors): the version is read
 # again at once. A change made by another process is seen within SHAPE_LOOK_S (the version
 # is read at most that often otherwise); the RV's own host hears of it by message anyway.
@@ -127,7 +132,7 @@ m2m_changed.connect(
 def _fleet_shape() -> _FleetShape:
     """The fleet's shape, read again only when a vehicle row changed: one light query, at
     most every SHAPE_LOOK_S unless this process changed a vehicle."""
-    global _shape_seen_at
+    global _shape_seen_at, _airspace_seen
     seen = _shape_seen_at
     now = time.monotonic()
     if seen is not None and seen[0] == _generation and now - seen[1] < SHAPE_LOOK_S:
@@ -142,6 +147,10 @@ def _fleet_shape() -> _FleetShape:
             Vehicle.objects.exclude(status=VehicleStatus.REMOVED).prefetch_related("sensors")
         )
         zones = no_fly_zones()
+        zones_key = (zoned["count"], zoned["changed"])
+        if _airspace_seen is None or _airspace_seen[0] != zones_key:
+            _airspace_seen = (zones_key, Airspace(zones))
+        airspace = _airspace_seen[1]
         # The live fields come with each call; a vehicle that never flew is at its depot.
         caps = {
             v.pk: dataclasses.replace(vehicle_caps(v), position=v.depot, no_fly=zones)
@@ -156,11 +165,19 @@ def _fleet_shape() -> _FleetShape:
             overlaps[a] = frozenset(
                 b for b in near if caps[a].area.intersection(caps[b].area).area > 0.0
             )
-        shape = _FleetShape(caps, {v.pk: v for v in vehicles}, ids, index, overlaps, zones)
+        shape = _FleetShape(
+            caps, {v.pk: v for v in vehicles}, ids, index, overlaps, zones, airspace
+        )
         _shapes_seen.clear()
         _shapes_seen[key] = shape
     _shape_seen_at = (generation, now, shape)
     return shape
+
+
+def fleet_airspace() -> Airspace:
+    """The provider's no-fly zones as the vehicles fly around them (the same object while the
+    zones do not change)."""
+    return _fleet_shape().airspace
 
 
 def fleet_caps(

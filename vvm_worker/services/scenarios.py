@@ -14,7 +14,7 @@ from django.db import transaction
 from django.utils.text import slugify
 
 from accounts.models import Customer, User
-from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
+from fleet.models import GroundStation, NoFlyZone, SensorType, Vehicle, VehicleStatus
 from missions.models import (
     ACTIVE_STATUSES,
     Task,
@@ -137,8 +137,8 @@ def _login_for(customer: Customer, password: str | None) -> tuple[str, str | Non
 def scenario_apply(
     *, scenario: Scenario, logins: bool = True, password: str | None = None
 ) -> LoadedScenario:
-    """Put the scenario's SDC additions, ground stations, RVs and customers (with a login user
-    each, unless ``logins`` is False) into the database. Running it twice changes nothing the
+    """Put the scenario's SDC additions, ground stations, RVs, no-fly zones and customers
+    (with a login user each, unless ``logins`` is False) into the database. Running it twice changes nothing the
     second time. A customer's login gets ``password``; without one, a new login gets a
     generated password and an existing one keeps its own (``logins`` says which).
 
@@ -168,6 +168,15 @@ def scenario_apply(
             )
         for spec in scenario.vehicles:
             loaded.vehicles[spec.name] = vehicle_upsert(spec=spec)
+        for zone in scenario.no_fly_zones:
+            NoFlyZone.objects.update_or_create(
+                name=zone.name,
+                defaults={
+                    "area": [list(point) for point in zone.area],
+                    "min_altitude_m": zone.min_altitude_m,
+                    "max_altitude_m": zone.max_altitude_m,
+                },
+            )
         for customer_spec in scenario.customers:
             customer = _customer_upsert(customer_spec)
             loaded.customers[customer_spec.name] = customer
