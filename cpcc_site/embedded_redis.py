@@ -2,14 +2,19 @@
 
 Used when ``REDIS_URL`` is not set, so a fresh machine needs nothing else. Several processes
 share one server: the first that needs it starts it, the others find its socket answering.
+Processes that start together take turns (a lock file next to the socket), so no two servers
+are ever started on one socket.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import logging
 import shutil
 import subprocess
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
 
@@ -45,6 +50,19 @@ def answers(socket_path: Path) -> bool:
         return False
 
 
+@contextlib.contextmanager
+def _turn(socket_path: Path) -> Iterator[None]:
+    """This process's turn to look for the server on ``socket_path`` and start it: an
+    exclusive lock on ``<socket>.lock``, released when the block ends (or the process dies)."""
+    socket_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(socket_path.with_suffix(".lock"), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
 class EmbeddedRedis:
     """A redis-server on ``socket_path`` for as long as the context lasts (if it started it).
 
@@ -56,11 +74,17 @@ class EmbeddedRedis:
         self.process: subprocess.Popen[bytes] | None = None
 
     def start(self, *, detach: bool = False) -> EmbeddedRedis:
-        """Start the server unless one answers already. ``detach``: it keeps running after
-        this process ends (other processes use it); ``stop`` then leaves it alone."""
+        """Start the server unless one answers already (one process at a time looks, so
+        processes started together share one). ``detach``: it keeps running after this
+        process ends (other processes use it); ``stop`` then leaves it alone."""
         if answers(self.socket_path):
             return self
-        self.socket_path.parent.mkdir(parents=True, exist_ok=True)
+        with _turn(self.socket_path):
+            if not answers(self.socket_path):  # nobody started it while this one waited
+                self._start(detach=detach)
+        return self
+
+    def _start(self, *, detach: bool) -> None:
         self.socket_path.unlink(missing_ok=True)
         log = self.socket_path.with_suffix(".log")
         command = [
@@ -73,7 +97,15 @@ class EmbeddedRedis:
             "--dir", str(self.socket_path.parent),
             "--logfile", str(log),
         ]  # fmt: skip
-        self.process = subprocess.Popen(command, stdin=subprocess.DEVNULL, start_new_session=detach)
+        # Its output goes to the log file, not to this process's (a pipe a detached server
+        # held open would never end).
+        self.process = subprocess.Popen(
+            command,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=detach,
+        )
         deadline = time.monotonic() + START_TIMEOUT_S
         while not answers(self.socket_path):
             if self.process.poll() is not None or time.monotonic() > deadline:
@@ -83,10 +115,9 @@ class EmbeddedRedis:
                     f"redis-server did not start on {self.socket_path}: {tail}"
                 )
             time.sleep(0.05)
-        logger.info("embedded redis started", extra={"socket": str(self.socket_path)})
+        logger.info("embedded redis started on %s", self.socket_path)
         if detach:
             self.process = None
-        return self
 
     def stop(self) -> None:
         if self.process is None:

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -35,3 +39,57 @@ def test_the_configured_broker_and_channel_layer_answer(settings) -> None:
             conn.ensure_connection(max_retries=1)
         host = settings.CHANNEL_LAYERS["default"]["CONFIG"]["hosts"][0]
         assert redis.Redis.from_url(host).ping()
+
+
+STARTER = """
+import sys
+from pathlib import Path
+
+import redis
+
+from cpcc_site.embedded_redis import EmbeddedRedis
+
+socket = Path(sys.argv[1])
+sys.stdin.readline()  # every starter goes at once
+EmbeddedRedis(socket).start(detach=True)
+print(redis.Redis(unix_socket_path=str(socket)).info("server")["process_id"])
+"""
+
+
+def _servers_on(socket: Path) -> list[int]:
+    """The redis-server processes started for this socket."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            command = (entry / "cmdline").read_bytes()
+        except (OSError, ValueError):
+            continue
+        if entry.name.isdigit() and b"redis-server" in command and str(socket).encode() in command:
+            found.append(int(entry.name))
+    return found
+
+
+def test_workers_started_together_share_one_embedded_server(tmp_path: Path) -> None:
+    socket = tmp_path / "redis.sock"
+    root = Path(__file__).resolve().parents[2]
+    starters = [
+        subprocess.Popen(
+            [sys.executable, "-c", STARTER, str(socket)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            cwd=root,
+        )
+        for _ in range(3)
+    ]
+    try:
+        for starter in starters:
+            assert starter.stdin is not None
+            starter.stdin.write("go\n")
+            starter.stdin.flush()
+        answered = {int(s.communicate(timeout=60)[0].strip()) for s in starters}
+        assert len(answered) == 1
+        assert _servers_on(socket) == list(answered)
+    finally:
+        for pid in _servers_on(socket):
+            os.kill(pid, signal.SIGTERM)
