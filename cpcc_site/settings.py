@@ -355,10 +355,16 @@ LOGGING = {
     "version": 1,
     "disable_existing_loggers": False,
     "formatters": {
-        "plain": {"format": "%(asctime)s %(levelname)s %(name)s %(message)s"},
+        "plain": {
+            "()": "cpcc_site.logs.FieldsFormatter",
+            "format": "%(asctime)s %(levelname)s %(name)s %(message)s",
+        },
     },
     "handlers": {
         "console": {"class": "logging.StreamHandler", "formatter": "plain"},
     },
-    "root": {"handlers": ["console"], "level": env_str("CPCC_LOG_LEVEL", "WARNING")},
+    # Libraries speak up on warnings; the platform's own lines (migrations, flights, links,
+    # batteries) show at INFO unless CPCC_LOG_LEVEL says otherwise.
+    "root": {"handlers": ["console"], "level": "WARNING"},
+    "loggers": {"cpcc": {"level": env_str("CPCC_LOG_LEVEL", "INFO")}},
 }

@@ -297,6 +297,13 @@ class ControlLoop:
             if within_m(here, t.position, t.tolerance_m + REACH_SLACK_M)
         ]
         battery = self.battery_fraction(now)
+        if served:
+            logger.info(
+                "%s arrived: %d task(s) to serve",
+                self.name,
+                len(served),
+                extra={**self._log(), "tasks": ",".join(str(t.id) for t in served)},
+            )
         for task in served:
             self.recent_alts = [*self.recent_alts[1 - RECENT_TASKS :], task.position.alt]
             try:
@@ -320,6 +327,7 @@ class ControlLoop:
                 self.scheduler.call_at(now + ARRIVAL_POLL_S, lambda: self._landed(token, due_s))
             return
         self.returning = False
+        logger.info("%s landed", self.name, extra=self._log())
         if self.status == CHARGING:
             self._charge(now)
         self._record(now)
@@ -343,7 +351,11 @@ class ControlLoop:
     def _run_low(self) -> None:
         """Hand the work over and go home to recharge: the VVs aboard move to RVs that can
         serve them (or wait), and this RV takes no work until it is full again."""
-        logger.info("battery low: recharging", extra=self._log())
+        logger.info(
+            "%s: battery too low for the next task: home to recharge",
+            self.name,
+            extra={**self._log(), "battery": self.battery_fraction(self.clock())},
+        )
         self.store.set_status(CHARGING)
         self.status = CHARGING
 
@@ -354,6 +366,7 @@ class ControlLoop:
 
     def _charged(self) -> None:
         self._charged_at = None
+        logger.info("%s charged", self.name, extra=self._log())
         # Back into service, unless the provider decided otherwise meanwhile.
         self.store.set_status(ACTIVE, expected=CHARGING)
         self.wake()
@@ -415,6 +428,8 @@ class ControlLoop:
         """Fly the next leg of the way (``_via``): to a turn point, or to the way's end."""
         point = self._via.pop(0)
         tolerance_m = TURN_TOLERANCE_M if self._via or self._homing else self._tolerance_m
+        if self.driver.is_landed_at(now):
+            logger.info("%s taking off", self.name, extra=self._log())
         try:
             arrival = self.driver.fly_to(point, now)
         except DriverError as exc:
@@ -424,6 +439,8 @@ class ControlLoop:
         self.scheduler.call_at(arrival, lambda: self._arrive(token, point, tolerance_m, arrival))
 
     def _go_home(self, now: float, token: int) -> None:
+        if not self.returning:
+            logger.info("%s returning home", self.name, extra=self._log())
         self.returning = True
         self.standby_until = None
         self._via = []

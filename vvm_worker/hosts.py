@@ -419,7 +419,7 @@ class HostedRV:
     def _link_lost(self) -> None:
         """The vehicle stopped answering: like an RV taken out of service, its VVs move on
         (a reading it may still report is refused); it comes back when the link does."""
-        logger.warning("vehicle link lost", extra=self._log())
+        logger.warning("vehicle %s: link lost", self.name, extra=self._log())
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
         if vehicle.status == VehicleStatus.ACTIVE:
             self._link_down = True
@@ -432,7 +432,7 @@ class HostedRV:
         self._link_down = False
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
         if vehicle.status == VehicleStatus.MAINTENANCE:
-            logger.warning("vehicle link back: in service again", extra=self._log())
+            logger.warning("vehicle %s: link back, in service again", self.name, extra=self._log())
             vehicle_set_status(vehicle=vehicle, status=VehicleStatus.ACTIVE, vvm=self.host.vvm)
 
     def recover(self) -> None:

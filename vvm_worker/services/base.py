@@ -180,6 +180,14 @@ def pending_of(vv: VirtualVehicle) -> PendingRequest | None:
     return PendingRequest.from_json(vv.pending) if vv.pending else None
 
 
+def customer_named(vv: VirtualVehicle) -> str:
+    """The VV's customer as a log line names it: its slug when it was read with the VV (the
+    step's read does), else its id; a log line costs no query."""
+    if VirtualVehicle.customer.is_cached(vv):
+        return vv.customer.slug
+    return f"#{vv.customer_id}"
+
+
 def db_time_ago(seconds: float) -> ExpressionWrapper:
     """That long ago by the database's clock: the same for every worker, whatever its own
     clock says (leases, sweeps)."""

@@ -110,7 +110,12 @@ def vehicle_set_status(*, vehicle: Vehicle, status: VehicleStatus, vvm: VVM) -> 
             Task.objects.filter(vehicle=vehicle, status=TaskStatus.OPEN).update(vehicle=None)
             for vv_id in aboard:
                 vvm.dispatcher.vv_arrived(vv_id)
-        logger.info("vehicle status", extra={"vehicle": vehicle.name, "status": status})
+        logger.info(
+            "vehicle %s: %s",
+            vehicle.name,
+            status,
+            extra={"vehicle": vehicle.name, "status": status},
+        )
         vvm.dispatcher.vehicle_changed(vehicle.pk)
     if status == VehicleStatus.ACTIVE:
         vehicle_register(vehicle=vehicle, vvm=vvm)
@@ -216,7 +221,7 @@ def vehicles_check_leases(*, vvm: VVM) -> list[str]:
                 vv.save()
             gone.append(vehicle.name)
     for name in gone:
-        logger.warning("vehicle worker lost", extra={"vehicle": name})
+        logger.warning("vehicle %s: its worker is gone", name, extra={"vehicle": name})
     return gone
 
 

@@ -37,6 +37,7 @@ from vvm_worker.runtime import (
 )
 from vvm_worker.services.base import (
     VVM,
+    customer_named,
     db_time_ago,
     ground_station_for,
     logger,
@@ -542,8 +543,17 @@ def vv_record_migration(
     # back, the context catches up on the steps made elsewhere (the runtime's resume reads
     # their answers from the journal) instead of replaying from the program's first line.
     logger.info(
-        "vv migrated",
-        extra={"vv": str(vv.id), "from": getattr(source, "name", None), "to": to.name},
+        "vv %r migrated from %s to %s",
+        vv.name,
+        getattr(source, "name", "nowhere"),
+        to.name,
+        extra={
+            "vv": str(vv.id),
+            "customer": customer_named(vv),
+            "from": getattr(source, "name", None),
+            "to": to.name,
+            "reason": reason,
+        },
     )
 
 

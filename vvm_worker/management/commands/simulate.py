@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import logging
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -76,6 +78,9 @@ class Command(BaseCommand):
 
     def handle(self, *args: Any, **options: Any) -> None:
         speed = settings.CPCC_SIM_SPEED if options["speed"] is None else options["speed"]
+        if options["verbosity"] < 2 and "CPCC_LOG_LEVEL" not in os.environ:
+            # A simulation's flights and migrations are its summary; -v 2 shows each.
+            logging.getLogger("cpcc").setLevel(logging.WARNING)
         if speed < 0:
             raise CommandError("--speed must be 0 (discrete-event) or positive")
         try:
