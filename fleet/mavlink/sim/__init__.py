@@ -1,10 +1,14 @@
 """MavSim: a simulated copter that speaks MAVLink like ArduCopter (or, optionally, PX4).
 
-``copter.py`` is the vehicle (flight, modes, arming, the loop) and wires the sub-protocols,
-one module each: ``commands.py`` (COMMAND_LONG/COMMAND_INT and their ACKs), ``params.py``
-(the parameter protocol), ``telemetry.py`` (streamed messages and their rates),
-``missions.py`` (the mission protocol's transfers), ``auto.py`` (flying the mission in AUTO),
-``guided.py`` with ``targets.py`` (GUIDED's targets and frames), ``fence.py`` (the geofence),
+``copter.py`` (``MavSim``) wires the parts, runs them in its loop and has the API tests and
+``manage.py mavsim`` use; each part is a module: ``transport.py`` (the connection, the loop
+that reads it, a sender per component), ``flight.py`` (the kinematics on the simulated clock,
+the battery), ``commands.py`` (COMMAND_LONG/COMMAND_INT and their ACKs; arming, modes and the
+commands that fly), ``failsafes.py`` (what the autopilot does by itself: fence breaches, an
+empty battery, disarming on the ground), ``telemetry.py`` with ``messages.py`` (streamed
+messages and their rates), ``params.py`` (the parameter protocol), ``missions.py`` (the
+mission protocol's transfers), ``auto.py`` (flying the mission in AUTO), ``guided.py`` with
+``targets.py`` (GUIDED's targets and frames), ``fence.py`` (the geofence), ``payload.py`` with
 ``companion.py`` (the sensors: the simulated field at the vehicle) and ``camera.py`` (the
 camera protocol and the image server); ``flavours.py`` says what differs between ArduCopter
 and PX4.

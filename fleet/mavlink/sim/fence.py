@@ -4,7 +4,7 @@ polygon, outside every exclusion polygon), switched on by FENCE_ENABLE and chose
 FENCE_TYPE's bits.
 
 ``Fence`` answers which fences a position breaches; ``FenceStatus`` is what FENCE_STATUS
-reports. What a breach does (FENCE_ACTION) is the vehicle's business.
+reports. What a breach does (FENCE_ACTION) is the vehicle's business (``failsafes.py``).
 """
 
 from __future__ import annotations
@@ -50,6 +50,17 @@ class FenceStatus:
     count: int = 0
     breach_type: int = mavlink.FENCE_BREACH_NONE
     time_ms: int = 0
+
+    def update(self, breaches: int, time_ms: int) -> int:
+        """Take the fences breached now (``time_ms``: the boot time); returns those newly
+        breached, 0 for none (a breach begins: it counts and is timed)."""
+        new = breaches & ~self.breaches
+        self.breaches = breaches
+        self.breach_type = breach_type(breaches)
+        if new:
+            self.count += 1
+            self.time_ms = time_ms
+        return new
 
     def send(self, mav: Any) -> None:
         mav.fence_status_send(1 if self.breaches else 0, self.count, self.breach_type, self.time_ms)

@@ -12,7 +12,8 @@
   metres north, east, down from home, ArduCopter's EKF origin; MAV_FRAME_LOCAL_OFFSET_NED:
   from where the vehicle is): no answer in the protocol, ignored outside GUIDED and before
   take-off as ArduCopter does; a frame it does not fly or a refused target is said once in a
-  STATUSTEXT ("Guided: frame 8 not supported").
+  STATUSTEXT ("Guided: frame 8 not supported"). When they came is kept for PX4, whose
+  offboard mode wants them streaming (``SetpointStream``).
 
 A target outside an enabled fence is refused, as ArduCopter's ModeGuided::set_destination
 refuses it: the vehicle stays where it is and no breach follows. Velocity and acceleration
@@ -22,6 +23,7 @@ targets are not simulated.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -36,6 +38,7 @@ POSITION_IGNORE = (
     | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
     | mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE
 )
+_SETPOINT_LOSS_S = 1.0  # PX4's COM_OF_LOSS_T default
 
 
 class Vehicle(Protocol):
@@ -61,10 +64,35 @@ class Vehicle(Protocol):
         ...
 
 
+class SetpointStream:
+    """When the position targets came, on the wall clock ``wall``: PX4 enters offboard only
+    while they stream and leaves it when they stop (COM_OF_LOSS_T)."""
+
+    def __init__(self, wall: Callable[[], float]) -> None:
+        self._wall = wall
+        self._times: deque[float] = deque(maxlen=8)
+        self._last = -math.inf
+
+    def heard(self) -> None:
+        """A position target came now."""
+        self._last = self._wall()
+        self._times.append(self._last)
+
+    def live(self) -> bool:
+        """At least two targets within the loss time."""
+        wall = self._wall()
+        return sum(1 for t in self._times if wall - t <= _SETPOINT_LOSS_S) >= 2
+
+    def lost(self) -> bool:
+        """No target within the loss time."""
+        return self._wall() - self._last > _SETPOINT_LOSS_S
+
+
 class Guided:
     """GUIDED's targets for ``vehicle``. ``mode`` is the mode that follows them (GUIDED),
     ``home`` and ``ground_amsl_m`` what relative and absolute altitudes mean, ``send`` sends a
-    message from the autopilot, ``text`` a STATUSTEXT (severity, text)."""
+    message from the autopilot, ``text`` a STATUSTEXT (severity, text), ``wall`` is the wall
+    clock ``setpoints`` runs on."""
 
     def __init__(
         self,
@@ -76,6 +104,7 @@ class Guided:
         ground_amsl_m: float,
         send: Callable[[Callable[[Any], None]], None],
         text: Callable[[int, str], None],
+        wall: Callable[[], float],
     ) -> None:
         self._vehicle = vehicle
         self._fence = fence
@@ -85,6 +114,7 @@ class Guided:
         self._send = send
         self._text = text
         self._refused: set[tuple[str, str]] = set()  # (message, reason) already said
+        self.setpoints = SetpointStream(wall)
 
     def target(self, frame: int, lat: float, lng: float, alt: float) -> Position:
         """Where a global-frame target points. Raises TargetRefused."""
@@ -165,6 +195,7 @@ class Guided:
 
     def on_position_target(self, msg: Any) -> None:
         """SET_POSITION_TARGET_GLOBAL_INT or SET_POSITION_TARGET_LOCAL_NED."""
+        self.setpoints.heard()
         vehicle = self._vehicle
         if msg.type_mask & POSITION_IGNORE:
             return  # velocity or acceleration targets: not simulated

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fleet.mavlink.mission import MissionItem, validate_fence
+from fleet.mavlink.sim.transport import reply_to
 from fleet.mavlink.wire import mavlink
 
 logger = logging.getLogger("cpcc.mavsim")
@@ -66,13 +67,9 @@ class MissionServer:
         """Ask again for an item that has not come within a second (give up after five)."""
         self._check_upload()
 
-    @staticmethod
-    def _reply_to(msg: Any) -> tuple[int, int]:
-        return int(msg.get_srcSystem()), int(msg.get_srcComponent())
-
     def _on_mission_count(self, msg: Any) -> None:
         mission_type = int(getattr(msg, "mission_type", 0))
-        partner = self._reply_to(msg)
+        partner = reply_to(msg)
         if msg.count == 0:
             self.missions[mission_type] = []
             self._upload = None
@@ -134,13 +131,13 @@ class MissionServer:
     def _on_mission_request_list(self, msg: Any) -> None:
         mission_type = int(getattr(msg, "mission_type", 0))
         count = len(self.missions.get(mission_type, []))
-        system, component = self._reply_to(msg)
+        system, component = reply_to(msg)
         self._send(lambda mav: mav.mission_count_send(system, component, count, mission_type))
 
     def _on_mission_request(self, msg: Any) -> None:
         mission_type = int(getattr(msg, "mission_type", 0))
         items = self.missions.get(mission_type, [])
-        system, component = self._reply_to(msg)
+        system, component = reply_to(msg)
         if not 0 <= msg.seq < len(items):
             self._mission_ack(
                 (system, component), mavlink.MAV_MISSION_INVALID_SEQUENCE, mission_type
@@ -174,4 +171,4 @@ class MissionServer:
     def _on_mission_clear_all(self, msg: Any) -> None:
         mission_type = int(getattr(msg, "mission_type", 0))
         self.missions.pop(mission_type, None)
-        self._mission_ack(self._reply_to(msg), mavlink.MAV_MISSION_ACCEPTED, mission_type)
+        self._mission_ack(reply_to(msg), mavlink.MAV_MISSION_ACCEPTED, mission_type)

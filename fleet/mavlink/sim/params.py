@@ -6,7 +6,7 @@ is answered with the value kept."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from fleet.mavlink import params as param_codec
@@ -16,8 +16,9 @@ from fleet.mavlink.wire import encode_text
 
 class ParamServer:
     """Keeps the parameters (by name, in the order PARAM_REQUEST_LIST streams them) and answers
-    their messages. ``send`` sends a message (it gets pymavlink's MAVLink object),
-    ``on_set`` hears every value a ground station sets (name, new value)."""
+    their messages. ``send`` sends a message (it gets pymavlink's MAVLink object).
+    ``speeds`` are the flavour's speed parameters (name, ``VehicleSpec`` field, unit in m/s):
+    a ground station setting one calls ``on_speed`` (field, m/s)."""
 
     def __init__(
         self,
@@ -25,12 +26,14 @@ class ParamServer:
         send: Callable[[Callable[[Any], None]], None],
         *,
         bytewise: bool,
-        on_set: Callable[[str, float], None],
+        speeds: Sequence[tuple[str, str, float]],
+        on_speed: Callable[[str, float], None],
     ) -> None:
         self._params = params
         self._send = send
         self._bytewise = bytewise
-        self._on_set = on_set
+        self._speeds = speeds
+        self._on_speed = on_speed
 
     def __contains__(self, name: str) -> bool:
         return name in self._params
@@ -93,5 +96,8 @@ class ParamServer:
         if param_codec.is_integer_type(param.type):
             value = float(round(value))
         param.value = value
-        self._on_set(name, value)
+        for speed_name, field, unit in self._speeds:
+            if name == speed_name and value > 0:
+                # A ground station changing a speed changes the kinematics from the next leg on.
+                self._on_speed(field, value * unit)
         self._send_value(name)

@@ -1,17 +1,26 @@
 """What the simulated autopilot streams, and how often.
 
 ``Streams`` keeps the rate of each message (MAV_CMD_SET_MESSAGE_INTERVAL, the older
-REQUEST_DATA_STREAM groups, the defaults) and sends what is due; the functions below build the
-messages themselves from plain values (pymavlink's MAVLink object first).
+REQUEST_DATA_STREAM groups, the defaults) and sends what is due; ``Telemetry`` makes each
+message of the vehicle's state (with ``messages.py``) and answers the commands that ask for
+messages.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, Protocol
 
-from fleet.geo import Position
+from fleet.mavlink.modes import custom_mode_of
+from fleet.mavlink.sim import messages
+from fleet.mavlink.sim.camera import Shot
+from fleet.mavlink.sim.commands import Outcome
+from fleet.mavlink.sim.companion import FieldSensors
+from fleet.mavlink.sim.fence import FenceStatus
+from fleet.mavlink.sim.flavours import Flavour
+from fleet.mavlink.sim.flight import Flight
+from fleet.mavlink.sim.transport import Build, reply_to
 from fleet.mavlink.wire import mavlink
 
 # What streams from the start (wall seconds between messages), and what interval 0 restores.
@@ -35,29 +44,6 @@ DATA_STREAMS: Mapping[int, tuple[int, ...]] = {
     mavlink.MAV_DATA_STREAM_RAW_SENSORS: (mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE,),
 }
 _MIN_INTERVAL_S = 0.005  # 200 Hz at most
-
-CELLS = 4  # a 4S LiPo: 16.8 V full, 14.0 V empty
-_CELL_FULL_V = 4.2
-_CELL_EMPTY_V = 3.5
-LOW_BATTERY = 0.2
-CRITICAL_BATTERY = 0.1
-_SENSORS = (
-    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
-    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
-    | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
-)
-_CAPABILITIES = (
-    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-)
 
 
 class Streams:
@@ -124,167 +110,246 @@ class Streams:
             self.set_interval(message_id, 1e6 / rate if msg.start_stop and rate > 0 else -1.0)
 
 
-def clamp16(value: float) -> int:
-    return max(-32768, min(32767, round(value)))
+class Status(Protocol):
+    """The autopilot's state as its messages report it (``commands.Commander``)."""
+
+    @property
+    def armed(self) -> bool: ...
+
+    @property
+    def mode(self) -> str: ...
+
+    def arming_refusal(self) -> str | None:
+        """Why arming would be refused now, or None."""
+        ...
 
 
-def voltage_mv(fraction: float) -> int:
-    cell = _CELL_EMPTY_V + (_CELL_FULL_V - _CELL_EMPTY_V) * fraction
-    return round(cell * CELLS * 1000)
+class Telemetry:
+    """The autopilot's messages, made of the vehicle's state: ``status`` (arming and mode),
+    ``flight`` (where it is, its battery), ``sensors`` (barometer, thermometer, GPS) and
+    ``fence_status``; ``ground_amsl_m`` is the ground's altitude above mean sea level,
+    ``capacity_mah`` the battery's. ``streams`` sends them at their rates (MISSION_CURRENT with
+    ``mission_current``). ``send`` sends from the autopilot, ``wall`` is the wall clock."""
 
+    def __init__(
+        self,
+        status: Status,
+        flight: Flight,
+        sensors: FieldSensors,
+        fence_status: FenceStatus,
+        *,
+        flavour: Flavour,
+        ground_amsl_m: float,
+        capacity_mah: int,
+        mission_current: Callable[[], None],
+        send: Callable[[Build], None],
+        wall: Callable[[], float],
+    ) -> None:
+        self._status = status
+        self._flight = flight
+        self._sensors = sensors
+        self._fence_status = fence_status
+        self._flavour = flavour
+        self._ground_amsl_m = ground_amsl_m
+        self._capacity_mah = capacity_mah
+        self._send = send
+        self._wall = wall
+        self.gcs_heartbeats = 0  # received from ground stations and companions
+        self._gcs_seen: set[tuple[int, int]] = set()
+        self._announced: tuple[bool, str] | None = None  # (armed, mode) of the last HEARTBEAT
+        self.streams = Streams(
+            {
+                mavlink.MAVLINK_MSG_ID_HEARTBEAT: self._send_heartbeat,
+                mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self._send_position,
+                mavlink.MAVLINK_MSG_ID_SYS_STATUS: self._send_sys_status,
+                mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: self._send_battery_status,
+                mavlink.MAVLINK_MSG_ID_HOME_POSITION: self._send_home,
+                mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self._send_extended_state,
+                mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._send_autopilot_version,
+                mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: mission_current,
+                mavlink.MAVLINK_MSG_ID_FENCE_STATUS: self._send_fence_status,
+                mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE: self._send_scaled_pressure,
+                mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: self._send_gps_raw,
+            },
+            wall,
+        )
 
-def current_ca(on_ground: bool) -> int:
-    return 50 if on_ground else 1500  # 0.5 A idle, 15 A hovering or cruising
+    def tick(self) -> None:
+        """Send what is due."""
+        if self._announced != (self._status.armed, self._status.mode):
+            # A mode or arming change goes out at once rather than with the next 1 Hz
+            # heartbeat (ArduPilot waits for the next one): a GCS that confirms a change by
+            # the heartbeat then waits milliseconds, not a second.
+            self._send_heartbeat()
+            self.streams.sent_now(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
+        self.streams.send_due()
 
+    def handle(self, msg: Any) -> bool:
+        """Handle a HEARTBEAT or REQUEST_DATA_STREAM; returns whether it did."""
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            self._on_heartbeat(msg)
+        elif kind == "REQUEST_DATA_STREAM":
+            self.streams.on_request_data_stream(msg)
+        else:
+            return False
+        return True
 
-def heartbeat(mav: Any, *, autopilot: int, custom_mode: int, armed: bool, critical: bool) -> None:
-    base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-    if armed:
-        base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-    if critical:
-        status = mavlink.MAV_STATE_CRITICAL
-    else:
-        status = mavlink.MAV_STATE_ACTIVE if armed else mavlink.MAV_STATE_STANDBY
-    mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, autopilot, base, custom_mode, status)
+    def _on_heartbeat(self, msg: Any) -> None:
+        # A new ground station (or companion) hears ours at once instead of within a second.
+        if msg.type not in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER):
+            return
+        self.gcs_heartbeats += 1
+        source = reply_to(msg)
+        if source not in self._gcs_seen:
+            self._gcs_seen.add(source)
+            self.streams.due_now(mavlink.MAVLINK_MSG_ID_HEARTBEAT)
 
+    def command(self, command: int, p: tuple[float, ...]) -> Outcome | None:
+        """Run a command that asks for messages (their rates, or one now): its MAV_RESULT and
+        what to send after the ACK; None for any other command."""
+        accepted = mavlink.MAV_RESULT_ACCEPTED
+        if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            return self.streams.set_interval(round(p[0]), p[1]), None
+        if command == mavlink.MAV_CMD_GET_MESSAGE_INTERVAL:
+            message_id = round(p[0])
+            interval = self.streams.intervals.get(message_id)
+            interval_us = round(interval * 1e6) if interval is not None else -1
+            return accepted, lambda: self._send(
+                lambda mav: mav.message_interval_send(message_id, interval_us)
+            )
+        if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
+            sender = self.streams.senders.get(round(p[0]))
+            if sender is None:
+                return mavlink.MAV_RESULT_DENIED, None
+            return accepted, sender
+        if command == mavlink.MAV_CMD_GET_HOME_POSITION:
+            return accepted, self._send_home
+        if command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            return accepted, self._send_autopilot_version
+        return None
 
-def global_position(
-    mav: Any,
-    *,
-    boot_ms: int,
-    here: Position,
-    home: Position,
-    ground_amsl_m: float,
-    velocity: tuple[float, float, float],
-    heading_deg: float | None,
-) -> None:
-    north, east, down = velocity
-    heading = 65535 if heading_deg is None else round(heading_deg * 100) % 36000
-    mav.global_position_int_send(
-        boot_ms,
-        round(here.lat * 1e7),
-        round(here.lng * 1e7),
-        round((ground_amsl_m + here.alt) * 1000),
-        round((here.alt - home.alt) * 1000),
-        clamp16(north * 100),
-        clamp16(east * 100),
-        clamp16(down * 100),
-        heading,
-    )
+    def shot(self) -> Shot:
+        """Where the vehicle is as the camera takes a picture."""
+        flight = self._flight
+        now = flight.now()
+        here = flight.position_at(now)
+        return Shot(
+            position=here,
+            amsl_m=self._ground_amsl_m + here.alt,
+            relative_m=here.alt - flight.home.alt,
+            heading_deg=flight.heading_deg(now),
+            time_s=now,
+        )
 
+    def _boot_ms(self) -> int:
+        return messages.boot_ms(self._wall())
 
-def sys_status(mav: Any, *, fraction: float, prearm_ok: bool, on_ground: bool) -> None:
-    health = _SENSORS | (mavlink.MAV_SYS_STATUS_PREARM_CHECK if prearm_ok else 0)
-    present = _SENSORS | mavlink.MAV_SYS_STATUS_PREARM_CHECK
-    mav.sys_status_send(
-        present,
-        present,
-        health,
-        200,  # load, per mille
-        voltage_mv(fraction),
-        current_ca(on_ground),
-        round(fraction * 100),
-        0,
-        0,
-        0,
-        0,
-        0,
-        0,
-    )
+    def _send_heartbeat(self) -> None:
+        status, flavour = self._status, self._flavour
+        self._announced = (status.armed, status.mode)
+        autopilot = flavour.heartbeat_autopilot
+        custom = custom_mode_of(flavour.autopilot, status.mode)
+        armed, critical = status.armed, self._flight.battery_failsafe
+        self._send(
+            lambda mav: messages.heartbeat(
+                mav, autopilot=autopilot, custom_mode=custom, armed=armed, critical=critical
+            )
+        )
 
+    def _send_position(self) -> None:
+        flight = self._flight
+        now = flight.now()
+        here = flight.position_at(now)
+        velocity, heading = flight.velocity(now), flight.heading_deg(now)
+        boot = self._boot_ms()
+        self._send(
+            lambda mav: messages.global_position(
+                mav,
+                boot_ms=boot,
+                here=here,
+                home=flight.home,
+                ground_amsl_m=self._ground_amsl_m,
+                velocity=velocity,
+                heading_deg=heading,
+            )
+        )
 
-def battery_status(
-    mav: Any, *, fraction: float, battery_s: float | None, capacity_mah: int, on_ground: bool
-) -> None:
-    if fraction <= 0.0:
-        state = mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY
-    elif fraction < CRITICAL_BATTERY:
-        state = mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL
-    elif fraction < LOW_BATTERY:
-        state = mavlink.MAV_BATTERY_CHARGE_STATE_LOW
-    else:
-        state = mavlink.MAV_BATTERY_CHARGE_STATE_OK
-    remaining_s = round(fraction * battery_s) if battery_s is not None else 0
-    cell_mv = voltage_mv(fraction) // CELLS
-    # Per-cell voltages, the unused cells UINT16_MAX as the message asks.
-    cells = [cell_mv] * CELLS + [65535] * (10 - CELLS)
-    mav.battery_status_send(
-        0,
-        mavlink.MAV_BATTERY_FUNCTION_ALL,
-        mavlink.MAV_BATTERY_TYPE_LIPO,
-        32767,  # INT16_MAX: temperature unknown
-        cells,
-        current_ca(on_ground),
-        round((1.0 - fraction) * capacity_mah),
-        -1,  # energy consumed: unknown
-        round(fraction * 100),
-        remaining_s,
-        state,
-    )
+    def _send_sys_status(self) -> None:
+        fraction = self._flight.battery(self._flight.now())
+        prearm_ok = self._status.arming_refusal() is None
+        on_ground = self._flight.on_ground
+        self._send(
+            lambda mav: messages.sys_status(
+                mav, fraction=fraction, prearm_ok=prearm_ok, on_ground=on_ground
+            )
+        )
 
+    def _send_battery_status(self) -> None:
+        flight = self._flight
+        fraction = flight.battery(flight.now())
+        on_ground = flight.on_ground
+        self._send(
+            lambda mav: messages.battery_status(
+                mav,
+                fraction=fraction,
+                battery_s=flight.spec.battery_s,
+                capacity_mah=self._capacity_mah,
+                on_ground=on_ground,
+            )
+        )
 
-def home_position(mav: Any, *, home: Position, ground_amsl_m: float) -> None:
-    mav.home_position_send(
-        round(home.lat * 1e7),
-        round(home.lng * 1e7),
-        round((ground_amsl_m + home.alt) * 1000),
-        0.0,
-        0.0,
-        0.0,
-        [1.0, 0.0, 0.0, 0.0],
-        0.0,
-        0.0,
-        0.0,
-    )
+    def _send_home(self) -> None:
+        home = self._flight.home
+        self._send(
+            lambda mav: messages.home_position(mav, home=home, ground_amsl_m=self._ground_amsl_m)
+        )
 
+    def _send_scaled_pressure(self) -> None:
+        # The barometer and thermometer of the default catalog, read from the simulated field.
+        here, now = self._flight.where()
+        pressure = self._sensors.value("pressure", here, now)
+        temperature = self._sensors.value("temperature", here, now)
+        boot = self._boot_ms()
+        self._send(
+            lambda mav: messages.scaled_pressure(
+                mav, boot_ms=boot, pressure_hpa=pressure, temperature_c=temperature
+            )
+        )
 
-def extended_sys_state(mav: Any, *, landed_state: int) -> None:
-    mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, landed_state)
+    def _send_gps_raw(self) -> None:
+        # The receiver's own fix, a few metres off the position GLOBAL_POSITION_INT reports.
+        here, now = self._flight.where()
+        fix = self._sensors.gps(here, now)
+        north, east, _ = self._flight.velocity(now)
+        heading = self._flight.heading_deg(now)
+        boot = self._boot_ms()
+        self._send(
+            lambda mav: messages.gps_raw(
+                mav,
+                boot_ms=boot,
+                fix=fix,
+                ground_amsl_m=self._ground_amsl_m,
+                speed_mps=math.hypot(north, east),
+                heading_deg=heading,
+            )
+        )
 
+    def _send_fence_status(self) -> None:
+        self._send(self._fence_status.send)
 
-def autopilot_version(mav: Any, *, bytewise_params: bool) -> None:
-    capabilities = _CAPABILITIES | (
-        mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
-        if bytewise_params
-        else mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
-    )
-    version = 4 << 24 | 5 << 16 | 0 << 8 | mavlink.FIRMWARE_VERSION_TYPE_OFFICIAL
-    mav.autopilot_version_send(capabilities, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
+    def _send_extended_state(self) -> None:
+        flight = self._flight
+        if flight.on_ground:
+            landed = mavlink.MAV_LANDED_STATE_ON_GROUND
+        elif flight.stage == "takeoff":
+            landed = mavlink.MAV_LANDED_STATE_TAKEOFF
+        elif flight.stage == "landing":
+            landed = mavlink.MAV_LANDED_STATE_LANDING
+        else:
+            landed = mavlink.MAV_LANDED_STATE_IN_AIR
+        self._send(lambda mav: messages.extended_sys_state(mav, landed_state=landed))
 
-
-def scaled_pressure(mav: Any, *, boot_ms: int, pressure_hpa: float, temperature_c: float) -> None:
-    """The barometer: absolute pressure in hPa, its temperature in centi-degrees Celsius."""
-    mav.scaled_pressure_send(boot_ms, pressure_hpa, 0.0, clamp16(temperature_c * 100))
-
-
-def gps_raw(
-    mav: Any,
-    *,
-    boot_ms: int,
-    fix: Mapping[str, Any],
-    ground_amsl_m: float,
-    speed_mps: float,
-    heading_deg: float | None,
-) -> None:
-    """The receiver's own fix (a ``SensorField`` GPS sample: lat, lng, alt, satellites, hdop)."""
-    mav.gps_raw_int_send(
-        boot_ms * 1000,
-        mavlink.GPS_FIX_TYPE_3D_FIX,
-        round(fix["lat"] * 1e7),
-        round(fix["lng"] * 1e7),
-        round((ground_amsl_m + fix["alt"]) * 1000),
-        round(fix["hdop"] * 100),
-        round(fix["hdop"] * 150),  # VDOP: about 1.5 times HDOP
-        min(round(speed_mps * 100), 65534),
-        65535 if heading_deg is None else round(heading_deg * 100) % 36000,
-        fix["satellites"],
-    )
-
-
-def velocity_ned(here: Position, ahead: Position, dt_s: float) -> tuple[float, float, float]:
-    """North, east, down in m/s between two positions ``dt_s`` apart (small distances)."""
-    m_per_deg = 111_320.0
-    north = (ahead.lat - here.lat) * m_per_deg / dt_s
-    east = (ahead.lng - here.lng) * m_per_deg * math.cos(math.radians(here.lat)) / dt_s
-    down = -(ahead.alt - here.alt) / dt_s
-    return north, east, down
+    def _send_autopilot_version(self) -> None:
+        bytewise = self._flavour.bytewise_params
+        self._send(lambda mav: messages.autopilot_version(mav, bytewise_params=bytewise))
