@@ -61,6 +61,22 @@ def _age(seconds: float) -> str:
     return f"{seconds / 86400:.0f} days ago"
 
 
+def _health_text(health: dict[str, Any]) -> str:
+    """A vehicle's health in a few words: "link up · armed · GUIDED · fence loaded"."""
+    parts = []
+    if health.get("link"):
+        parts.append(f"link {health['link']}")
+    if health.get("armed") is not None:
+        parts.append("armed" if health["armed"] else "disarmed")
+    if health.get("mode"):
+        parts.append(str(health["mode"]))
+    if health.get("fence"):
+        parts.append(f"fence {health['fence']}")
+    if health.get("took_over"):
+        parts.append(f"taken over in {health['took_over']}")
+    return " · ".join(parts)
+
+
 def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]:
     """What the fleet overview shows of an RV (annotated with ``vvs_aboard``)."""
     if vehicle.worker_seen is None:
@@ -69,8 +85,9 @@ def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]
         age_s = max(0.0, (now - vehicle.worker_seen).total_seconds())
         lease = "fresh" if age_s < lease_s else "expired"
         lease_text = f"{lease}, {_age(age_s)}"
-    battery = None
-    if vehicle.battery_s:
+    health = vehicle.health or {}
+    battery = health.get("battery_pct")
+    if battery is None and vehicle.battery_s:
         # What the simulated vehicle's battery reports: endurance less the time flown.
         battery = round(100 * max(0.0, 1 - vehicle.flight_s / vehicle.battery_s))
     position = vehicle.position
@@ -79,6 +96,10 @@ def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]
         "url": reverse("admin:fleet_vehicle_change", args=[vehicle.pk]),
         "status": vehicle.status,
         "status_label": vehicle.get_status_display(),
+        "status_reason": vehicle.status_reason,
+        "status_changed": vehicle.status_changed,
+        "health": _health_text(health),
+        "health_changed": vehicle.health_changed,
         "phase": vehicle.phase,
         "lat": position.lat,
         "lng": position.lng,
@@ -192,6 +213,10 @@ class VehicleAdmin(admin.ModelAdmin):
     filter_horizontal = ["sensors"]
     readonly_fields = [
         "status",
+        "status_reason",
+        "status_changed",
+        "health",
+        "health_changed",
         "lat",
         "lng",
         "alt",
@@ -203,7 +228,18 @@ class VehicleAdmin(admin.ModelAdmin):
     ]
     actions = ["put_into_maintenance", "return_to_service", "remove_from_fleet"]
     fieldsets = [
-        (None, {"fields": ["name", "status", "driver", "driver_url"]}),
+        (
+            None,
+            {
+                "fields": [
+                    "name",
+                    ("status", "status_reason", "status_changed"),
+                    "driver",
+                    "driver_url",
+                ]
+            },
+        ),
+        ("Health", {"fields": ["health", "health_changed"]}),
         (
             "Limits",
             {
@@ -300,8 +336,9 @@ class VehicleAdmin(admin.ModelAdmin):
         self, request: HttpRequest, queryset: QuerySet[Vehicle], status: VehicleStatus
     ) -> None:
         vvm = platform_vvm()
+        reason = f"set by {request.user.get_username()} in the admin"
         for vehicle in queryset:
-            vehicle_set_status(vehicle=vehicle, status=status, vvm=vvm)
+            vehicle_set_status(vehicle=vehicle, status=status, vvm=vvm, reason=reason)
         names = ", ".join(v.name for v in queryset)
         self.message_user(request, f"{names}: {status.label.lower()}", messages.SUCCESS)
 

@@ -94,6 +94,9 @@ class VehicleStatus(models.TextChoices):
     MAINTENANCE = "maintenance", "In maintenance"
     # Gone home to recharge: its worker puts it back into service once it is full.
     CHARGING = "charging", "Recharging"
+    # In service, but it cannot be flown (its link is down, its autopilot refused, a pilot
+    # took over): its worker puts it back into service when the link returns.
+    OFFLINE = "offline", "Offline (link or autopilot)"
     REMOVED = "removed", "Removed"
 
 
@@ -109,6 +112,13 @@ class Vehicle(models.Model):
     status = models.CharField(
         max_length=12, choices=VehicleStatus.choices, default=VehicleStatus.ACTIVE
     )
+    # Why and when the status changed last (a person's decision or the platform's).
+    status_reason = models.CharField(max_length=200, blank=True)
+    status_changed = models.DateTimeField(null=True, blank=True)
+    # What the vehicle's worker last saw of it (link, battery, armed, mode, fence), and when
+    # that changed: health, which never overrides the status a person set.
+    health = models.JSONField(default=dict, blank=True)
+    health_changed = models.DateTimeField(null=True, blank=True)
     driver = models.CharField(max_length=10, choices=Driver.choices, default=Driver.SIM)
     driver_url = models.CharField(
         max_length=200, blank=True, help_text="MAVLink connection, e.g. udpin:0.0.0.0:14550."

@@ -371,7 +371,7 @@ def _overview_row(page: str, name: str) -> tuple[dict[str, str], str]:
 
 def test_the_fleet_overview_shows_each_rv_to_staff(client, staff, in_process, customer_a) -> None:
     from fleet.models import Vehicle, VehicleStatus
-    from vvm_worker.services import vehicle_set_status
+    from vvm_worker.services import vehicle_record_health, vehicle_set_status
 
     _vv_aboard_heli_one(in_process, customer_a)
     now = timezone.now()
@@ -379,7 +379,13 @@ def test_the_fleet_overview_shows_each_rv_to_staff(client, staff, in_process, cu
     Vehicle.objects.filter(name="Heli One").update(worker_seen=now, battery_s=100, flight_s=25)
     Vehicle.objects.filter(name="Heli Two").update(worker_seen=expired)
     two = Vehicle.objects.get(name="Heli Two")
-    vehicle_set_status(vehicle=two, status=VehicleStatus.MAINTENANCE, vvm=in_process.vvm)
+    vehicle_set_status(
+        vehicle=two, status=VehicleStatus.MAINTENANCE, vvm=in_process.vvm, reason="rotor check"
+    )
+    vehicle_record_health(
+        vehicle_id=two.pk,
+        health={"link": "down", "armed": False, "mode": "LAND", "fence": "loaded"},
+    )
     VehicleFactory(name="Heli Three")
 
     client.force_login(staff)
@@ -395,6 +401,8 @@ def test_the_fleet_overview_shows_each_rv_to_staff(client, staff, in_process, cu
     two_row, cells = _overview_row(page, "Heli Two")
     assert two_row == {"status": "maintenance", "lease": "expired"}
     assert "In maintenance" in cells and 'data-vvs-aboard="0"' in cells
+    assert re.search(r"rotor check, \d\d:\d\d:\d\d", cells)
+    assert "link down · disarmed · LAND · fence loaded" in cells
     assert re.search(r"expired, \d+ min ago", cells)
     three, cells = _overview_row(page, "Heli Three")
     assert three == {"status": "active", "lease": "never"}

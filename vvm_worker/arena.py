@@ -93,7 +93,7 @@ class MemoryStore:
     def status(self) -> str:
         return ACTIVE
 
-    def set_status(self, status: str, *, expected: str | None = None) -> None:
+    def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
         raise RuntimeError("the arena's vehicles have no battery and never leave service")
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:

@@ -38,6 +38,7 @@ logger = logging.getLogger("cpcc.executor")
 ACTIVE = "active"
 MAINTENANCE = "maintenance"
 CHARGING = "charging"
+OFFLINE = "offline"  # in service, but it cannot be flown (its link, its autopilot)
 
 # A vehicle at its target serves every open task within the task's tolerance plus this much
 # (floating-point slack of the kinematics).
@@ -104,8 +105,8 @@ class Store(Protocol):
         """The RV's status (ACTIVE, MAINTENANCE, CHARGING, ...)."""
         ...
 
-    def set_status(self, status: str, *, expected: str | None = None) -> None:
-        """Change the RV's status (only from ``expected`` when given)."""
+    def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
+        """Change the RV's status, for ``reason`` (only from ``expected`` when given)."""
         ...
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
@@ -356,7 +357,7 @@ class ControlLoop:
             self.name,
             extra={**self._log(), "battery": self.battery_fraction(self.clock())},
         )
-        self.store.set_status(CHARGING)
+        self.store.set_status(CHARGING, reason="battery too low for the next task")
         self.status = CHARGING
 
     def _charge(self, now: float) -> None:
@@ -368,7 +369,7 @@ class ControlLoop:
         self._charged_at = None
         logger.info("%s charged", self.name, extra=self._log())
         # Back into service, unless the provider decided otherwise meanwhile.
-        self.store.set_status(ACTIVE, expected=CHARGING)
+        self.store.set_status(ACTIVE, expected=CHARGING, reason="charged")
         self.wake()
 
     def battery_fraction(self, now: float) -> float | None:
@@ -528,12 +529,12 @@ class ControlLoop:
 
     def _failed(self, exc: DriverError) -> None:
         """The vehicle cannot be flown (its link, its autopilot refused, a pilot took over):
-        it leaves service so that its VVs move on; the operator returns it (or its worker,
-        once the link is back)."""
-        logger.error("vehicle out of service: %s", exc, extra=self._log())
+        it goes offline so that its VVs move on (a person's decision, maintenance, stays as
+        it is); the operator returns it to service (or its worker, once the link is back)."""
+        logger.error("vehicle %s out of service: %s", self.name, exc, extra=self._log())
         self.target = None
-        self.store.set_status(MAINTENANCE, expected=ACTIVE)
-        self.status = MAINTENANCE
+        self.store.set_status(OFFLINE, expected=ACTIVE, reason=str(exc))
+        self.status = self.store.status()
 
     # --- what the vehicle reports -------------------------------------------------------------
 

@@ -155,10 +155,14 @@ class DatabaseStore:
             )
         return self._status
 
-    def set_status(self, status: str, *, expected: str | None = None) -> None:
-        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
-        if expected is None or vehicle.status == expected:
-            vehicle_set_status(vehicle=vehicle, status=VehicleStatus(status), vvm=self.vvm)
+    def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
+        vehicle_set_status(
+            vehicle=Vehicle(pk=self.vehicle_id),
+            status=VehicleStatus(status),
+            vvm=self.vvm,
+            reason=reason,
+            expected=None if expected is None else VehicleStatus(expected),
+        )
         self._status = None
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:

@@ -48,6 +48,7 @@ from vvm_worker.services import (
     VVM,
     LeasesUnsure,
     vehicle_heartbeat,
+    vehicle_record_health,
     vehicle_register,
     vehicle_set_status,
     vehicles_check_leases,
@@ -377,6 +378,7 @@ class HostedRV:
         self.driver = self.rig.driver
         self.loop = self.rig.loop
         self._sources = vehicle.sensor_sources  # as the rig's sensing reads them
+        self._health: dict[str, Any] | None = None  # as last recorded
         # What the map was told last (without its time) and when: an RV whose state does not
         # change (landed, idle) is told again only every BEACON_KEYFRAME_S.
         self._told: tuple[dict[str, Any], float] | None = None
@@ -417,23 +419,33 @@ class HostedRV:
         self.host.scheduler.submit(self._link_lost)
 
     def _link_lost(self) -> None:
-        """The vehicle stopped answering: like an RV taken out of service, its VVs move on
-        (a reading it may still report is refused); it comes back when the link does."""
+        """The vehicle stopped answering: it goes offline and its VVs move on (a reading it
+        may still report is refused); it comes back into service when the link does. An RV
+        not in service (maintenance, charging) keeps its status: the link is its health."""
         logger.warning("vehicle %s: link lost", self.name, extra=self._log())
-        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
-        if vehicle.status == VehicleStatus.ACTIVE:
-            self._link_down = True
-            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.MAINTENANCE, vvm=self.host.vvm)
+        self._link_down = True
+        vehicle_set_status(
+            vehicle=Vehicle(pk=self.vehicle_id),
+            status=VehicleStatus.OFFLINE,
+            vvm=self.host.vvm,
+            reason="link lost",
+            expected=VehicleStatus.ACTIVE,
+        )
 
     def link_check(self) -> None:
-        """The MAVLink link lost before is back: in service again."""
+        """The MAVLink link lost before is back: an RV offline for it is in service again;
+        one a person put into maintenance meanwhile stays there."""
         if not self._link_down or not getattr(self.driver, "link_ok", True):
             return
         self._link_down = False
-        vehicle = Vehicle.objects.get(pk=self.vehicle_id)
-        if vehicle.status == VehicleStatus.MAINTENANCE:
-            logger.warning("vehicle %s: link back, in service again", self.name, extra=self._log())
-            vehicle_set_status(vehicle=vehicle, status=VehicleStatus.ACTIVE, vvm=self.host.vvm)
+        logger.warning("vehicle %s: link back", self.name, extra=self._log())
+        vehicle_set_status(
+            vehicle=Vehicle(pk=self.vehicle_id),
+            status=VehicleStatus.ACTIVE,
+            vvm=self.host.vvm,
+            reason="link back",
+            expected=VehicleStatus.OFFLINE,
+        )
 
     def recover(self) -> None:
         """Take up whatever this RV was doing: VVs aboard, its open tasks, and any VV waiting
@@ -461,6 +473,7 @@ class HostedRV:
     def beacon(self, now: float) -> None:
         """Tell the live maps where the vehicle is, what it carries and where it goes next:
         when that changed, else now and then (a map forgets a state VEHICLE_STALE_S old)."""
+        self._note_health(now)
         state = self.loop.live_state(now)
         if self._told is not None and self._told[0] == state and now < self._told[1]:
             return
@@ -469,6 +482,22 @@ class HostedRV:
         publish_vehicle(
             state | {"id": self.vehicle_id, "name": self.name, "t": clock.epoch_ms(now) / 1000}
         )
+
+    def _note_health(self, now: float) -> None:
+        """Record the vehicle's health when it changed (the battery in steps of 5 %)."""
+        if isinstance(self.driver, MavlinkDriver):
+            health = self.driver.health()
+        else:
+            battery = self.loop.battery_fraction(now)
+            health = {
+                "link": "simulated",
+                "battery_pct": None if battery is None else round(battery * 100),
+            }
+        step = health.get("battery_pct")
+        seen = health | {"battery_pct": None if step is None else 5 * round(step / 5)}
+        if seen != self._health:
+            vehicle_record_health(vehicle_id=self.vehicle_id, health=health)
+            self._health = seen
 
     def close(self) -> None:
         self.rig.sensing.close()

@@ -111,6 +111,13 @@ class VehicleOutSerializer(serializers.ModelSerializer):
     vvs_aboard = StrictIntegerField(
         read_only=True, default=0, help_text="VVs on it that have not ended."
     )
+    health = serializers.DictField(
+        read_only=True,
+        help_text=(
+            "What its worker last saw: link (up, down, simulated), armed, mode, battery_pct, "
+            "fence (loaded, none), took_over (a pilot's or failsafe's mode, or null)."
+        ),
+    )
 
     class Meta:
         model = Vehicle
@@ -118,6 +125,10 @@ class VehicleOutSerializer(serializers.ModelSerializer):
             "id",
             "name",
             "status",
+            "status_reason",
+            "status_changed",
+            "health",
+            "health_changed",
             "driver",
             "driver_url",
             "depot",

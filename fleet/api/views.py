@@ -171,7 +171,12 @@ class VehicleViewSet(
 
     def _set_status(self, status_: VehicleStatus) -> Response:
         vehicle = self.get_object()
-        vehicle_set_status(vehicle=vehicle, status=status_, vvm=platform_vvm())
+        vehicle_set_status(
+            vehicle=vehicle,
+            status=status_,
+            vvm=platform_vvm(),
+            reason=f"set by {self.request.user.get_username()} over the API",
+        )
         return self._shown(vehicle)
 
     def destroy(self, request: Request, pk: str) -> Response:

@@ -618,6 +618,21 @@ class MavlinkDriver:
                 return self._flight_before_s
             return self._flight_before_s + max(0.0, t - since)
 
+    def health(self) -> dict[str, Any]:
+        """What an operator sees of the vehicle's health: the link, armed, the flight mode,
+        the battery's charge (%), whether the fence is on the autopilot, and the mode a pilot
+        or failsafe took it over in (None while the driver is in control)."""
+        beat = self.link.heartbeat
+        battery = self._battery
+        return {
+            "link": "up" if self.link_ok else "down",
+            "armed": None if beat is None else beat.armed,
+            "mode": None if beat is None else beat.mode,
+            "battery_pct": None if battery is None else round(battery * 100),
+            "fence": "loaded" if self.fence is not None else "none",
+            "took_over": self._took_over,
+        }
+
     def battery_fraction(self) -> float | None:
         """The battery's charge 0..1 from SYS_STATUS.battery_remaining (or BATTERY_STATUS),
         None while the vehicle has not reported one."""

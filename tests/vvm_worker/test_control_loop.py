@@ -37,7 +37,7 @@ class Store:
     def status(self) -> str:
         return ACTIVE
 
-    def set_status(self, status: str, *, expected: str | None = None) -> None:
+    def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
         raise AssertionError("no battery here")
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:

@@ -19,6 +19,8 @@ from tests.conftest import SCENARIOS
 from tests.fleet.mavlink.conftest import free_udp_port
 from tests.live import wait_for
 from tests.vvm_worker.test_distributed import KEYS, all_ended, load
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import vehicle_set_status
 
 pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
 
@@ -108,11 +110,12 @@ def test_a_link_cut_in_flight_hands_the_vv_to_another_rv_and_nothing_is_read_twi
     )
     sim.cut_link()  # the radio dies in flight
     wait_for(
-        lambda: Vehicle.objects.get(pk=heli.pk).status == VehicleStatus.MAINTENANCE,
+        lambda: Vehicle.objects.get(pk=heli.pk).status == VehicleStatus.OFFLINE,
         timeout=30,
-        what="the RV taken out of service",
+        what="the RV offline",
         details=workers.logs,
     )
+    assert Vehicle.objects.get(pk=heli.pk).status_reason == "link lost"
     wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
     vv = VirtualVehicle.objects.get()
     assert vv.status == VVStatus.FINISHED, vv.error
@@ -131,6 +134,48 @@ def test_a_link_cut_in_flight_hands_the_vv_to_another_rv_and_nothing_is_read_twi
         what="the RV back in service",
         details=workers.logs,
     )
+    assert Vehicle.objects.get(pk=heli.pk).status_reason == "link back"
+
+
+def test_maintenance_set_while_the_link_is_down_survives_the_links_return(
+    workers, copters, tmp_path: Path, monkeypatch
+) -> None:
+    """Issue 25: the link is the vehicle's health; maintenance is a person's decision."""
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    load(_vv1_only(data["vehicles"]), tmp_path, monkeypatch)
+    heli = Vehicle.objects.get(name="Heli One")
+    copters.append(sim := _mavlink(heli))
+    workers.env["CPCC_MAVLINK_LINK_TIMEOUT_S"] = "1"
+    workers.env["CPCC_LOG_LEVEL"] = "INFO"
+    workers.start("rvworker", "Heli One")
+    wait_for(
+        lambda: any("rv worker started" in p.read_text() for p in tmp_path.glob("*.log")),
+        timeout=60,
+        what="the RV worker",
+        details=workers.logs,
+    )
+    sim.cut_link()
+    wait_for(
+        lambda: Vehicle.objects.get(pk=heli.pk).status == VehicleStatus.OFFLINE,
+        timeout=30,
+        what="the RV offline",
+        details=workers.logs,
+    )
+    vehicle_set_status(
+        vehicle=heli,
+        status=VehicleStatus.MAINTENANCE,
+        vvm=platform_vvm(),
+        reason="propeller check",
+    )
+    sim.restore_link()
+    wait_for(
+        lambda: any("Heli One: link back" in p.read_text() for p in tmp_path.glob("*.log")),
+        timeout=30,
+        what="the worker to see the link back",
+        details=workers.logs,
+    )
+    heli.refresh_from_db()
+    assert (heli.status, heli.status_reason) == (VehicleStatus.MAINTENANCE, "propeller check")
 
 
 def test_a_vv_on_a_mavlink_rv_gets_the_readings_of_the_vehicles_own_sensors(

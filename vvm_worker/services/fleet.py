@@ -12,6 +12,7 @@ from typing import Any, TypedDict
 from django.core.exceptions import ValidationError
 from django.db import connection, transaction
 from django.db.models.functions import Now
+from django.utils import timezone
 
 from cpcc_site.prepared import deferred, update_row
 from fleet.geo import Position
@@ -90,8 +91,20 @@ def _validate_vehicle(vehicle: Vehicle) -> None:
     vehicle.full_clean()  # field ranges, a unique name, and the area (Vehicle.clean)
 
 
-def vehicle_set_status(*, vehicle: Vehicle, status: VehicleStatus, vvm: VVM) -> None:
-    """Put an RV into service, into maintenance, or remove it, without disturbing customers.
+def vehicle_set_status(
+    *,
+    vehicle: Vehicle,
+    status: VehicleStatus,
+    vvm: VVM,
+    reason: str = "",
+    expected: VehicleStatus | None = None,
+) -> bool:
+    """Put an RV into service, into maintenance, or remove it (a person's decisions), or
+    take it out of service while it recharges or cannot be flown (the platform's), without
+    disturbing customers; ``reason`` says why, for the operator. With ``expected``, only
+    from that status: the platform never overrides a person's decision (an RV put into
+    maintenance while its link was down stays there when the link returns). Returns whether
+    the status changed.
 
     The VVs aboard an RV that leaves service move to RVs that can serve their tasks, or wait
     on a ground station until one can; VVs waiting on a ground station are looked at again
@@ -99,10 +112,12 @@ def vehicle_set_status(*, vehicle: Vehicle, status: VehicleStatus, vvm: VVM) -> 
     """
     with transaction.atomic():
         vehicle = Vehicle.objects.select_for_update().get(pk=vehicle.pk)
-        if vehicle.status == status:
-            return
+        if vehicle.status == status or (expected is not None and vehicle.status != expected):
+            return False
         vehicle.status = status
-        vehicle.save(update_fields=["status", "updated"])
+        vehicle.status_reason = reason[: Vehicle._meta.get_field("status_reason").max_length]
+        vehicle.status_changed = timezone.now()
+        vehicle.save(update_fields=["status", "status_reason", "status_changed", "updated"])
         if status != VehicleStatus.ACTIVE:
             aboard = list(
                 vehicle.vvs.exclude(status__in=ENDED_STATUSES).values_list("pk", flat=True)
@@ -114,11 +129,12 @@ def vehicle_set_status(*, vehicle: Vehicle, status: VehicleStatus, vvm: VVM) -> 
             "vehicle %s: %s",
             vehicle.name,
             status,
-            extra={"vehicle": vehicle.name, "status": status},
+            extra={"vehicle": vehicle.name, "status": status, "reason": reason or None},
         )
         vvm.dispatcher.vehicle_changed(vehicle.pk)
     if status == VehicleStatus.ACTIVE:
         vehicle_register(vehicle=vehicle, vvm=vvm)
+    return True
 
 
 def vvs_reroute_waiting(*, vvm: VVM) -> None:
@@ -171,6 +187,13 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
             vvm.dispatcher.vv_arrived(vv.pk)
             newcomer = dataclasses.replace(newcomer, open_tasks=newcomer.open_tasks + len(tasks))
     vvm.dispatcher.vehicle_changed(vehicle.pk)
+
+
+def vehicle_record_health(*, vehicle_id: int, health: dict[str, Any]) -> None:
+    """What the RV's worker sees of the vehicle's health now (link, battery, armed, mode,
+    fence), for the operator: kept with the time it changed. Health never changes the
+    status a person set."""
+    Vehicle.objects.filter(pk=vehicle_id).update(health=health, health_changed=timezone.now())
 
 
 def vehicle_heartbeat(*, vehicle_id: int, vvm: VVM) -> None:

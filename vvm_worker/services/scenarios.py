@@ -257,7 +257,12 @@ def scenario_event_apply(
         vehicle_register(vehicle=vehicle, vvm=vvm)
         return vehicle
     vehicle = Vehicle.objects.get(name=event.vehicle)
-    vehicle_set_status(vehicle=vehicle, status=EVENT_STATUS[event.action], vvm=vvm)
+    vehicle_set_status(
+        vehicle=vehicle,
+        status=EVENT_STATUS[event.action],
+        vvm=vvm,
+        reason=f"the scenario's event at {event.at_s:g} s",
+    )
     return vehicle
 
 

@@ -9,7 +9,7 @@ import vvm_worker.services.fleet
 from fleet.models import Vehicle, VehicleStatus
 from missions.models import VVStatus
 from tests.factories import AREA_ONE, AREA_TWO, VehicleFactory
-from vvm_worker.services import vv_submit
+from vvm_worker.services import vehicle_record_health, vehicle_set_status, vv_submit
 
 NEW = {
     "name": "Heli Three",
@@ -225,3 +225,39 @@ def test_an_unknown_vehicle_is_a_404_that_says_which(api_staff, db) -> None:
     response = api_staff.post("/api/v1/vehicles/999/maintenance/")
     assert response.status_code == 404
     assert response.json() == {"detail": "No vehicle with id '999'."}
+
+
+def test_a_vehicle_shows_why_and_when_its_status_changed_and_its_health(
+    api_staff, heli_one
+) -> None:
+    url = f"/api/v1/vehicles/{heli_one.pk}/"
+    shown = api_staff.post(url + "maintenance/").json()
+    assert shown["status"] == "maintenance"
+    assert shown["status_reason"].startswith("set by ") and shown["status_reason"].endswith(
+        " over the API"
+    )
+    assert shown["status_changed"] is not None
+    assert (shown["health"], shown["health_changed"]) == ({}, None)  # no worker has looked
+    health = {"link": "down", "armed": True, "mode": "GUIDED", "battery_pct": 54}
+    vehicle_record_health(vehicle_id=heli_one.pk, health=health)
+    shown = api_staff.get(url).json()
+    assert shown["health"] == health and shown["health_changed"] is not None
+    assert shown["status"] == "maintenance"  # health does not touch the status
+
+
+@pytest.mark.django_db
+def test_the_platform_never_overrides_a_persons_decision(vvm_factory, heli_one) -> None:
+    vvm = vvm_factory()
+    vehicle_set_status(vehicle=heli_one, status=VehicleStatus.MAINTENANCE, vvm=vvm, reason="check")
+    # The link returns, a charge ends: each only from the status the platform set itself.
+    for status, expected in [
+        (VehicleStatus.ACTIVE, VehicleStatus.OFFLINE),
+        (VehicleStatus.ACTIVE, VehicleStatus.CHARGING),
+        (VehicleStatus.OFFLINE, VehicleStatus.ACTIVE),
+    ]:
+        changed = vehicle_set_status(
+            vehicle=heli_one, status=status, vvm=vvm, reason="platform", expected=expected
+        )
+        assert not changed
+    heli_one.refresh_from_db()
+    assert (heli_one.status, heli_one.status_reason) == (VehicleStatus.MAINTENANCE, "check")
