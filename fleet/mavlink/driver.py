@@ -174,6 +174,11 @@ class MavlinkDriver:
             else None
         )
         self.fence: Fence | None = None  # what the autopilot was given last
+        # Set while what the old connection said is stale (the link came back, the autopilot
+        # restarted): no command is sent and the link does not count as up until it is read
+        # again (``_resync``).
+        self._resync_due = threading.Event()
+        self._boot_ms: int | None = None  # the autopilot's uptime as last reported
 
         self._lock = threading.RLock()
         self._command_lock = threading.Lock()  # one flight command sequence at a time
@@ -237,30 +242,7 @@ class MavlinkDriver:
                 self.link.add_listener("HOME_POSITION", self._on_home),
             ]
             self._on_heartbeat_state(beat.armed, beat.mode)
-            self.link.set_message_interval(
-                mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, self.telemetry_hz
-            )
-            for message_id, rate_hz in (
-                (mavlink.MAVLINK_MSG_ID_SYS_STATUS, 1.0),
-                (mavlink.MAVLINK_MSG_ID_BATTERY_STATUS, 1.0),
-                (mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 1.0),
-                (mavlink.MAVLINK_MSG_ID_HEARTBEAT, 1.0),
-                (mavlink.MAVLINK_MSG_ID_STATUSTEXT, 1.0),
-                # What its sensors' readings come from (fleet.sources: telemetry).
-                (mavlink.MAVLINK_MSG_ID_GPS_RAW_INT, 1.0),
-                (mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE, 2.0),
-            ):
-                try:
-                    self.link.set_message_interval(message_id, rate_hz)
-                except MavlinkError as exc:
-                    logger.info("%s: message %d rate not set: %s", self.name, message_id, exc)
-            try:
-                self.link.request_message(mavlink.MAVLINK_MSG_ID_HOME_POSITION)
-            except MavlinkError as exc:
-                logger.warning("%s: no HOME_POSITION: %s", self.name, exc)
-            if self._fence_request is not None:
-                area, low, high, exclusions, rally = self._fence_request
-                self.upload_fence(area, low, high, exclusions=exclusions, rally=rally)
+            self._set_up()
         except BaseException:
             self.close()
             raise
@@ -269,6 +251,47 @@ class MavlinkDriver:
             target=self._guidance_loop, name=f"mavlink-guidance {self.name}", daemon=True
         )
         self._guidance.start()
+
+    def _set_up(self) -> None:
+        """What the vehicle is asked for on every connection (the first, and each time the
+        link returns or the autopilot restarts): the telemetry rates, its home, the fence."""
+        self.link.set_message_interval(
+            mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, self.telemetry_hz
+        )
+        for message_id, rate_hz in (
+            (mavlink.MAVLINK_MSG_ID_SYS_STATUS, 1.0),
+            (mavlink.MAVLINK_MSG_ID_BATTERY_STATUS, 1.0),
+            (mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 1.0),
+            (mavlink.MAVLINK_MSG_ID_HEARTBEAT, 1.0),
+            (mavlink.MAVLINK_MSG_ID_STATUSTEXT, 1.0),
+            # What its sensors' readings come from (fleet.sources: telemetry).
+            (mavlink.MAVLINK_MSG_ID_GPS_RAW_INT, 1.0),
+            (mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE, 2.0),
+        ):
+            try:
+                self.link.set_message_interval(message_id, rate_hz)
+            except MavlinkError as exc:
+                logger.info("%s: message %d rate not set: %s", self.name, message_id, exc)
+        try:
+            self.link.request_message(mavlink.MAVLINK_MSG_ID_HOME_POSITION)
+        except MavlinkError as exc:
+            logger.warning("%s: no HOME_POSITION: %s", self.name, exc)
+        if self._fence_request is not None:
+            area, low, high, exclusions, rally = self._fence_request
+            self.upload_fence(area, low, high, exclusions=exclusions, rally=rally)
+
+    def _resync(self) -> None:
+        """The link is back (or the autopilot restarted): forget what the old connection
+        said of the vehicle's state, read it fresh and set the vehicle up again."""
+        with self._lock:
+            self._landed_state = None
+            self._on_ground_since = None
+        beat = self.link.heartbeat
+        if beat is not None:
+            self._on_heartbeat_state(beat.armed, beat.mode)
+        self._set_up()
+        logger.warning("%s: link resynchronised (telemetry, home, fence)", self.name)
+        self._resync_due.clear()
 
     def close(self) -> None:
         """Stop the guidance thread and close the link (idempotent). The vehicle keeps doing
@@ -285,8 +308,14 @@ class MavlinkDriver:
 
     @property
     def link_ok(self) -> bool:
-        """Whether the vehicle's heartbeat is fresh."""
-        return self.link.link_ok
+        """Whether the vehicle's heartbeat is fresh and what the driver knows of it is
+        current (not during the resynchronisation after the link returned)."""
+        return self.link.link_ok and not self._resync_due.is_set()
+
+    @property
+    def uptime_s(self) -> float | None:
+        """How long the autopilot has been up, as its last position report said."""
+        return None if self._boot_ms is None else self._boot_ms / 1000
 
     @property
     def autopilot(self) -> Autopilot:
@@ -327,6 +356,7 @@ class MavlinkDriver:
             raise ValueError(
                 f"max altitude {max_altitude_m!r} must be above min altitude {min_altitude_m!r}"
             )
+        self._fence_request = (area, min_altitude_m, max_altitude_m, exclusions, rally)
         items = fence_polygon_items(area)
         for ring in exclusions:
             items += fence_polygon_items(ring, exclusion=True, first_seq=len(items))
@@ -680,6 +710,8 @@ class MavlinkDriver:
     def _check_usable(self, *, returning_ok: bool) -> None:
         if not self.link.link_ok:
             raise LinkLost(f"{self.name}: the link to the vehicle is down")
+        if self._resync_due.is_set():  # never a command on what the old connection said
+            raise LinkLost(f"{self.name}: the link is back, the vehicle's state not read yet")
         taken = self._took_over
         if taken is not None and not (returning_ok and taken in _RETURN_MODES):
             raise VehicleTookOver(taken)
@@ -800,6 +832,10 @@ class MavlinkDriver:
             if self._stop.is_set():
                 return
             try:
+                if self._resync_due.is_set():
+                    if self.link.link_ok:
+                        self._resync()
+                    continue
                 self._guide(px4)
             except MavlinkError as exc:
                 logger.warning("%s: guidance: %s", self.name, exc)
@@ -888,6 +924,16 @@ class MavlinkDriver:
                 logger.warning("%s: the vehicle switched to %s by itself", self.name, mode)
 
     def _on_position(self, msg: Any) -> None:
+        booted, self._boot_ms = self._boot_ms, int(msg.time_boot_ms)
+        if booted is not None and self._boot_ms + 250 < booted:  # uptime went back
+            logger.warning(
+                "%s: the autopilot restarted (up %.0f s, was %.0f s): resynchronising",
+                self.name,
+                self._boot_ms / 1000,
+                booted / 1000,
+            )
+            self._resync_due.set()
+            self._wake.set()
         if msg.lat == 0 and msg.lon == 0:
             return  # ArduPilot reports 0, 0 until it has a position
         try:
@@ -934,7 +980,9 @@ class MavlinkDriver:
             self.on_link_lost()
 
     def _on_link_regained(self) -> None:
-        logger.warning("%s: link regained", self.name)
+        logger.warning("%s: link regained: resynchronising", self.name)
+        self._resync_due.set()
+        self._wake.set()
 
 
 def _is(kind: str) -> Callable[[Any], bool]:

@@ -302,3 +302,39 @@ def test_at_speed_zero_every_flight_ends_at_once(
     assert sim.sim_now() == pytest.approx(takeoff + out + home)
     assert sim.flight_s() == pytest.approx(takeoff + out + home)
     assert sim.battery_fraction() == pytest.approx(1 - sim.flight_s() / SPEC.battery_s)
+
+
+@pytest.mark.parametrize("link_timeout_s", [2.0, 30.0], ids=["link-lost", "quick-reboot"])
+def test_a_restarted_autopilot_is_set_up_again_and_commanded_only_on_fresh_state(
+    make_sim: Callable[..., MavSim],
+    make_driver: Callable[..., MavlinkDriver],
+    link_timeout_s: float,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Issue 25: after the autopilot restarts (noticed by a lost link, or by its uptime
+    going back), the worker asks for telemetry, home and the fence again before it commands."""
+    first = make_sim(speed=SPEED)
+    driver = make_driver(
+        area=AREA, min_altitude_m=10.0, max_altitude_m=120.0, link_timeout_s=link_timeout_s
+    )
+    # Up a while, as a real autopilot is before it restarts.
+    wait_until(lambda: (driver.uptime_s or 0) > 1.5, what="a second and a half of uptime")
+    assert first.fence_polygons() == [[tuple(p) for p in AREA[:4]]]
+    first.stop()
+    if link_timeout_s < 10:
+        wait_until(lambda: not driver.link_ok, what="the link lost")
+    # A fresh autopilot on the same port: no fence, default rates, up for a moment only.
+    again = make_sim(speed=SPEED)
+    assert again.fence_polygons() == []
+    wait_until(lambda: again.fence_polygons(), timeout=15, what="the fence uploaded again")
+    assert again.fence_polygons() == [[tuple(p) for p in AREA[:4]]]
+    assert again.message_interval_s(mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT) == 1 / TELEMETRY_HZ
+    wait_until(lambda: driver.link_ok, what="the link usable again")
+    assert again.commands_seen(mavlink.MAV_CMD_COMPONENT_ARM_DISARM) == []
+    assert "resynchronised" in caplog.text
+    # And it flies as before (to a point inside its fence).
+    clock = driver.clock
+    inside = offset(DEPOT, north_m=-150, east_m=150, up_m=40)
+    arrival = driver.fly_to(inside, clock())
+    wait_until(lambda: driver.has_arrived(inside, 2.0, clock()), timeout=15, what="the target")
+    assert clock() >= arrival - LATE_S

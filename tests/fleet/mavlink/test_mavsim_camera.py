@@ -89,7 +89,7 @@ def test_capture_an_image_and_fetch_it(sim: MavSim, gcs: Station) -> None:
         assert response.headers["Content-Type"] == "image/png"
         png = response.read()
     assert Image.open(io.BytesIO(png)).size == (640, 480)
-    # The catalog's "Camera 640x480" at the capture's place and time, in mavsim's world.
+    # The catalog's "Camera 640x480" at the capture's place, time and heading, in mavsim's world.
     shot = sim.camera_captures()[0].shot
     assert distance_m(shot.position, target) < 0.5
     spec = SensorSpec(
@@ -98,7 +98,8 @@ def test_capture_an_image_and_fetch_it(sim: MavSim, gcs: Station) -> None:
         "",
         {"width": 640, "height": 480, "format": "png", "view": "front"},
     )
-    assert png == render_camera(spec, shot.position, shot.time_s, seed=SEED)
+    heading = shot.heading_deg or 0.0  # still turning onto the spot, or facing north
+    assert png == render_camera(spec, shot.position, shot.time_s, seed=SEED, heading_deg=heading)
 
     # The next image gets the next index; one not taken is not there.
     assert camera_command(gcs, start, 0, 0, 1) == 0
