@@ -64,6 +64,8 @@ def _age(seconds: float) -> str:
 def _health_text(health: dict[str, Any]) -> str:
     """A vehicle's health in a few words: "link up · armed · GUIDED · fence loaded"."""
     parts = []
+    if health.get("worker"):
+        parts.append(f"worker {health['worker']}")
     if health.get("link"):
         parts.append(f"link {health['link']}")
     if health.get("armed") is not None:

@@ -52,6 +52,7 @@ from vvm_worker.services import (
     vehicle_register,
     vehicle_set_status,
     vehicles_check_leases,
+    vehicles_worker_stopped,
     vv_admit_queued,
     vv_advance,
     vvs_reroute_waiting,
@@ -245,6 +246,9 @@ class RVHost:
             self.scheduler.run()
             try:  # what the loops said last, for the next start and the API
                 self._each(lambda rv: rv.rig.store.write_waiting(), "report")
+                # The operator sees at once that nobody drives them (their VVs move on
+                # when the lease runs out, unless the worker is back by then).
+                vehicles_worker_stopped(vehicle_ids=list(self.rvs))
             except Exception:
                 logger.warning("the vehicles' last reports are lost: the database is away")
             self.vvm.announcer.close()

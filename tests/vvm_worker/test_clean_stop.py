@@ -16,6 +16,7 @@ import pytest
 import requests
 from rest_framework.authtoken.models import Token
 
+from fleet.models import Vehicle
 from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.factories import (
     AREA_ONE,
@@ -160,6 +161,8 @@ def test_workers_stopped_with_sigterm_mid_mission_exit_0_and_the_vvs_finish_afte
     logs = workers.logs()
     assert statuses == {"Heli One": 0, "Heli Two": 0, "GS Base": 0}, logs
     assert "Fatal Python error" not in logs
+    # The operator sees at once that nobody drives the RVs.
+    assert {v.health.get("worker") for v in Vehicle.objects.all()} == {"stopped"}
     assert not all_ended(), "the mission ended before the stop: it tested nothing"
     assert VirtualVehicle.objects.filter(status=VVStatus.FINISHED).count() < 3
     workers.start("rvworker", "Heli One")

@@ -58,6 +58,7 @@ from vvm_worker.services.fleet import (
     vehicle_set_status,
     vehicle_update,
     vehicles_check_leases,
+    vehicles_worker_stopped,
     vvs_reroute_waiting,
 )
 from vvm_worker.services.journal import JournalView
@@ -137,6 +138,7 @@ __all__ = [
     "vehicle_set_status",
     "vehicle_update",
     "vehicles_check_leases",
+    "vehicles_worker_stopped",
     "vv_admit_queued",
     "vv_advance",
     "vv_cancel",

@@ -196,6 +196,14 @@ def vehicle_record_health(*, vehicle_id: int, health: dict[str, Any]) -> None:
     Vehicle.objects.filter(pk=vehicle_id).update(health=health, health_changed=timezone.now())
 
 
+def vehicles_worker_stopped(*, vehicle_ids: Sequence[int]) -> None:
+    """The worker of these RVs stopped cleanly: their health says so until a worker reports
+    again (what the link and the battery were is not known any more)."""
+    Vehicle.objects.filter(pk__in=vehicle_ids).update(
+        health={"worker": "stopped"}, health_changed=timezone.now()
+    )
+
+
 def vehicle_heartbeat(*, vehicle_id: int, vvm: VVM) -> None:
     """The vehicle's worker is alive (it renews its lease). The time is the database's: a
     worker whose clock is behind or ahead renews its lease all the same (``online_vehicles``
