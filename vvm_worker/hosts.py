@@ -365,6 +365,7 @@ class HostedRV:
                 link_timeout_s=settings.CPCC_MAVLINK_LINK_TIMEOUT_S,
                 on_link_lost=self._link_lost_later,
                 name=vehicle.name,
+                gcs_failsafe_s=settings.CPCC_GCS_FAILSAFE_S,
             )
             driver.connect(timeout_s=settings.CPCC_MAVLINK_CONNECT_S)
         self.rig = build_rig(

@@ -128,6 +128,9 @@ class MavlinkDriver:
     ``upload_fence``). ``clock``: the platform clock. ``telemetry_hz``: the GLOBAL_POSITION_INT rate
     to ask for. ``arrival_tolerance_m``: how close counts as "there" for ``phase_at``.
     ``on_link_lost``: called (on the link's thread) when the heartbeat stops.
+    ``gcs_failsafe_s``: the autopilot's GCS failsafe is turned on (return home when it hears
+    no ground station for this long: the worker stopped, the link died) on every connection;
+    an autopilot that cannot is not flown. None: left as the autopilot has it.
     """
 
     def __init__(
@@ -149,6 +152,7 @@ class MavlinkDriver:
         arrival_tolerance_m: float = 1.0,
         on_link_lost: Callable[[], None] | None = None,
         name: str = "",
+        gcs_failsafe_s: float | None = None,
     ) -> None:
         if isinstance(connection, MavlinkLink):
             self.link = connection
@@ -167,6 +171,7 @@ class MavlinkDriver:
         self.telemetry_hz = telemetry_hz
         self.arrival_tolerance_m = arrival_tolerance_m
         self.on_link_lost = on_link_lost
+        self.gcs_failsafe_s = gcs_failsafe_s
         self.name = name or str(self.link.endpoint)
         self._fence_request = (
             (area, min_altitude_m, max_altitude_m, exclusions, rally)
@@ -279,6 +284,27 @@ class MavlinkDriver:
         if self._fence_request is not None:
             area, low, high, exclusions, rally = self._fence_request
             self.upload_fence(area, low, high, exclusions=exclusions, rally=rally)
+        self._arm_gcs_failsafe()
+
+    def _arm_gcs_failsafe(self) -> None:
+        """Turn the autopilot's GCS failsafe on (home when no ground station is heard for
+        ``gcs_failsafe_s``): ArduCopter's FS_GCS_ENABLE (1, RTL, unless another action is
+        set) and FS_GCS_TIMEOUT, PX4's NAV_DLL_ACT (2, Return, unless set) and COM_DL_LOSS_T.
+        What the autopilot refuses raises (no flight without it)."""
+        if self.gcs_failsafe_s is None:
+            return
+        if self.autopilot is Autopilot.PX4:
+            enable, action, timeout = "NAV_DLL_ACT", 2, "COM_DL_LOSS_T"
+        else:
+            enable, action, timeout = "FS_GCS_ENABLE", 1, "FS_GCS_TIMEOUT"
+        if self.link.param_get(enable) == 0:
+            self.link.param_set(enable, action)
+        self.link.param_set(timeout, self.gcs_failsafe_s)
+        logger.info(
+            "%s: GCS failsafe on: home after %g s without the platform",
+            self.name,
+            self.gcs_failsafe_s,
+        )
 
     def _resync(self) -> None:
         """The link is back (or the autopilot restarted): forget what the old connection

@@ -216,3 +216,34 @@ def test_a_vv_on_a_mavlink_rv_gets_the_readings_of_the_vehicles_own_sensors(
             where = reading["position"]
             here = Position(where["lat"], where["lng"], where["alt"])
             assert distance_m(here, task.position) <= task.tolerance_m + 0.5
+
+
+def test_a_stopped_workers_drone_returns_home_by_the_autopilots_failsafe(
+    workers, copters, tmp_path: Path, monkeypatch
+) -> None:
+    """Issue 25: the worker turns the GCS failsafe on; when it stops, the autopilot hears no
+    ground station and flies home by itself."""
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    load(_vv1_only(data["vehicles"]), tmp_path, monkeypatch)
+    heli = Vehicle.objects.get(name="Heli One")
+    copters.append(sim := _mavlink(heli))
+    workers.env["CPCC_GCS_FAILSAFE_S"] = "2"
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    wait_for(
+        lambda: sim.param("FS_GCS_ENABLE") == 1 and sim.param("FS_GCS_TIMEOUT") == 2,
+        timeout=60,
+        what="the GCS failsafe turned on",
+        details=workers.logs,
+    )
+    wait_for(
+        lambda: not sim.on_ground and distance_m(sim.position(), heli.depot) > 30,
+        timeout=120,
+        what="the copter on its way",
+        details=workers.logs,
+    )
+    assert workers.terminate("Heli One") == 0
+    wait_for(lambda: sim.mode == "RTL", timeout=30, what="the failsafe's RTL")
+    assert "GCS Failsafe" in sim.texts_sent()
+    wait_for(lambda: sim.on_ground, timeout=120, what="the copter landed")
+    assert distance_m(sim.position(), heli.depot) < 2.0

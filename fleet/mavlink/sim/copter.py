@@ -149,6 +149,7 @@ class MavSim:
             send=send,
             text=self._text,
             wall=self._wall,
+            gcs_seen=lambda: self._telemetry.gcs_seen_wall,
         )
         sensors = FieldSensors(field_seed)
         self._telemetry = Telemetry(

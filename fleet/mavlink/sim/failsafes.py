@@ -1,7 +1,9 @@
 """What the autopilot checks on every tick and does by itself: the fence (ArduCopter's
 Copter::fence_check and FENCE_ACTION), the battery (a warning when low, landing when empty:
-ArduPilot's battery failsafe), disarming when armed on the ground too long (DISARM_DELAY,
-PX4's COM_DISARM_PRFLT) and PX4 leaving offboard when the setpoints stop (COM_OF_LOSS_T)."""
+ArduPilot's battery failsafe), the ground station gone silent (ArduCopter's GCS failsafe,
+FS_GCS_ENABLE and FS_GCS_TIMEOUT; PX4's data link loss, NAV_DLL_ACT and COM_DL_LOSS_T: home),
+disarming when armed on the ground too long (DISARM_DELAY, PX4's COM_DISARM_PRFLT) and PX4
+leaving offboard when the setpoints stop (COM_OF_LOSS_T)."""
 
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ class Failsafes:
         send: Callable[[Build], None],
         text: Callable[[int, str], None],
         wall: Callable[[], float],
+        gcs_seen: Callable[[], float | None],
     ) -> None:
         self._commander = commander
         self._flight = flight
@@ -43,12 +46,15 @@ class Failsafes:
         self._send = send
         self._text = text
         self._wall = wall
+        self._gcs_seen = gcs_seen
         self.fence_status = FenceStatus()
+        self.gcs_failsafe = False  # on since the ground station went silent
 
     def check(self) -> None:
         now = self._flight.now()
         self._check_fence(now)
         self._check_battery(now)
+        self._check_gcs(now)
         self._check_auto_disarm()
         self._check_setpoint_stream()
 
@@ -91,6 +97,32 @@ class Failsafes:
             flight.battery_failsafe = True
             self._text(mavlink.MAV_SEVERITY_CRITICAL, "Battery 1 is critical: landing")
             self._commander.land_now(now)
+
+    def _check_gcs(self, now: float) -> None:
+        """No heartbeat from a ground station for the timeout, with the failsafe on and a
+        ground station heard before: an armed vehicle in the air returns home (one on the
+        ground disarms), once; heartbeats again clear it (the vehicle keeps returning)."""
+        f, commander, flight = self._flavour, self._commander, self._flight
+        enable, timeout = f.gcs_failsafe_params
+        seen = self._gcs_seen()
+        if not self._params.value(enable) or seen is None:
+            return
+        silent = self._wall() - seen > self._params.value(timeout)
+        if not silent:
+            if self.gcs_failsafe:
+                self.gcs_failsafe = False
+                self._text(mavlink.MAV_SEVERITY_INFO, "GCS Failsafe Cleared")
+            return
+        if self.gcs_failsafe or not commander.armed:
+            return
+        self.gcs_failsafe = True
+        self._text(mavlink.MAV_SEVERITY_CRITICAL, "GCS Failsafe")
+        if flight.on_ground:
+            commander.stop_motors()
+        elif commander.mode not in (f.rtl, f.land) and (
+            commander.change_mode(f.rtl) != mavlink.MAV_RESULT_ACCEPTED
+        ):
+            commander.change_mode(f.land)
 
     def _check_auto_disarm(self) -> None:
         commander = self._commander

@@ -35,6 +35,8 @@ class Flavour:
     speed_params: tuple[tuple[str, str, float], ...]  # (param, spec field, unit in m/s)
     rtl_alt_param: tuple[str, float]  # (param, unit in metres)
     disarm_delay_param: str
+    # The GCS (data link) failsafe: the parameter that turns it on (0: off) and its timeout.
+    gcs_failsafe_params: tuple[str, str]
 
 
 ARDUCOPTER = Flavour(
@@ -61,6 +63,7 @@ ARDUCOPTER = Flavour(
     ),
     rtl_alt_param=("RTL_ALT", 0.01),
     disarm_delay_param="DISARM_DELAY",
+    gcs_failsafe_params=("FS_GCS_ENABLE", "FS_GCS_TIMEOUT"),
 )
 PX4 = Flavour(
     autopilot=Autopilot.PX4,
@@ -86,6 +89,7 @@ PX4 = Flavour(
     ),
     rtl_alt_param=("RTL_RETURN_ALT", 1.0),
     disarm_delay_param="COM_DISARM_PRFLT",
+    gcs_failsafe_params=("NAV_DLL_ACT", "COM_DL_LOSS_T"),
 )
 FLAVOURS = {"ardupilot": ARDUCOPTER, "px4": PX4}
 
@@ -120,6 +124,8 @@ def initial_params(
             "RTL_RETURN_ALT": Param(spec.takeoff_alt_m, real),
             "COM_DISARM_PRFLT": Param(10.0, real),
             "MAV_SYS_ID": Param(float(system_id), int32),
+            "NAV_DLL_ACT": Param(0, int32),  # data link loss: disabled, as PX4 ships
+            "COM_DL_LOSS_T": Param(10.0, real),
         }
     return {
         "FENCE_ENABLE": Param(0, int8),
@@ -136,5 +142,6 @@ def initial_params(
         "RTL_ALT": Param(round(spec.takeoff_alt_m * 100), int32),
         "DISARM_DELAY": Param(10, int8),
         "SYSID_THISMAV": Param(float(system_id), int16),
-        "FS_GCS_ENABLE": Param(0, int8),
+        "FS_GCS_ENABLE": Param(0, int8),  # off, as ArduCopter ships
+        "FS_GCS_TIMEOUT": Param(5.0, real),
     }

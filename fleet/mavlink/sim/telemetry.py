@@ -155,6 +155,7 @@ class Telemetry:
         self._send = send
         self._wall = wall
         self.gcs_heartbeats = 0  # received from ground stations and companions
+        self.gcs_seen_wall: float | None = None  # when the last of them came (wall clock)
         self._gcs_seen: set[tuple[int, int]] = set()
         self._announced: tuple[bool, str] | None = None  # (armed, mode) of the last HEARTBEAT
         self.streams = Streams(
@@ -200,6 +201,7 @@ class Telemetry:
         if msg.type not in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER):
             return
         self.gcs_heartbeats += 1
+        self.gcs_seen_wall = self._wall()
         source = reply_to(msg)
         if source not in self._gcs_seen:
             self._gcs_seen.add(source)

@@ -5,6 +5,7 @@ the global and the local frame, and the refusals a ground station sees."""
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Iterator
 
 import pytest
@@ -177,3 +178,29 @@ def test_position_targets_in_the_local_ned_frame(sim: MavSim, gcs: Station) -> N
         round(there.lat * 1e7), round(there.lng * 1e7), 15, 0, 0, 0, 0, 0, 0, 0, 0,
     )  # fmt: skip
     wait_until(at(sim, there), what="the global target")
+
+
+def test_a_silent_ground_station_sends_the_copter_home_by_its_gcs_failsafe(
+    sim: MavSim, gcs: Station
+) -> None:
+    """ArduCopter's GCS failsafe (FS_GCS_ENABLE, FS_GCS_TIMEOUT): off as it ships; on, a
+    ground station silent for the timeout sends the flying copter home, which lands there."""
+    gcs.conn.param_set_send("FS_GCS_ENABLE", 1)
+    gcs.conn.param_set_send("FS_GCS_TIMEOUT", 2.0)
+    gcs.wait("PARAM_VALUE", lambda m: m.param_id == "FS_GCS_TIMEOUT")
+    assert sim.param("FS_GCS_ENABLE") == 1
+    gcs.take_off(sim, 30)
+    target = offset(DEPOT, north_m=-300, east_m=150, up_m=30)
+    assert gcs.guided_item(mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, target, 30) == 0
+    wait_until(lambda: distance_m(sim.position(), DEPOT) > 50, what="the copter away")
+    # The ground station goes silent (its last heartbeat now), the copter flies on for the
+    # timeout, then returns.
+    gcs.wait("HEARTBEAT")
+    silent = time.monotonic()
+    wait_until(lambda: sim.mode == "RTL", timeout=8, what="RTL")
+    assert time.monotonic() - silent > 1.0
+    assert "GCS Failsafe" in sim.texts_sent()
+    wait_until(lambda: sim.on_ground and not sim.armed, timeout=30, what="the landing")
+    assert distance_m(sim.position(), DEPOT) < 1.0
+    # Heard again: cleared (the copter stays where the failsafe left it).
+    gcs.wait("STATUSTEXT", lambda m: m.text.startswith("GCS Failsafe Cleared"), timeout=5)

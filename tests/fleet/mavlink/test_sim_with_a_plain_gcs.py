@@ -166,10 +166,10 @@ def test_the_parameter_protocol(sim: MavSim, gcs: Gcs) -> None:
     gcs.wait("HEARTBEAT")
     gcs.mav.param_request_list_send(1, 1)
     names = set()
-    while len(names) < 15:
+    while len(names) < 16:
         value = gcs.wait("PARAM_VALUE")
         names.add(value.param_id)
-        assert value.param_count == 15
+        assert value.param_count == 16
     assert {"FENCE_ENABLE", "FENCE_ALT_MAX", "FENCE_TYPE", "BATT_CAPACITY", "WPNAV_SPEED"} <= names
 
     gcs.mav.param_request_read_send(1, 1, b"WPNAV_SPEED", -1)
