@@ -71,9 +71,11 @@ class Sample:
 class Driver(Protocol):
     """The vehicle link: commands (which may raise ``DriverError``) and what the vehicle
     reports or the kinematics estimate, at platform time ``t`` (seconds). ``depot``: where it
-    takes off and lands."""
+    takes off and lands. ``measures_battery``: its battery's charge is measured (telemetry),
+    not estimated from the time flown."""
 
     depot: Position
+    measures_battery: bool
 
     def fly_to(self, target: Position, now_s: float) -> float:
         """Send the vehicle to ``target``; returns the estimated arrival time."""

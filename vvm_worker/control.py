@@ -19,6 +19,7 @@ task and home with its reserve sends it home to recharge, out of service meanwhi
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import logging
 from collections.abc import Callable, Sequence
@@ -47,6 +48,8 @@ REACH_SLACK_M = 1e-3
 # when this late.
 ARRIVAL_POLL_S = 0.2
 ARRIVAL_OVERDUE_S = 60.0
+# A vehicle whose battery is measured is looked at this often while it charges.
+CHARGE_POLL_S = 1.0
 # Altitudes of this many tasks served last place the standby position.
 RECENT_TASKS = 20
 # A turn point of a way around a no-fly zone is passed within this (ArduCopter's default
@@ -158,6 +161,9 @@ class LoopConfig:
     battery_s: float | None = None
     reserve: float = 0.0  # a fraction of battery_s never planned away
     recharge_s: float = 0.0
+    # A measured battery (a real vehicle's) is charged when it reports this much: a swap is
+    # seen at once, and a battery still low keeps the vehicle out of service.
+    resume: float = 0.9
     standby_s: float = 0.0
     live: bool = False  # someone watches the map: keep the route up to date at every change
     # A wake-up that finds the vehicle at its target with the arrival due (the leg flown, its
@@ -361,9 +367,40 @@ class ControlLoop:
         self.status = CHARGING
 
     def _charge(self, now: float) -> None:
-        if self._charged_at is None:
-            self._charged_at = self.driver.recharge(now, self.config.recharge_s)
-            self.scheduler.call_at(self._charged_at, self._charged)
+        if self._charged_at is not None:
+            return
+        if self.driver.measures_battery:
+            self._charged_at = now  # under way until the vehicle reports a charged battery
+            logger.info(
+                "%s: waiting for a charged battery (%s, back in service from %.0f %%)",
+                self.name,
+                _percent(self.battery_fraction(now)),
+                100 * self.config.resume,
+                extra=self._log(),
+            )
+            self.scheduler.call_at(now + CHARGE_POLL_S, self._charge_check)
+            return
+        self._charged_at = self.driver.recharge(now, self.config.recharge_s)
+        self.scheduler.call_at(self._charged_at, self._charged)
+
+    def _charge_check(self) -> None:
+        """A measured battery: back into service when it reports ``config.resume`` or more
+        (charged, or swapped), else look again; nothing more once the RV left ``charging``
+        (a person decided otherwise)."""
+        now = self.clock()
+        if self.store.status() != CHARGING:
+            self._charged_at = None
+            return
+        fraction = self.battery_fraction(now)
+        if fraction is None or fraction >= self.config.resume:
+            self._charged()
+            return
+        self.scheduler.call_at(now + CHARGE_POLL_S, self._charge_check)
+
+    def set_battery(self, battery_s: float | None) -> None:
+        """The vehicle's endurance was reconfigured: plan with it from now on."""
+        self.config = dataclasses.replace(self.config, battery_s=battery_s)
+        self.reserve_s = self.config.reserve * battery_s if battery_s else 0.0
 
     def _charged(self) -> None:
         self._charged_at = None
@@ -578,6 +615,10 @@ class ControlLoop:
             return  # the store says all this already (a second look at the same moment)
         self.store.record_state(state, moved=moved)
         self._last_state = state  # only once recorded: work redone after an outage records it
+
+
+def _percent(fraction: float | None) -> str:
+    return "not reported" if fraction is None else f"{100 * fraction:.0f} %"
 
 
 def _same_report(a: VehicleState, b: VehicleState) -> bool:

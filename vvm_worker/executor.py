@@ -574,6 +574,7 @@ def build_rig(
             battery_s=spec.battery_s,
             reserve=settings.CPCC_BATTERY_RESERVE,
             recharge_s=settings.CPCC_RECHARGE_S / scale,
+            resume=settings.CPCC_BATTERY_RESUME,
             standby_s=settings.CPCC_STANDBY_S / scale,
             live=live,
             wake_defers_to_arrival=wake_defers_to_arrival,

@@ -383,6 +383,8 @@ class HostedRV:
         self.driver = self.rig.driver
         self.loop = self.rig.loop
         self._sources = vehicle.sensor_sources  # as the rig's sensing reads them
+        self._scale = scale
+        self._battery_s = vehicle.battery_s  # as the loop and the driver plan with it
         self._health: dict[str, Any] | None = None  # as last recorded
         # What the map was told last (without its time) and when: an RV whose state does not
         # change (landed, idle) is told again only every BEACON_KEYFRAME_S.
@@ -416,6 +418,11 @@ class HostedRV:
                     )
                 except MavlinkError:
                     logger.exception("geofence not uploaded", extra=self._log())
+        if vehicle.battery_s != self._battery_s:  # a new battery, configured: no restart
+            spec = kinematics(vehicle, scale=self._scale)
+            self.driver.spec = spec
+            self.loop.set_battery(spec.battery_s)
+            self._battery_s = vehicle.battery_s
         self.rig.fly_in(fleet_airspace())
         self.rig.store.changed()
         self.loop.wake()

@@ -172,6 +172,7 @@ class MavlinkDriver:
         self.arrival_tolerance_m = arrival_tolerance_m
         self.on_link_lost = on_link_lost
         self.gcs_failsafe_s = gcs_failsafe_s
+        self.measures_battery = True  # SYS_STATUS, BATTERY_STATUS
         self.name = name or str(self.link.endpoint)
         self._fence_request = (
             (area, min_altitude_m, max_altitude_m, exclusions, rally)

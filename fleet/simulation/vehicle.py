@@ -111,6 +111,7 @@ class SimVehicle:
             raise ValueError(f"now_s must be a finite number, got {now_s!r}")
         self.spec = spec
         self.depot = depot
+        self.measures_battery = False  # its battery is the time it has flown
         self._command_s = now_s
         self._steps: list[_Step] = []
         # Parallel list of leg start times, kept for bisect.

@@ -247,3 +247,38 @@ def test_a_stopped_workers_drone_returns_home_by_the_autopilots_failsafe(
     assert "GCS Failsafe" in sim.texts_sent()
     wait_for(lambda: sim.on_ground, timeout=120, what="the copter landed")
     assert distance_m(sim.position(), heli.depot) < 2.0
+
+
+def test_a_low_battery_keeps_the_rv_home_until_telemetry_shows_it_charged_and_a_swap_counts(
+    workers, copters, tmp_path: Path, monkeypatch
+) -> None:
+    """Issue 25: the battery from the vehicle, not from a timer. The RV whose battery is too
+    low for the task stays `charging` (no loop back to service after CPCC_RECHARGE_S) until
+    the autopilot reports a charged battery; a swap is seen at once and the VV goes on."""
+    data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
+    load(_vv1_only([dict(data["vehicles"][0], battery_s=400)]), tmp_path, monkeypatch)
+    heli = Vehicle.objects.get(name="Heli One")
+    copters.append(sim := _mavlink(heli, battery=0.25))
+    workers.env["CPCC_RECHARGE_S"] = "1"  # a timer would put it back into service at once
+    workers.env["CPCC_LOG_LEVEL"] = "INFO"
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    log = tmp_path / "rvworker-Heli_One.log"
+    wait_for(
+        lambda: "waiting for a charged battery" in log.read_text(),
+        timeout=60,
+        what="the RV waiting for its battery",
+        details=workers.logs,
+    )
+    heli.refresh_from_db()
+    assert (heli.status, heli.status_reason) == (
+        VehicleStatus.CHARGING,
+        "battery too low for the next task",
+    )
+    assert sim.on_ground and not sim.armed
+    sim.set_battery(1.0)  # swapped
+    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    vv = VirtualVehicle.objects.get()
+    assert vv.status == VVStatus.FINISHED, vv.error
+    assert log.read_text().count("battery too low for the next task") == 1, "no loop"
+    assert Vehicle.objects.get(pk=heli.pk).status_reason == "charged"
