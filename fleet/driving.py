@@ -72,10 +72,13 @@ class Driver(Protocol):
     """The vehicle link: commands (which may raise ``DriverError``) and what the vehicle
     reports or the kinematics estimate, at platform time ``t`` (seconds). ``depot``: where it
     takes off and lands. ``measures_battery``: its battery's charge is measured (telemetry),
-    not estimated from the time flown."""
+    not estimated from the time flown. ``reports_arrival``: where it is comes from telemetry,
+    so an arrival is looked for from the start (an estimate may be late), not at the
+    estimated time."""
 
     depot: Position
     measures_battery: bool
+    reports_arrival: bool
 
     def fly_to(self, target: Position, now_s: float) -> float:
         """Send the vehicle to ``target``; returns the estimated arrival time."""

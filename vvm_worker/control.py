@@ -474,7 +474,16 @@ class ControlLoop:
             self._failed(exc)
             return
         self._leg = (point, tolerance_m, arrival)
-        self.scheduler.call_at(arrival, lambda: self._arrive(token, point, tolerance_m, arrival))
+        self.scheduler.call_at(
+            self._first_look(now, arrival), lambda: self._arrive(token, point, tolerance_m, arrival)
+        )
+
+    def _first_look(self, now: float, due_s: float) -> float:
+        """When to look first whether the vehicle got there: at the estimate, or soon for a
+        vehicle that reports where it is (a real one may be quicker than estimated)."""
+        if self.driver.reports_arrival:
+            return min(due_s, now + ARRIVAL_POLL_S)
+        return due_s
 
     def _go_home(self, now: float, token: int) -> None:
         if not self.returning:
@@ -500,7 +509,7 @@ class ControlLoop:
         except DriverError as exc:
             self._failed(exc)
             return
-        self.scheduler.call_at(landing, lambda: self._landed(token, landing))
+        self.scheduler.call_at(self._first_look(now, landing), lambda: self._landed(token, landing))
 
     def _time_to_s(self, target: Position, now: float) -> float:
         """Estimated seconds to fly to ``target`` now, around the no-fly zones."""

@@ -23,6 +23,7 @@ from cpcc_site.prepared import PreparedRead
 from fleet.airspace import Airspace
 from fleet.driving import Driver, Sample, SensorFailure, SensorRead
 from fleet.geo import Position, within_m
+from fleet.models import Driver as DriverKind
 from fleet.models import SensorType, Vehicle, VehicleStatus
 from fleet.plugins import SensorPlugin, plugin_class
 from fleet.simulation import SimVehicle
@@ -514,6 +515,21 @@ class RigFleet:
         rig.store.add(tasks)
         self._wake(rig, rig.loop.changed())
         return True
+
+
+# With time acceleration 0 ("instant flights") a simulated vehicle flies this much faster.
+INSTANT = 1e6
+
+
+def time_scale(vehicle: Vehicle, speed: float) -> float:
+    """How much faster than real time the vehicle's worker takes it to fly: a simulated
+    vehicle at the worker's ``speed`` (CPCC_SIM_SPEED; 0: instant), which shortens its flights
+    (distances stay right), its battery, charging and standby with them; a MAVLink vehicle
+    flies as fast as it flies, whatever the speed (its arrivals, battery and charge are
+    what it reports)."""
+    if vehicle.driver == DriverKind.MAVLINK:
+        return 1.0
+    return INSTANT if speed <= 0 else speed
 
 
 def kinematics(vehicle: Vehicle, *, scale: float = 1.0) -> KinematicSpec:

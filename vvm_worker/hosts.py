@@ -39,7 +39,7 @@ from fleet.selectors import VehicleFence, vehicle_fence
 from missions.events import VEHICLE_STALE_S
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle, VVStatus
 from vvm_worker.clock import Clock
-from vvm_worker.executor import RigFleet, build_rig, kinematics, read_aboard
+from vvm_worker.executor import RigFleet, build_rig, kinematics, read_aboard, time_scale
 from vvm_worker.live import publish_vehicle
 from vvm_worker.planning import DEFAULT_PLANNER
 from vvm_worker.platform import platform_vvm
@@ -62,8 +62,6 @@ from vvm_worker.services.routing import fleet_airspace, online_vehicles
 
 logger = logging.getLogger("cpcc.hosts")
 
-# With time acceleration 0 ("instant flights") a simulated vehicle flies this much faster.
-INSTANT = 1e6
 WAIT_S = 60.0  # how long a Celery task waits for the host thread
 SWEEP_S = 5.0  # how often a host looks for work a lost message would have started
 WAITING_LOOK_S = 30.0  # how often a ground station routes a VV waiting for an RV again
@@ -342,15 +340,10 @@ class HostedRV:
         self.name = vehicle.name
         self.host = host
         vvm, scheduler = host.vvm, host.scheduler
-        # Simulated flights: time acceleration shortens them (distances stay right), and the
-        # battery and its charging with them. A MAVLink vehicle flies as fast as it flies:
-        # the same acceleration only tells the estimates what a `mavsim --speed` does.
-        scale = INSTANT if speed <= 0 else speed
+        scale = time_scale(vehicle, speed)
         self._link_down = False
         driver: MavlinkDriver | None = None
         if vehicle.driver == Driver.MAVLINK:
-            if speed <= 0:
-                raise ValueError("a MAVLink vehicle cannot fly instantly: set CPCC_SIM_SPEED > 0")
             fence = vehicle_fence(vehicle=vehicle)
             driver = MavlinkDriver(
                 vehicle.driver_url,

@@ -173,6 +173,7 @@ class MavlinkDriver:
         self.on_link_lost = on_link_lost
         self.gcs_failsafe_s = gcs_failsafe_s
         self.measures_battery = True  # SYS_STATUS, BATTERY_STATUS
+        self.reports_arrival = True  # GLOBAL_POSITION_INT
         self.name = name or str(self.link.endpoint)
         self._fence_request = (
             (area, min_altitude_m, max_altitude_m, exclusions, rally)

@@ -112,6 +112,7 @@ class SimVehicle:
         self.spec = spec
         self.depot = depot
         self.measures_battery = False  # its battery is the time it has flown
+        self.reports_arrival = False  # it is where the kinematics say, when they say
         self._command_s = now_s
         self._steps: list[_Step] = []
         # Parallel list of leg start times, kept for bisect.

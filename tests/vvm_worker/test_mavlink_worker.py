@@ -19,6 +19,7 @@ from tests.conftest import SCENARIOS
 from tests.fleet.mavlink.conftest import free_udp_port
 from tests.live import wait_for
 from tests.vvm_worker.test_distributed import KEYS, all_ended, load
+from vvm_worker.executor import time_scale
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vehicle_set_status
 
@@ -69,6 +70,10 @@ def test_an_rv_worker_flies_the_papers_vv_1_over_mavlink(
     load(_vv1_only(data["vehicles"]), tmp_path, monkeypatch)
     heli = Vehicle.objects.get(name="Heli One")
     copters.append(sim := _mavlink(heli))
+    # The worker's time acceleration is for simulated vehicles only (issue 25): instant here,
+    # and the copter (25 times real time) still flies, arrives and lands as it reports.
+    workers.env["CPCC_SIM_SPEED"] = "0"
+    workers.env["CPCC_STANDBY_S"] = "1"  # real seconds in the air before it lands
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
     wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
@@ -282,3 +287,11 @@ def test_a_low_battery_keeps_the_rv_home_until_telemetry_shows_it_charged_and_a_
     assert vv.status == VVStatus.FINISHED, vv.error
     assert log.read_text().count("battery too low for the next task") == 1, "no loop"
     assert Vehicle.objects.get(pk=heli.pk).status_reason == "charged"
+
+
+def test_the_time_acceleration_is_for_simulated_vehicles_only() -> None:
+    sim = Vehicle(driver=Driver.SIM)
+    real = Vehicle(driver=Driver.MAVLINK)
+    assert [time_scale(real, speed) for speed in (0.0, 1.0, 25.0)] == [1.0, 1.0, 1.0]
+    assert [time_scale(sim, speed) for speed in (1.0, 25.0)] == [1.0, 25.0]
+    assert time_scale(sim, 0.0) > 1e5  # instant flights
