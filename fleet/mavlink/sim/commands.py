@@ -106,7 +106,8 @@ class Commander:
     the mission ``mission`` returns, GUIDED (``guided``) the targets a ground station sends,
     refused outside ``fence``. ``ground_amsl_m`` is what AMSL altitudes are measured from;
     below ``arm_min_battery`` it refuses to arm. ``send`` sends from the autopilot, ``text``
-    a STATUSTEXT (severity, text), ``wall`` is the wall clock."""
+    a STATUSTEXT (severity, text), ``wall`` is the wall clock, ``log`` tells the operator
+    what the flight does (mode changes, take-off, landing)."""
 
     def __init__(
         self,
@@ -121,8 +122,10 @@ class Commander:
         send: Callable[[Build], None],
         text: Callable[[int, str], None],
         wall: Callable[[], float],
+        log: Callable[[str], None] = lambda line: None,
     ) -> None:
         self._flight = flight
+        self._log = log
         self._params = params
         self._flavour = flavour
         self._ground_amsl_m = ground_amsl_m
@@ -211,6 +214,10 @@ class Commander:
         """The flight's manoeuvres end when their time has come, and AUTO flies on."""
         f = self._flavour
         event = self._flight.advance()
+        if event in (TOOK_OFF, LANDED):
+            p = self._flight.position_at(self._flight.now())
+            done = "took off" if event == TOOK_OFF else "landed"
+            self._log(f"{done} at {p.lat:.6f}, {p.lng:.6f}, {p.alt:.1f} m")
         if event == TOOK_OFF and f.after_takeoff is not None and self.mode == f.takeoff_mode:
             self.mode = f.after_takeoff
         elif event == LANDED and self.armed:
@@ -281,6 +288,7 @@ class Commander:
                 return int(mavlink.MAV_RESULT_FAILED)
         flight = self._flight
         now = flight.now()
+        self._log(f"mode {self.mode} -> {mode}")
         self.mode = mode
         if mode == f.mission:
             self.auto.start()  # the next tick begins (or resumes) the current item

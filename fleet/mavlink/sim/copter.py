@@ -139,6 +139,7 @@ class MavSim:
             send=send,
             text=self._text,
             wall=self._wall,
+            log=lambda line: logger.info("mavsim %s: %s", name, line),
         )
         self._failsafes = Failsafes(
             self._commander,

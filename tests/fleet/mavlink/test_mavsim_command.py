@@ -48,7 +48,6 @@ def mavsim(name: str, *args: str, tmp_path: Path) -> Iterator[tuple[subprocess.P
                 **os.environ,
                 "DATABASE_URL": database_url(),
                 "CPCC_VAR_DIR": str(tmp_path / "var"),
-                "CPCC_LOG_LEVEL": "INFO",
             },
             stdout=out,
             stderr=subprocess.STDOUT,
@@ -111,6 +110,13 @@ def test_mavsim_flies_a_vehicle_of_the_fleet(tmp_path: Path) -> None:
         )  # fmt: skip
         home = gcs.recv_match(type="HOME_POSITION", blocking=True, timeout=5)
         assert home is not None and (home.latitude, home.longitude) == (481135000, 128600000)
+
+        # Its flight is in its log at the default level (mode changes, take-off, landing).
+        gcs.mav.set_mode_send(1, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)  # GUIDED
+        deadline = time.monotonic() + 10
+        while "mavsim Heli MAV: mode STABILIZE -> GUIDED" not in log.read_text():
+            assert time.monotonic() < deadline, log.read_text()
+            time.sleep(0.05)
 
         os.killpg(process.pid, signal.SIGTERM)
         assert process.wait(timeout=15) == 0
