@@ -337,15 +337,15 @@ CPCC_ISOLATE_POOL = int(env_float("CPCC_ISOLATE_POOL", 2, minimum=0))
 # A ground station's worker starts every new VV (a new isolate each): it keeps more ready, for
 # bursts of submissions (about 1.7 MB each).
 CPCC_GS_ISOLATE_POOL = int(env_float("CPCC_GS_ISOLATE_POOL", 16, minimum=0))
-# The password `loadscenario` and `demo` give the scenario's customers' logins (empty:
-# loadscenario generates one for a new login and prints it, demo keeps one in var/), and the
-# demo's admin password (empty: one kept in var/).
 # A MAVLink vehicle's autopilot returns home when it has not heard its worker for this long
 # (its GCS failsafe, which the worker turns on at every connection).
 CPCC_GCS_FAILSAFE_S = env_float("CPCC_GCS_FAILSAFE_S", 5.0, minimum=1.0)
 # A vehicle whose battery is measured (MAVLink) is back in service from charging when it
 # reports this much charge (a fraction).
 CPCC_BATTERY_RESUME = env_float("CPCC_BATTERY_RESUME", 0.9, minimum=0.0)
+# The password `loadscenario` and `demo` give the scenario's customers' logins (empty:
+# loadscenario generates one for a new login and prints it, demo keeps one in var/), and the
+# demo's admin password (empty: one kept in var/).
 CPCC_SCENARIO_PASSWORD = env_str("CPCC_SCENARIO_PASSWORD", "")
 CPCC_ADMIN_PASSWORD = env_str("CPCC_ADMIN_PASSWORD", "")
 # Journal limits in the spirit of Temporal: a warning in the VV's log, then the VV is stopped

@@ -113,9 +113,9 @@ class Airspace:
             shapely.prepare(wall)
             self._shapes.append(shape)
             self._walls.append(wall)
-            self._rings.append(np.asarray(_exteriors(grown), dtype=np.float64))
-            gx, gy = np.asarray(grown.exterior.coords).T
-            glng, glat = self._to_lnglat.transform(gx, gy)
+            ring = np.asarray(grown.exterior.coords, dtype=np.float64)[:-1]  # no closing repeat
+            self._rings.append(ring)
+            glng, glat = self._to_lnglat.transform(ring[:, 0], ring[:, 1])
             pad = 1e-5  # about a metre
             self._boxes.append(
                 (glng.min() - pad, glat.min() - pad, glng.max() + pad, glat.max() + pad)
@@ -318,9 +318,3 @@ NO_ZONES = Airspace(())
 def _centre(zones: Sequence[ExclusionZone]) -> tuple[float, float]:
     x0, y0, x1, y1 = shapely.union_all([z.area for z in zones]).bounds
     return (x0 + x1) / 2.0, (y0 + y1) / 2.0
-
-
-def _exteriors(geometry: BaseGeometry) -> list[tuple[float, float]]:
-    """The corners of a (multi)polygon's outer rings (without the closing repeat)."""
-    polygons = getattr(geometry, "geoms", [geometry])
-    return [pt for poly in polygons for pt in list(poly.exterior.coords)[:-1]]

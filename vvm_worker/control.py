@@ -341,12 +341,12 @@ class ControlLoop:
 
     # --- the battery ---------------------------------------------------------------------------
 
-    def _within_battery(self, now: float, target: Position) -> bool:
-        """Whether the vehicle can fly to ``target`` and home from there with its reserve left."""
+    def _within_battery(self, now: float, way: list[Position]) -> bool:
+        """Whether the vehicle can fly ``way`` and home from its end with its reserve left."""
         remaining = self.driver.battery_remaining_s(now)
         if remaining is None:
             return True
-        need = self._time_to_s(target, now) + self._time_home_s(target)
+        need = self._way_s(way, now) + self._time_home_s(way[-1])
         if remaining - need >= self.reserve_s:
             return True
         if self.driver.is_landed_at(now) and remaining >= (self.config.battery_s or 0.0):
@@ -423,6 +423,7 @@ class ControlLoop:
         tasks = list(self.store.open_tasks()) if self.status == ACTIVE else []
         here = self.driver.position_at(now)
         choice: LoopTask | None = None
+        way: list[Position] | None = None  # to the choice, round the no-fly zones
         self.route = []
         if tasks:
             started = self.plan_timer() if self.plan_timer is not None else 0.0
@@ -431,9 +432,11 @@ class ControlLoop:
                 self.planning_s.append(self.plan_timer() - started)
             first = self.route[0].id if self.route else None
             choice = next((t for t in tasks if t.id == first), None)
-            if choice is not None and not self._within_battery(now, choice.position):
-                self._run_low()
-                choice, self.route = None, []
+            if choice is not None:
+                way = self.airspace.way(here, choice.position)
+                if not self._within_battery(now, way or [choice.position]):
+                    self._run_low()
+                    choice, self.route = None, []
         if self.status == CHARGING and self.driver.is_landed_at(now):
             self._charge(now)
         if choice is not None and choice.id == self.target and not self.returning:
@@ -442,7 +445,6 @@ class ControlLoop:
         self._token += 1
         token = self._token
         if choice is not None:
-            way = self.airspace.way(here, choice.position)
             if way is None:
                 logger.warning("task walled in by no-fly zones", extra=self._log())
                 self.target = None
@@ -492,8 +494,7 @@ class ControlLoop:
         self.standby_until = None
         self._via = []
         if not self.driver.is_landed_at(now):
-            here = self.driver.position_at(now)
-            way = self.airspace.way(here, self.driver.depot.with_alt(here.alt))
+            way = self._way_home(self.driver.position_at(now))
             if way is None:
                 logger.warning("home walled in by no-fly zones: flying straight", extra=self._log())
             elif len(way) > 1:  # around the zones to the last turn point, then home
@@ -511,15 +512,18 @@ class ControlLoop:
             return
         self.scheduler.call_at(self._first_look(now, landing), lambda: self._landed(token, landing))
 
-    def _time_to_s(self, target: Position, now: float) -> float:
-        """Estimated seconds to fly to ``target`` now, around the no-fly zones."""
-        way = self.airspace.way(self.driver.position_at(now), target) or [target]
+    def _way_home(self, start: Position) -> list[Position] | None:
+        """The way from ``start`` to above the depot at its altitude (``Airspace.way``)."""
+        return self.airspace.way(start, self.driver.depot.with_alt(start.alt))
+
+    def _way_s(self, way: list[Position], now: float) -> float:
+        """Estimated seconds to fly ``way`` from where the vehicle is now."""
         first = self.driver.time_to_s(way[0], now)
         return first + sum(self.driver.leg_s(a, b) for a, b in itertools.pairwise(way))
 
     def _time_home_s(self, start: Position) -> float:
         """Estimated seconds to return home from ``start``, around the no-fly zones."""
-        way = self.airspace.way(start, self.driver.depot.with_alt(start.alt)) or [start]
+        way = self._way_home(start) or [start]
         turns = [start, *way[:-1]]
         around = sum(self.driver.leg_s(a, b) for a, b in itertools.pairwise(turns))
         return around + self.driver.time_home_s(turns[-1])

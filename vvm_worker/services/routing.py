@@ -90,8 +90,7 @@ class _FleetShape:
     ids: tuple[int, ...]  # in the order of the index's geometries
     index: STRtree
     overlaps: dict[int, frozenset[int]]
-    zones: tuple[ExclusionZone, ...]  # the provider's no-fly zones
-    airspace: Airspace  # the same, with the ways around them
+    airspace: Airspace  # the provider's no-fly zones, with the ways around them
 
     def covering(self, requests: Iterable[TaskRequest]) -> set[int]:
         """The RVs whose areas hold any of the requests' points (border included)."""
@@ -166,9 +165,7 @@ def _fleet_shape() -> _FleetShape:
             overlaps[a] = frozenset(
                 b for b in near if caps[a].area.intersection(caps[b].area).area > 0.0
             )
-        shape = _FleetShape(
-            caps, {v.pk: v for v in vehicles}, ids, index, overlaps, zones, airspace
-        )
+        shape = _FleetShape(caps, {v.pk: v for v in vehicles}, ids, index, overlaps, airspace)
         _shapes_seen.clear()
         _shapes_seen[key] = shape
     _shape_seen_at = (generation, now, shape)
@@ -323,7 +320,7 @@ def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None 
         # no other RV's area overlaps its own. (Its area, altitudes and sensors are the
         # shape's, of the version just read.)
         caps = shape.caps.get(host.pk) or dataclasses.replace(
-            vehicle_caps(host), no_fly=shape.zones
+            vehicle_caps(host), no_fly=shape.airspace.zones
         )
         mine = _servable(caps, open_tasks)
         if mine and not shape.overlaps.get(host.pk):

@@ -138,9 +138,10 @@ def scenario_apply(
     *, scenario: Scenario, logins: bool = True, password: str | None = None
 ) -> LoadedScenario:
     """Put the scenario's SDC additions, ground stations, RVs, no-fly zones and customers
-    (with a login user each, unless ``logins`` is False) into the database. Running it twice changes nothing the
-    second time. A customer's login gets ``password``; without one, a new login gets a
-    generated password and an existing one keeps its own (``logins`` says which).
+    (with a login user each, unless ``logins`` is False) into the database. Running it twice
+    changes nothing the second time. A customer's login gets ``password``; without one, a new
+    login gets a generated password and an existing one keeps its own (``logins`` says
+    which).
 
     Raises ScenarioError for a vehicle sensor that is in neither the SDC nor the scenario,
     and for a VV's name with a control or bidirectional formatting character (which
