@@ -4,9 +4,11 @@ from django.contrib import admin
 from django.contrib.auth.admin import UserAdmin as BaseUserAdmin
 from django.http import HttpRequest
 
-from accounts.models import Customer, User
+from accounts.models import ApiToken, Customer, User, Webhook
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import CustomerConfig, customer_create, customer_update
+from vvm_worker.services.notifications import webhook_delete
+from vvm_worker.services.tokens import api_token_revoke
 
 
 class CustomerUserInline(admin.TabularInline):
@@ -73,3 +75,40 @@ class UserAdmin(BaseUserAdmin):
         *BaseUserAdmin.add_fieldsets,
         ("Customer", {"fields": ["customer"]}),
     ]
+
+
+class _MadeByTheirOwners(admin.ModelAdmin):
+    """What customers make themselves (tokens, webhooks): staff see them and may delete one
+    (a token revoked, a webhook removed), never add or edit one, nor see a key or secret."""
+
+    def has_add_permission(self, request: HttpRequest) -> bool:
+        return False
+
+    def has_change_permission(self, request: HttpRequest, obj: Any = None) -> bool:
+        return False
+
+    def delete_queryset(self, request: HttpRequest, queryset: Any) -> None:
+        for obj in queryset:  # one by one, through the service
+            self.delete_model(request, obj)
+
+
+@admin.register(ApiToken)
+class ApiTokenAdmin(_MadeByTheirOwners):
+    list_display = ["name", "user", "token_key", "created", "last_used"]
+    list_filter = ["user__customer"]
+    search_fields = ["name", "token_key", "user__username"]
+    fields = ["name", "user", "token_key", "created", "last_used"]
+
+    def delete_model(self, request: HttpRequest, obj: ApiToken) -> None:
+        api_token_revoke(token=obj)
+
+
+@admin.register(Webhook)
+class WebhookAdmin(_MadeByTheirOwners):
+    list_display = ["url", "customer", "events", "created"]
+    list_filter = ["customer"]
+    search_fields = ["url", "customer__name"]
+    fields = ["customer", "url", "events", "created"]
+
+    def delete_model(self, request: HttpRequest, obj: Webhook) -> None:
+        webhook_delete(webhook=obj)

@@ -8,10 +8,17 @@ user deactivated or deleted, a customer changed) forgets the entries it concerns
 again when its transaction commits; other web processes notice within the TTL, when their
 entry expires. A change by ``QuerySet.update()`` (which sends no signal) is noticed within
 the TTL everywhere. ``CPCC_TOKEN_CACHE_S=0`` turns the cache off.
+
+Two kinds of token answer to ``Authorization: Token KEY``: the named tokens customers make
+(accounts.ApiToken, knox's: keys start with ``cpcc_``, only their digest is stored, and it is
+the cache's name for them too) and the one token per user that ``drf_create_token`` makes
+(DRF's). A named token's ``last_used`` is written at most once a minute (LAST_USED_EVERY_S),
+not at every request.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import hashlib
 import pickle
 import threading
@@ -20,9 +27,14 @@ from collections.abc import Callable
 from typing import Any
 
 from django.conf import settings
+from django.db.models import Q
+from django.utils import timezone
+from knox.crypto import hash_token
+from knox.settings import knox_settings
 from rest_framework import exceptions
 from rest_framework.authtoken.models import Token
 
+from accounts.models import ApiToken
 from cpcc_site.api import AuditedTokenAuthentication
 
 # Tokens remembered per process at most (a web process serves a few hundred users at once).
@@ -54,7 +66,7 @@ class TokenCache:
         """How many times something was forgotten: a lookup notes it before it reads."""
         return self._generation
 
-    def get(self, digest: str) -> tuple[Any, Token] | None:
+    def get(self, digest: str) -> tuple[Any, Any] | None:
         with self._lock:
             entry = self._entries.get(digest)
             if entry is None:
@@ -65,7 +77,7 @@ class TokenCache:
         user, token = pickle.loads(entry[2])
         return user, token
 
-    def put(self, digest: str, user: Any, token: Token, *, ttl_s: float, generation: int) -> None:
+    def put(self, digest: str, user: Any, token: Any, *, ttl_s: float, generation: int) -> None:
         data = pickle.dumps((user, token), protocol=pickle.HIGHEST_PROTOCOL)
         with self._lock:
             if generation != self._generation:
@@ -110,9 +122,12 @@ TOKENS = TokenCache()
 
 class CachedTokenAuthentication(AuditedTokenAuthentication):
     """DRF's token authentication (audited), answered from this process's TokenCache while the
-    entry lasts; a miss reads the token with its user and customer in one query."""
+    entry lasts; a miss reads the token with its user and customer in one query. A named
+    token (``cpcc_...``) is looked up by its digest."""
 
-    def authenticate_credentials(self, key: str) -> tuple[Any, Token]:
+    def authenticate_credentials(self, key: str) -> tuple[Any, Any]:
+        if key.startswith(knox_settings.TOKEN_PREFIX):
+            return _named_token(key)
         ttl_s = settings.CPCC_TOKEN_CACHE_S
         digest = token_digest(key)
         if ttl_s > 0:
@@ -129,3 +144,65 @@ class CachedTokenAuthentication(AuditedTokenAuthentication):
         if ttl_s > 0:
             TOKENS.put(digest, token.user, token, ttl_s=ttl_s, generation=generation)
         return token.user, token
+
+
+def _named_token(key: str) -> tuple[Any, ApiToken]:
+    """A named token (knox's digest of the key is stored, and names it in the cache)."""
+    ttl_s = settings.CPCC_TOKEN_CACHE_S
+    digest = hash_token(key)
+    if ttl_s > 0:
+        cached = TOKENS.get(digest)
+        if cached is not None:
+            LAST_USED.touch(cached[1])
+            return cached  # type: ignore[return-value]
+    generation = TOKENS.generation
+    token = ApiToken.objects.select_related("user", "user__customer").filter(digest=digest).first()
+    if token is None:
+        raise exceptions.AuthenticationFailed("Invalid token.")
+    if token.expiry is not None and token.expiry <= timezone.now():
+        raise exceptions.AuthenticationFailed("Token expired: make a new one.")
+    if not token.user.is_active:
+        raise exceptions.AuthenticationFailed("User inactive or deleted.")
+    if ttl_s > 0:
+        TOKENS.put(digest, token.user, token, ttl_s=ttl_s, generation=generation)
+    LAST_USED.touch(token)
+    return token.user, token
+
+
+# How often a named token's last_used is written at most: the page says "a minute ago", and a
+# script polling the API many times a second costs one write a minute.
+LAST_USED_EVERY_S = 60.0
+
+
+class LastUsed:
+    """Writes when named tokens were last used, at most once every LAST_USED_EVERY_S per token:
+    this process remembers when it last wrote each one, and the UPDATE itself skips a row that
+    another process wrote within that time (so the processes together write about once)."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._written: dict[int, float] = {}
+
+    def touch(self, token: ApiToken) -> None:
+        now = self._clock()
+        with self._lock:
+            last = self._written.get(token.pk)
+            if last is not None and now - last < LAST_USED_EVERY_S:
+                return
+            if len(self._written) >= MAX_ENTRIES:
+                self._written.clear()
+            self._written[token.pk] = now
+        moment = timezone.now()
+        recently = moment - dt.timedelta(seconds=LAST_USED_EVERY_S)
+        if token.last_used is not None and token.last_used > recently:
+            return  # as read with the token: written a moment ago
+        stale = Q(last_used__isnull=True) | Q(last_used__lte=recently)
+        ApiToken.objects.filter(stale, pk=token.pk).update(last_used=moment)
+
+    def clear(self) -> None:
+        with self._lock:
+            self._written.clear()
+
+
+LAST_USED = LastUsed()

@@ -1,11 +1,17 @@
-"""Customers (tenants), their users and their quotas."""
+"""Customers (tenants), their users and their quotas; API tokens; webhooks and e-mail
+notifications."""
 
 from __future__ import annotations
+
+import uuid
 
 from django.contrib.auth.models import AbstractUser
 from django.core.validators import MinValueValidator
 from django.db import models
+from django.utils import timezone
 from django.utils.text import slugify
+from knox.models import AbstractAuthToken
+from knox.settings import CONSTANTS
 
 DEFAULT_MAX_PARALLEL_VVS = 5
 # Room for two editor submissions of the most copies (50) each, and for every VV of the example
@@ -15,6 +21,14 @@ DEFAULT_MAX_TASKS_PER_VV = 10_000
 DEFAULT_STORAGE_BYTES = 10 * 1024 * 1024
 DEFAULT_CPU_MS_PER_STEP = 2_000
 DEFAULT_HEAP_BYTES = 64 * 1024 * 1024
+
+
+class NotifyEvent(models.TextChoices):
+    """What a customer can hear of by webhook or e-mail."""
+
+    VV_FINISHED = "vv.finished", "a VV finished"
+    VV_FAILED = "vv.failed", "a VV failed or was killed"
+    TASK_DONE = "task.done", "a task was done"
 
 
 class Customer(models.Model):
@@ -75,6 +89,10 @@ class Customer(models.Model):
         '"storage.store"]; empty means all.',
     )
     created = models.DateTimeField(auto_now_add=True)
+    # The events someone of the customer listens for (a webhook, or a user's e-mail): the
+    # services that end a VV or answer a task read it with the VV, so an event nobody listens
+    # for costs nothing. Kept by the notification services, never edited by hand.
+    notify_events = models.JSONField(default=list, blank=True, editable=False)
 
     class Meta:
         ordering = ["name"]
@@ -93,6 +111,16 @@ class Customer(models.Model):
     def save(self, *args: object, **kwargs: object) -> None:
         if not self.slug:
             self.slug = slugify(self.name)
+        if not (self._state.adding or args or kwargs.get("force_insert")) and (
+            kwargs.get("update_fields") is None
+        ):
+            # notify_events belongs to the notification services (an UPDATE of its own): a
+            # customer read before a webhook was made and saved after must not undo it.
+            kwargs["update_fields"] = [
+                f.name
+                for f in self._meta.concrete_fields
+                if not f.primary_key and f.name != "notify_events"
+            ]
         super().save(*args, **kwargs)  # type: ignore[arg-type]
 
 
@@ -102,3 +130,85 @@ class User(AbstractUser):
     customer = models.ForeignKey(
         Customer, null=True, blank=True, on_delete=models.CASCADE, related_name="users"
     )
+    # Opt-in (none by default): a user made by a scenario has no address, and 50 copies of a
+    # VV should not send 50 e-mails unasked.
+    email_events = models.JSONField(
+        default=list,
+        blank=True,
+        help_text='Events of the customer\'s VVs e-mailed to this user, e.g. ["vv.failed"].',
+    )
+
+
+class ApiToken(AbstractAuthToken):
+    """A named API token a user made: only a digest of its key is kept (knox's), and the key's
+    first characters (``token_key``), which identify it to its owner."""
+
+    # An id for the API and the pages (knox's own key is the digest).
+    id = models.BigAutoField(primary_key=True)
+    digest = models.CharField(max_length=CONSTANTS.DIGEST_LENGTH, unique=True)
+    name = models.CharField(max_length=100)
+    # Written at most once a minute per token (accounts/authentication.py), not per request.
+    last_used = models.DateTimeField(null=True, blank=True)
+
+    class Meta:
+        ordering = ["-created", "-id"]
+        verbose_name = "API token"
+        constraints = [
+            models.UniqueConstraint(fields=["user", "name"], name="api_token_name_per_user"),
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.name} ({self.token_key}…)"
+
+    @property
+    def prefix(self) -> str:
+        return self.token_key
+
+
+class Webhook(models.Model):
+    """A customer's URL that hears of the events it chose by a signed POST."""
+
+    customer = models.ForeignKey(Customer, on_delete=models.CASCADE, related_name="webhooks")
+    url = models.URLField(max_length=2000)
+    events = models.JSONField(help_text="NotifyEvent values.")
+    # Signs every delivery (HMAC-SHA256): kept as it is, shown to the customer once.
+    secret = models.CharField(max_length=100, editable=False)
+    created = models.DateTimeField(auto_now_add=True)
+
+    class Meta:
+        ordering = ["created", "id"]
+        constraints = [
+            models.UniqueConstraint(fields=["customer", "url"], name="webhook_url_per_customer"),
+        ]
+
+    def __str__(self) -> str:
+        return self.url
+
+
+class WebhookDelivery(models.Model):
+    """One attempt to POST one event to a webhook: what it answered, or why it did not."""
+
+    webhook = models.ForeignKey(Webhook, on_delete=models.CASCADE, related_name="deliveries")
+    # The same for every attempt of one event's POST (the X-CPCC-Delivery header).
+    delivery = models.UUIDField(default=uuid.uuid4)
+    event = models.CharField(max_length=20, choices=NotifyEvent.choices)
+    vv_id = models.UUIDField()
+    task_id = models.BigIntegerField(null=True, blank=True)
+    attempt = models.PositiveSmallIntegerField()
+    status_code = models.PositiveSmallIntegerField(null=True, blank=True)
+    error = models.CharField(max_length=300, blank=True)
+    duration_ms = models.PositiveIntegerField(null=True, blank=True)
+    at = models.DateTimeField(default=timezone.now)
+
+    class Meta:
+        ordering = ["-id"]
+        verbose_name = "webhook delivery attempt"
+        verbose_name_plural = "webhook delivery attempts"
+        indexes = [models.Index(fields=["webhook", "-id"], name="webhook_delivery_newest")]
+
+    def __str__(self) -> str:
+        return f"{self.event} {self.vv_id} #{self.attempt}"
+
+    @property
+    def ok(self) -> bool:
+        return self.status_code is not None and 200 <= self.status_code < 300

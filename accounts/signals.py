@@ -13,7 +13,7 @@ from django.dispatch import receiver
 from rest_framework.authtoken.models import Token, TokenProxy
 
 from accounts.authentication import TOKENS, token_digest
-from accounts.models import Customer, User
+from accounts.models import ApiToken, Customer, User
 
 
 def _forget(**which: Any) -> None:
@@ -28,6 +28,13 @@ def _forget(**which: Any) -> None:
 def token_changed(sender: Any, instance: Token, **kwargs: Any) -> None:
     # A user has one token: forgetting the user's entries also drops a rotated token's.
     _forget(digest=token_digest(instance.key or ""), user_id=instance.user_id)
+
+
+@receiver(post_save, sender=ApiToken)
+@receiver(post_delete, sender=ApiToken)
+def api_token_changed(sender: Any, instance: ApiToken, **kwargs: Any) -> None:
+    # A named token is cached under its digest (the key itself is not known here).
+    _forget(digest=instance.digest)
 
 
 @receiver(post_save, sender=User)

@@ -192,7 +192,16 @@ def take(browser: Any, url: str, out: Path, watch: Watch) -> None:
     wait_for(
         "the syntax check", lambda: customer.get_attribute("#editor-form", "data-check") == "ok", 20
     )
-    customer.screenshot(path=out / "editor.png")
+    # The dry run: what it would ask for, on the map of where the platform serves.
+    customer.wait_for_selector("#service-map[data-state=ready]")
+    customer.click("#dry-run-button")
+    wait_for(
+        "the dry run",
+        lambda: customer.get_attribute("#editor-form", "data-dry-run") == "done",
+        120,
+    )
+    customer.wait_for_selector("#service-map[data-tiles-idle=true]")
+    customer.screenshot(path=out / "editor.png", full_page=True)
     with customer.expect_navigation():
         customer.click("#submit-button")
 
@@ -221,8 +230,16 @@ def take(browser: Any, url: str, out: Path, watch: Watch) -> None:
         ),
         MISSION_TIMEOUT_S,
     )
+    staff.wait_for_selector("#live-map[data-tiles-idle=true]")
     staff.wait_for_timeout(1000)
     staff.screenshot(path=out / "map.png")
+
+    # The operators' live fleet page, while they fly.
+    fleet = context(DESKTOP).new_page()
+    log_in(fleet, "admin", then="/admin/fleet/vehicle/overview/")
+    fleet.wait_for_selector("#fleet-live[data-live=true]")
+    fleet.wait_for_timeout(1500)
+    fleet.screenshot(path=out / "fleet.png", full_page=True)
 
     # A finished VV's page: its replay, chart, storage.
     def all_ended() -> bool:
@@ -244,7 +261,7 @@ def take(browser: Any, url: str, out: Path, watch: Watch) -> None:
     log_in(phone, "customer-a", then="/")
     phone.wait_for_selector("#dashboard[data-live=true]")
     phone.screenshot(path=out / "dashboard-phone.png")
-    for page in (customer, staff, phone):
+    for page in (customer, staff, fleet, phone):
         if re.search(r"/accounts/login/", page.url):
             raise SystemExit("a page went back to the login form")
 

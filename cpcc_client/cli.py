@@ -1,13 +1,21 @@
 """``cpcc``: submit VV programs to a CPCC platform, watch them and fetch their results.
 
-Environment: ``CPCC_URL`` (default http://127.0.0.1:8000) and ``CPCC_TOKEN``, your API token
-(``python manage.py drf_create_token USERNAME`` on the server gives one).
+Environment: ``CPCC_URL`` (default http://127.0.0.1:8000) and ``CPCC_TOKEN``, your API token.
+Make a token on the platform's Account page (``/accounts/tokens/``) and either set
+``CPCC_TOKEN`` or run ``cpcc login``, which asks for it and keeps it for that address
+(cpcc_client/credentials.py); ``CPCC_TOKEN`` wins when both are there.
 
 ``cpcc submit`` with several programs sends them in one request (``POST /api/v1/vvs/`` with a
 list): all of them are queued, or none.
 
-Exit codes: 0 success (``submit --wait``: every VV finished); 1 the server refused the request,
-could not be reached, or a VV ended otherwise than finished; 2 a usage or set-up problem, or
+``cpcc submit --dry-run`` submits nothing: each program runs against a simulated copy of the
+fleet, which says what it would do (every task, those no vehicle could serve, how long, which
+quota would stop it).
+
+Exit codes: 0 success (``submit --wait``: every VV finished; ``--dry-run``: each would finish
+within its quotas with every task served); 1 the server refused the request, could not be
+reached, a VV ended otherwise than finished, or a dry run found a task no vehicle could serve
+(or that it would not finish); 2 a usage or set-up problem, or
 programs with syntax errors (each printed as ``FILE:LINE:COLUMN: message``); 3 ``--wait`` gave
 up after ``--timeout`` seconds.
 """
@@ -15,6 +23,7 @@ up after ``--timeout`` seconds.
 from __future__ import annotations
 
 import argparse
+import getpass
 import json
 import os
 import sys
@@ -26,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from cpcc_client.client import ApiError, Client, Unreachable
+from cpcc_client.credentials import credentials_path, forget_token, store_token, stored_token
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 ENDED = ("finished", "failed", "killed", "cancelled")
@@ -64,6 +74,8 @@ def cmd_submit(client: Client, args: argparse.Namespace) -> int:
     if args.name is not None and len(sources) > 1:
         raise UsageError("--name names one VV: give one program, or leave --name out")
     items = [{"name": args.name or source.stem, "program": _read(source)} for source in sources]
+    if args.dry_run:
+        return _dry_runs(client, args, items)
     if len(items) == 1:
         return _submit_one(client, args, items[0])
     # Several programs: one request, one transaction on the server (all of them or none).
@@ -190,6 +202,9 @@ def cmd_status(client: Client, args: argparse.Namespace) -> int:
         ("created", vv.get("created") or "-"),
         ("finished", vv.get("finished") or "-"),
     ]
+    waiting = vv.get("waiting")
+    if waiting:  # what it waits for, in the platform's words ("flying to your task, about 40 s")
+        rows.append(("waiting", waiting["message"]))
     if vv.get("error"):
         where = ""
         if vv.get("error_line"):
@@ -295,6 +310,122 @@ def _extract(archive: Any, target: Path) -> int:
     return sum(1 for m in members if not m.is_dir())
 
 
+# --- logging in with a token made on the Account page -----------------------------------------
+
+TOKENS = "/api/v1/tokens/"
+
+
+def _tokens_page(url: str) -> str:
+    return f"{url.rstrip('/')}/accounts/tokens/"
+
+
+def cmd_login(url: str, args: argparse.Namespace) -> int:
+    """Check a token against the platform and keep it for this address."""
+    if args.token_stdin:
+        token = sys.stdin.readline().strip()
+    else:
+        _err(f"Make a token on {_tokens_page(url)} and paste it here.")
+        token = getpass.getpass("API token: ").strip()
+    if not token:
+        raise UsageError("no token given")
+    client = Client(url, token)
+    try:
+        mine = list(client.pages(TOKENS))
+    except ApiError as exc:
+        if exc.status == 401:
+            raise UsageError(
+                f"{url} does not accept that token ({exc.describe()}): copy it again from "
+                f"{_tokens_page(url)}, or make a new one there"
+            ) from None
+        raise
+    path = store_token(url, token)
+    named = [t for t in mine if t.get("prefix") and token.startswith(str(t["prefix"]))]
+    which = f" with the token {named[0]['name']!r}" if len(named) == 1 else ""
+    _out(f"Logged in to {url}{which}; the token is kept in {path}")
+    return EXIT_OK
+
+
+def cmd_logout(url: str, args: argparse.Namespace) -> int:
+    """Forget the token kept for this address (it keeps working until revoked)."""
+    if forget_token(url):
+        _out(
+            f"Forgot the token for {url}. It still works until you revoke it on "
+            f"{_tokens_page(url)}."
+        )
+    else:
+        _out(f"No token kept for {url} (in {credentials_path()}).")
+    return EXIT_OK
+
+
+# --- submit --dry-run: a program tried against a simulated copy of the fleet ------------------
+
+DRY_RUN = "/api/v1/vvs/dry-run/"
+# A dry run computes for up to 20 s on the server, after starting a process of its own.
+DRY_RUN_TIMEOUT_S = 120.0
+
+
+def _dry_runs(client: Client, args: argparse.Namespace, items: list[dict[str, str]]) -> int:
+    """``submit --dry-run``: each program's dry run, one after the other; nothing is submitted.
+    Exit 0 when each would finish within its quotas with every task served; 1 otherwise; 2
+    for a syntax error (``FILE:LINE:COLUMN: message``, as a submission)."""
+    if args.wait:
+        raise UsageError("--dry-run submits nothing to wait for: leave --wait out")
+    code = EXIT_OK
+    for program, item in zip(args.program, items, strict=True):
+        try:
+            report = client.call("POST", DRY_RUN, data=item, timeout_s=DRY_RUN_TIMEOUT_S)
+        except ApiError as exc:
+            location = _syntax_error(program, exc.body) if exc.status == 400 else None
+            if location is None:
+                raise
+            _err(location)
+            code = max(code, EXIT_USAGE)
+            continue
+        if not _print_dry_run(program, report):
+            code = max(code, EXIT_ERROR)
+    return code
+
+
+def _print_dry_run(program: str, report: dict[str, Any]) -> bool:
+    """The report on stdout, each task no vehicle could serve on stderr as
+    ``FILE:LINE:COLUMN: message``; True when the VV would finish within its quotas with every
+    task served."""
+    tasks, unservable = report["tasks"], report["unservable"]
+    _out(f"{program}: dry run of {report['name']!r} (nothing was submitted)")
+    _out(f"  {len(tasks)} task(s), {len(unservable)} that no vehicle in service could serve")
+    for number, task in enumerate(tasks, 1):
+        lat, lng, alt = task["position"]
+        where = f"line {task['line']}, column {task['column']}" if task["line"] else "-"
+        if not task["servable"]:
+            outcome = "NOT SERVABLE"
+        elif task["done_s"] is not None and task["status"] == "done":
+            outcome = f"read at {_duration(task['done_s'])}"
+        else:
+            outcome = task["status"]
+        _out(
+            f"  {number:>4}  ({lat:.6f}, {lng:.6f}, {alt:g} m)  {', '.join(task['sensors'])}"
+            f"  [{where}]  {outcome}"
+        )
+    for task in unservable:
+        _err(f"{program}:{task['line'] or 1}:{task['column'] or 1}: {task['message']}")
+    ending = report["status"]
+    if report.get("error"):  # its place is in it: "... (line 4, column 9)"
+        ending += f": {report['error']}"
+    _out(f"  ends: {ending}, after about {_duration(report['duration_s'])}")
+    quota = report.get("quota")
+    if quota is None:
+        _out("  quotas: within your quotas")
+    else:
+        place = f" at line {quota['line']}, column {quota['column']}" if quota["line"] else ""
+        _out(f"  quotas: stopped{place} after {quota['tasks_before']} task(s): {quota['message']}")
+    return report["status"] == "finished" and not unservable and quota is None
+
+
+def _duration(seconds: float) -> str:
+    minutes, rest = divmod(round(seconds), 60)
+    return f"{minutes} min {rest} s" if minutes else f"{seconds:.1f} s"
+
+
 # --- the command line -------------------------------------------------------------------------
 
 
@@ -304,7 +435,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="cpcc",
         description="Submit virtual vehicles (VV programs) to a CPCC platform, watch them and "
         "download their results.",
-        epilog=f"Environment: CPCC_URL (default {DEFAULT_URL}) and CPCC_TOKEN (your API token).",
+        epilog=f"Environment: CPCC_URL (default {DEFAULT_URL}) and CPCC_TOKEN (your API token; "
+        "or run `cpcc login` once).",
     )
     parser.add_argument("--url", help="the platform's address (default: $CPCC_URL)")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -330,6 +462,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     submit.add_argument(
         "--poll", type=float, default=2.0, metavar="S", help="seconds between polls (2)"
+    )
+    submit.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="submit nothing: try each program against a simulated copy of the fleet and print "
+        "what it would do (exit 1 when a task could not be served or it would not finish)",
     )
     submit.set_defaults(handler=cmd_submit)
 
@@ -359,6 +497,20 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("-o", "--output", metavar="FILE.zip", help="where to save the zip")
     where.add_argument("--extract", metavar="DIR", help="unpack the zip into DIR instead")
     results.set_defaults(handler=cmd_results)
+
+    login = commands.add_parser(
+        "login",
+        help="keep an API token for this platform",
+        description="Ask for an API token (make one on the platform's Account page, "
+        "/accounts/tokens/), check it, and keep it for this address, readable by you only. "
+        "CPCC_TOKEN, when set, is used instead.",
+    )
+    login.add_argument(
+        "--token-stdin", action="store_true", help="read the token from standard input"
+    )
+    login.set_defaults(handler=cmd_login)
+    logout = commands.add_parser("logout", help="forget the token kept for this platform")
+    logout.set_defaults(handler=cmd_logout)
     return parser
 
 
@@ -366,12 +518,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one ``cpcc`` command; returns the exit code."""
     args = build_parser().parse_args(argv)
     url = args.url or os.environ.get("CPCC_URL") or DEFAULT_URL
-    token = os.environ.get("CPCC_TOKEN", "").strip()
     try:
+        if args.command in ("login", "logout"):
+            return int(args.handler(url, args))
+        token = os.environ.get("CPCC_TOKEN", "").strip() or stored_token(url)
         if not token:
             raise UsageError(
-                "set CPCC_TOKEN to your API token "
-                "(on the server: python manage.py drf_create_token USERNAME)"
+                f"run `cpcc login` with a token made on {_tokens_page(url)}, "
+                "or set CPCC_TOKEN to your API token"
             )
         if args.command == "submit" and args.poll <= 0:
             raise UsageError("--poll must be more than 0 seconds")

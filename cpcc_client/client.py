@@ -123,10 +123,12 @@ class Client:
         *,
         data: Any = None,
         query: Mapping[str, str] | None = None,
+        timeout_s: float | None = None,
     ) -> Any:
-        """One request; returns the decoded JSON answer. Raises ApiError or Unreachable."""
+        """One request; returns the decoded JSON answer. Raises ApiError or Unreachable.
+        ``timeout_s``: for a request the server takes long to answer (a dry run)."""
         url = self.url(path, query)
-        with self._open(method, url, data=data) as response:
+        with self._open(method, url, data=data, timeout_s=timeout_s) as response:
             try:
                 raw = response.read()
             except OSError as exc:

@@ -9,7 +9,9 @@ from collections.abc import Mapping
 from typing import IO, Any
 
 from auditlog.context import auditlog_value
+from django.core.exceptions import ValidationError as DjangoValidationError
 from drf_spectacular.authentication import SessionScheme
+from drf_spectacular.extensions import OpenApiSerializerFieldExtension
 from rest_framework import serializers, status
 from rest_framework.authentication import SessionAuthentication, TokenAuthentication
 from rest_framework.exceptions import APIException, NotAcceptable, ParseError, ValidationError
@@ -19,6 +21,7 @@ from rest_framework.parsers import JSONParser
 from rest_framework.permissions import IsAdminUser
 from rest_framework.renderers import BaseRenderer
 from rest_framework.request import Request
+from rest_framework.serializers import as_serializer_error
 
 from cpcc_site.json_depth import too_deep, too_deep_message
 
@@ -38,6 +41,29 @@ class Conflict(APIException):
     status_code = status.HTTP_409_CONFLICT
     default_detail = "The request conflicts with the current state."
     default_code = "conflict"
+
+
+# Django's codes for a value another record holds already.
+_TAKEN = {"unique", "unique_together"}
+
+
+def refusal(
+    exc: DjangoValidationError, field_names: Mapping[str, str] | None = None
+) -> APIException:
+    """A service's ValidationError as the API's answer, its fields named as the API names them
+    (``field_names``): 409 when every problem is a value another record holds already (a name
+    in use: a matter of what is stored, not of the request's form), 400 otherwise."""
+    errors: dict[str, list[Any]] = {}
+    for field, messages in as_serializer_error(exc).items():
+        errors.setdefault((field_names or {}).get(field, field), []).extend(messages)
+    problems = (
+        [error for field in exc.error_dict.values() for error in field]
+        if hasattr(exc, "error_dict")
+        else exc.error_list
+    )
+    if problems and all(problem.code in _TAKEN for problem in problems):
+        return Conflict(error_body(errors))
+    return ValidationError(errors)
 
 
 class QuotaReached(APIException):
@@ -139,6 +165,30 @@ _ERRORS = {
 }
 
 
+def nullable_as_json_schema(result: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+    """drf-spectacular postprocessing hook: OpenAPI 3.1 says "may be null" as JSON Schema does
+    (``"type": ["string", "null"]``); schemas written by hand in OpenAPI 3.0's words
+    (``"nullable": true``) are said so too."""
+
+    def visit(node: Any) -> Any:
+        if isinstance(node, list):
+            return [visit(item) for item in node]
+        if not isinstance(node, dict):
+            return node
+        node = {key: visit(value) for key, value in node.items()}
+        if node.pop("nullable", False):
+            kind = node.get("type")
+            if isinstance(kind, str):
+                node["type"] = [kind, "null"]
+            elif isinstance(kind, list):
+                node["type"] = [*kind, "null"] if "null" not in kind else kind
+            else:  # a $ref or a composition: it, or null
+                node = {"oneOf": [node, {"type": "null"}]}
+        return node
+
+    return visit(result)  # type: ignore[no-any-return]
+
+
 def add_error_responses(result: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
     """drf-spectacular postprocessing hook: every API operation documents the errors any
     request may get (401, 403, 429; 400 and 404 where it takes parameters, 400, 413 and 415
@@ -238,6 +288,28 @@ class StrictCharField(serializers.CharField):
         return super().to_internal_value(data)  # type: ignore[no-any-return]
 
 
+class StrictCharFieldSchema(OpenApiSerializerFieldExtension):
+    """What the schema says of a strict string: one that may not be blank is not empty and,
+    unless it keeps its white space, holds something besides (DRF trims it and refuses what
+    is left empty)."""
+
+    target_class = "cpcc_site.api.StrictCharField"
+
+    def map_serializer_field(self, auto_schema: Any, direction: str) -> dict[str, Any]:
+        schema: dict[str, Any] = auto_schema._map_serializer_field(
+            self.target, direction, bypass_extensions=True
+        )
+        if direction == "request" and not self.target.allow_blank:
+            schema.setdefault("minLength", 1)
+            if self.target.trim_whitespace:  # a program keeps its white space
+                schema.setdefault("pattern", NOT_BLANK)
+        return schema
+
+
+# Something besides white space, as a schema's (ECMA-262) pattern says it.
+NOT_BLANK = r"[^\s\x1c-\x1f\x85]"
+
+
 class StrictFloatField(serializers.FloatField):
     """A JSON number (not a string of digits, not a boolean)."""
 
@@ -255,6 +327,16 @@ class StrictIntegerField(serializers.IntegerField):
 
     def to_internal_value(self, data: Any) -> int:
         _refuse_type(self, data, int)
+        return super().to_internal_value(data)  # type: ignore[no-any-return]
+
+
+class StrictSlugField(serializers.SlugField):
+    """A slug given as a string (DRF's own turns 0 into "0")."""
+
+    type_name = "a string"
+
+    def to_internal_value(self, data: Any) -> str:
+        _refuse_type(self, data, str)
         return super().to_internal_value(data)  # type: ignore[no-any-return]
 
 

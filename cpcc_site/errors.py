@@ -1,4 +1,8 @@
-"""Error pages: JSON under /api/ (what an API client can read), Django's pages elsewhere.
+"""Error pages: JSON under /api/ (what an API client can read), the site's own pages elsewhere.
+
+Under /api/ every answer is JSON whatever DEBUG is: with DEBUG on, Django answers an unmatched
+path (``/api/v1/vvs/null/log/``) or a refused host with its HTML debug page before any handler
+here is asked; ``JsonUnderApiMiddleware`` turns those into the API's JSON.
 
 While the database is unavailable (cpcc_site.database), every request that needs it answers
 503 with Retry-After, not 500: nothing is wrong with the request, and it can be sent again.
@@ -9,6 +13,7 @@ from __future__ import annotations
 import logging
 import sys
 from collections.abc import Callable
+from http import HTTPStatus
 
 from django.http import HttpRequest, HttpResponse, JsonResponse
 from django.template.loader import render_to_string
@@ -20,11 +25,15 @@ API_PREFIX = "/api/"
 logger = logging.getLogger("cpcc.web")
 
 
+def _not_found_json(request: HttpRequest) -> JsonResponse:
+    return JsonResponse(
+        {"detail": f"No API endpoint at {request.path} (see /api/docs/)."}, status=404
+    )
+
+
 def not_found(request: HttpRequest, exception: Exception) -> HttpResponse:
     if request.path.startswith(API_PREFIX):
-        return JsonResponse(
-            {"detail": f"No API endpoint at {request.path} (see /api/docs/)."}, status=404
-        )
+        return _not_found_json(request)
     return defaults.page_not_found(request, exception)
 
 
@@ -73,3 +82,45 @@ class DatabaseOutageMiddleware:
             return None
         logger.warning("database unavailable: 503", extra={"path": request.path})
         return service_unavailable(request)
+
+
+def _is_json(response: HttpResponse) -> bool:
+    kind = response.get("Content-Type", "").split(";")[0].strip()
+    return kind == "application/json" or kind.endswith("+json")
+
+
+def _phrase(code: int) -> str:
+    try:
+        status = HTTPStatus(code)
+    except ValueError:
+        return f"HTTP {code}."
+    return f"{status.phrase}: {status.description}."
+
+
+class JsonUnderApiMiddleware:
+    """Under /api/ an error answer that is not JSON (Django's debug 404 page for a path no
+    route matches, its 400 page for a refused host, ...) becomes the API's JSON with the same
+    status and headers."""
+
+    def __init__(self, get_response: Callable[[HttpRequest], HttpResponse]) -> None:
+        self.get_response = get_response
+
+    def __call__(self, request: HttpRequest) -> HttpResponse:
+        response = self.get_response(request)
+        if (
+            response.status_code < 400
+            or not request.path.startswith(API_PREFIX)
+            or _is_json(response)
+            or response.streaming
+        ):
+            return response
+        if response.status_code == 404:
+            answer: HttpResponse = _not_found_json(request)
+        else:
+            answer = JsonResponse(
+                {"detail": _phrase(response.status_code)}, status=response.status_code
+            )
+        for header, value in response.items():
+            if header.lower() not in ("content-type", "content-length"):
+                answer[header] = value
+        return answer

@@ -41,6 +41,8 @@ INSTALLED_APPS = [
     "django.contrib.staticfiles",
     "rest_framework",
     "rest_framework.authtoken",
+    # Named API tokens that customers make (accounts.ApiToken, on knox's token model).
+    "knox",
     "drf_spectacular",
     "drf_spectacular_sidecar",
     "channels",
@@ -55,6 +57,8 @@ INSTALLED_APPS = [
 MIDDLEWARE = [
     # Requests in progress, so that a stopping server lets them end (cpcc_site.serving).
     "cpcc_site.serving.InProgressMiddleware",
+    # Under /api/ every answer is JSON, Django's own error pages included (DEBUG on or off).
+    "cpcc_site.errors.JsonUnderApiMiddleware",
     # 503, not 500, while the database is unavailable (listed first, asked last).
     "cpcc_site.errors.DatabaseOutageMiddleware",
     "django.middleware.security.SecurityMiddleware",
@@ -293,6 +297,40 @@ CPCC_RV_LEASE_S = env_float("CPCC_RV_LEASE_S", 20.0, minimum=1.0)
 # there within this time, in the revoking process at once (0: every request reads it).
 CPCC_TOKEN_CACHE_S = env_float("CPCC_TOKEN_CACHE_S", 10.0, minimum=0.0)
 
+# Named API tokens (accounts.ApiToken, django-rest-knox's model with a name and when it was last
+# used): only a digest of each key is kept; keys start with "cpcc_" (so that secret scanners
+# and people recognise them) and last until they are revoked. The tokens that
+# `drf_create_token` makes keep working beside them.
+KNOX_TOKEN_MODEL = "accounts.ApiToken"
+REST_KNOX = {"TOKEN_PREFIX": "cpcc_", "TOKEN_TTL": None, "AUTO_REFRESH": False}
+# Webhooks (accounts.Webhook): a POST to the customer's URL when a VV ends or a task is done,
+# answered within CPCC_WEBHOOK_TIMEOUT_S, retried CPCC_WEBHOOK_ATTEMPTS times in all, the
+# first retry after CPCC_WEBHOOK_RETRY_S and each later one after twice the time before. A URL
+# on a loopback, private, link-local or reserved address is refused unless
+# CPCC_WEBHOOK_ALLOW_PRIVATE (the demo and the tests, whose receivers run on this machine).
+CPCC_WEBHOOK_ALLOW_PRIVATE = env_bool("CPCC_WEBHOOK_ALLOW_PRIVATE", False)
+CPCC_WEBHOOK_TIMEOUT_S = env_float("CPCC_WEBHOOK_TIMEOUT_S", 5.0, minimum=0.1)
+CPCC_WEBHOOK_ATTEMPTS = int(env_float("CPCC_WEBHOOK_ATTEMPTS", 5, minimum=1))
+CPCC_WEBHOOK_RETRY_S = env_float("CPCC_WEBHOOK_RETRY_S", 30.0, minimum=0.0)
+# E-mail (the notifications a user chooses on the Account page): through EMAIL_HOST's SMTP
+# server when it is set, else printed on the worker's standard output (Django's console
+# backend: the demo).
+EMAIL_HOST = env_str("EMAIL_HOST", "")
+EMAIL_BACKEND = (
+    "django.core.mail.backends.smtp.EmailBackend"
+    if EMAIL_HOST
+    else "django.core.mail.backends.console.EmailBackend"
+)
+EMAIL_PORT = int(env_float("EMAIL_PORT", 25, minimum=1))
+EMAIL_HOST_USER = env_str("EMAIL_HOST_USER", "")
+EMAIL_HOST_PASSWORD = env_str("EMAIL_HOST_PASSWORD", "")
+EMAIL_USE_TLS = env_bool("EMAIL_USE_TLS", False)
+EMAIL_USE_SSL = env_bool("EMAIL_USE_SSL", False)
+EMAIL_TIMEOUT = 10
+DEFAULT_FROM_EMAIL = env_str("DEFAULT_FROM_EMAIL", "CPCC <cpcc@localhost>")
+# The site's address as people reach it, for links in e-mails (a worker knows no request).
+CPCC_SITE_URL = env_str("CPCC_SITE_URL", "http://127.0.0.1:8000")
+
 REST_FRAMEWORK = {
     "DEFAULT_AUTHENTICATION_CLASSES": [
         "accounts.authentication.CachedTokenAuthentication",
@@ -318,14 +356,19 @@ SPECTACULAR_SETTINGS = {
     "TITLE": "CPCC API",
     "DESCRIPTION": "Information acquisition as a service on fleets of unmanned vehicles.",
     "VERSION": "1",
+    # OpenAPI 3.1 (JSON Schema 2020-12): a position's coordinates each with its range.
+    "OAS_VERSION": "3.1.0",
     "SCHEMA_PATH_PREFIX": r"/api/v[0-9]+",  # tags by resource: vvs, sensors, vehicles...
     # Swagger UI and ReDoc from the drf-spectacular-sidecar package: the docs work offline.
     "SWAGGER_UI_DIST": "SIDECAR",
     "SWAGGER_UI_FAVICON_HREF": "SIDECAR",
     "REDOC_DIST": "SIDECAR",
+    # One name for a choice set that several fields use (webhooks' events and deliveries').
+    "ENUM_NAME_OVERRIDES": {"NotifyEventEnum": "accounts.models.NotifyEvent"},
     "POSTPROCESSING_HOOKS": [
         "drf_spectacular.hooks.postprocess_schema_enums",
         "cpcc_site.api.add_error_responses",
+        "cpcc_site.api.nullable_as_json_schema",
     ],
 }
 
@@ -353,8 +396,8 @@ CPCC_ADMIN_PASSWORD = env_str("CPCC_ADMIN_PASSWORD", "")
 CPCC_JOURNAL_WARN_ENTRIES = int(env_float("CPCC_JOURNAL_WARN_ENTRIES", 10_000, minimum=1))
 CPCC_JOURNAL_MAX_ENTRIES = int(env_float("CPCC_JOURNAL_MAX_ENTRIES", 50_000, minimum=1))
 CPCC_JOURNAL_MAX_BYTES = int(env_float("CPCC_JOURNAL_MAX_BYTES", 50_000_000, minimum=1))
-# Map tiles, a Leaflet URL template ({z}/{x}/{y}); empty: no tile layer, the maps draw on a
-# plain background (they work offline).
+# Map tiles, a Leaflet URL template ({z}/{x}/{y}) of a tile server; empty: the platform's own
+# tiles of the simulated world the cameras see (/tiles/{z}/{x}/{y}.png: they work offline).
 CPCC_MAP_TILES = env_str("CPCC_MAP_TILES", "")
 
 LOGGING = {

@@ -12,12 +12,14 @@ from django.urls import include, path
 from drf_spectacular.views import SpectacularAPIView, SpectacularSwaggerView
 
 from cpcc_site.docs import OfflineRedocView, redoc_bundle
+from fleet import views as fleet_views
 
 urlpatterns = [
     # Browsers ask for /favicon.ico on every page that names no icon (Swagger UI, ReDoc).
     path("favicon.ico", lambda request: redirect(static("img/favicon.svg"), permanent=True)),
     path("admin/", admin.site.urls),
     path("accounts/", include("django.contrib.auth.urls")),
+    path("accounts/", include("accounts.urls")),
     path("api/v1/", include("missions.api.urls")),
     path("api/v1/", include("fleet.api.urls")),
     path("api/v1/", include("accounts.api.urls")),
@@ -27,6 +29,7 @@ urlpatterns = [
     # works offline (cpcc_site/docs.py).
     path("api/redoc/", OfflineRedocView.as_view(url_name="schema"), name="api-redoc"),
     path("api/redoc/redoc.standalone.js", redoc_bundle, name="api-redoc-bundle"),
+    path("tiles/<int:z>/<int:x>/<int:y>.png", fleet_views.map_tile, name="map-tile"),
     path("", include("missions.urls")),
 ]
 

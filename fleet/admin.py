@@ -5,12 +5,29 @@ from django.conf import settings
 from django.contrib import admin, messages
 from django.core.exceptions import PermissionDenied
 from django.db.models import QuerySet
-from django.http import HttpRequest
+from django.http import (
+    HttpRequest,
+    HttpResponse,
+    HttpResponseBadRequest,
+    HttpResponseNotAllowed,
+    HttpResponseRedirect,
+)
+from django.shortcuts import get_object_or_404
 from django.template.response import TemplateResponse
 from django.urls import URLPattern, path, reverse
 from django.utils import timezone
 
-from fleet.models import GroundStation, NoFlyZone, RallyPoint, SensorType, Vehicle, VehicleStatus
+from cpcc_site.admin_display import METRES, SPEED, PositionShown, duration, rounded
+from fleet.models import (
+    Driver,
+    GroundStation,
+    NoFlyZone,
+    RallyPoint,
+    SensorType,
+    Vehicle,
+    VehicleCommand,
+    VehicleStatus,
+)
 from fleet.selectors import ground_station_list, vehicle_list
 from fleet.widgets import AreaWidget, map_media
 from missions.selectors import with_active_vv_count
@@ -18,12 +35,14 @@ from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     GroundStationConfig,
     VehicleConfig,
+    VehicleRemoved,
     ground_station_create,
     ground_station_update,
     no_fly_zone_delete,
     no_fly_zone_save,
     rally_point_delete,
     rally_point_save,
+    vehicle_command,
     vehicle_create,
     vehicle_set_status,
     vehicle_update,
@@ -79,8 +98,80 @@ def _health_text(health: dict[str, Any]) -> str:
     return " · ".join(parts)
 
 
+def _battery(vehicle: Vehicle, health: dict[str, Any]) -> tuple[int | None, str]:
+    """The RV's battery in percent as last known, or None and why there is none."""
+    if health.get("battery_pct") is not None:
+        return round(health["battery_pct"]), ""
+    if vehicle.driver == Driver.MAVLINK:
+        if vehicle.worker_seen is None:
+            return None, "its worker has not reported yet"
+        return None, "the autopilot has not reported its battery"
+    if vehicle.battery_s:
+        # What the simulated vehicle's battery reports: endurance less the time flown.
+        return round(100 * max(0.0, 1 - vehicle.flight_s / vehicle.battery_s)), ""
+    return None, "simulated without a battery (no battery_s set)"
+
+
+# What an operator may do with an RV on the fleet overview: its button, the question the
+# confirmation asks, and the statuses in which it makes no sense.
+FLEET_ACTIONS: dict[str, tuple[str, str, frozenset[str]]] = {
+    "maintenance": (
+        "Maintenance",
+        "Put {name} into maintenance? Its VVs move to other RVs; it flies home, lands and "
+        "takes no work until it is returned to service.",
+        frozenset({VehicleStatus.MAINTENANCE, VehicleStatus.REMOVED}),
+    ),
+    "return": (
+        "Return to service",
+        "Return {name} to service? It takes work at once.",
+        frozenset({VehicleStatus.ACTIVE, VehicleStatus.REMOVED}),
+    ),
+    VehicleCommand.RETURN_HOME: (
+        "Return home now",
+        "Send {name} home now? It goes into maintenance (its VVs move to other RVs), flies "
+        "home and lands, and stays there until it is returned to service.",
+        frozenset({VehicleStatus.REMOVED}),
+    ),
+    VehicleCommand.LAND: (
+        "Land now",
+        "Land {name} now, where it is? It goes into maintenance (its VVs move to other RVs) "
+        "and lands on the spot, and stays there until it is returned to service.",
+        frozenset({VehicleStatus.REMOVED}),
+    ),
+}
+
+
+def _actions(vehicle: Vehicle) -> list[dict[str, Any]]:
+    """The RV's buttons on the fleet overview (``never``: the statuses that disable one, for
+    the page to follow the status live)."""
+    return [
+        {
+            "name": str(name),
+            "label": label,
+            "confirm": confirm.format(name=vehicle.name),
+            "disabled": vehicle.status in never,
+            "never": " ".join(sorted(never)),
+        }
+        for name, (label, confirm, never) in FLEET_ACTIONS.items()
+    ]
+
+
+def _command(vehicle: Vehicle) -> dict[str, Any] | None:
+    """The operator's last command for the RV, when it was asked and taken by its worker."""
+    if not vehicle.command or vehicle.command_requested is None:
+        return None
+    return {
+        "label": VehicleCommand(vehicle.command).label,
+        "asked": vehicle.command_requested,
+        "asked_iso": vehicle.command_requested.isoformat(),
+        "taken": vehicle.command_taken,
+    }
+
+
 def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]:
-    """What the fleet overview shows of an RV (annotated with ``vvs_aboard``)."""
+    """What the fleet overview shows of an RV (annotated with ``vvs_aboard``). Its worker's
+    reports keep the page live (static/js/admin/fleet-overview.js); its speed and next task
+    are known from them only."""
     if vehicle.worker_seen is None:
         lease, lease_text = "never", "never reported"
     else:
@@ -88,32 +179,41 @@ def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]
         lease = "fresh" if age_s < lease_s else "expired"
         lease_text = f"{lease}, {_age(age_s)}"
     health = vehicle.health or {}
-    battery = health.get("battery_pct")
-    if battery is None and vehicle.battery_s:
-        # What the simulated vehicle's battery reports: endurance less the time flown.
-        battery = round(100 * max(0.0, 1 - vehicle.flight_s / vehicle.battery_s))
+    battery, battery_why = _battery(vehicle, health)
     position = vehicle.position
+    link = health.get("link") or ("worker stopped" if health.get("worker") else "not reported")
     return {
+        "id": vehicle.pk,
         "name": vehicle.name,
         "url": reverse("admin:fleet_vehicle_change", args=[vehicle.pk]),
+        "act_url": reverse("admin:fleet_vehicle_act", args=[vehicle.pk]),
+        "driver": vehicle.get_driver_display(),
         "status": vehicle.status,
         "status_label": vehicle.get_status_display(),
         "status_reason": vehicle.status_reason,
         "status_changed": vehicle.status_changed,
         "health": _health_text(health),
         "health_changed": vehicle.health_changed,
+        "link": link,
         "phase": vehicle.phase,
         "lat": position.lat,
         "lng": position.lng,
         "alt": position.alt,
         "reported": vehicle.lat is not None,
         "battery": battery,
+        "battery_why": battery_why,
         "tasks_done": vehicle.tasks_done,
         "vvs_aboard": vehicle.vvs_aboard,
         "lease": lease,
         "lease_text": lease_text,
         "area": vehicle.area,
+        "command": _command(vehicle),
+        "actions": _actions(vehicle),
     }
+
+
+# What the page's table shows and its map's data leaves out.
+_NOT_FOR_THE_MAP = ("actions", "command", "status_changed", "health_changed")
 
 
 @admin.register(SensorType)
@@ -124,10 +224,10 @@ class SensorTypeAdmin(admin.ModelAdmin):
 
 
 @admin.register(GroundStation)
-class GroundStationAdmin(admin.ModelAdmin):
+class GroundStationAdmin(PositionShown, admin.ModelAdmin):
     """Ground stations; a new one starts the VVs that waited for one."""
 
-    list_display = ["name", "lat", "lng", "alt"]
+    list_display = ["name", "lat_shown", "lng_shown", "alt_shown"]
     search_fields = ["name"]
 
     def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
@@ -164,7 +264,13 @@ class NoFlyZoneAdmin(_AirspaceAdmin):
     """No-fly zones: no RV serves a task inside one (between its altitudes), and every RV's
     autopilot gets it as an exclusion fence (when it holds at every altitude the RV flies)."""
 
-    list_display = ["name", "min_altitude_m", "max_altitude_m", "updated"]
+    list_display = ["name", "min_altitude_shown", "max_altitude_shown", "updated"]
+    min_altitude_shown = rounded(
+        "min_altitude_m", digits=METRES, unit="m", description="min altitude"
+    )
+    max_altitude_shown = rounded(
+        "max_altitude_m", digits=METRES, unit="m", description="max altitude"
+    )
     search_fields = ["name"]
     fields = ["name", "area", ("min_altitude_m", "max_altitude_m")]
 
@@ -183,10 +289,10 @@ class NoFlyZoneAdmin(_AirspaceAdmin):
 
 
 @admin.register(RallyPoint)
-class RallyPointAdmin(_AirspaceAdmin):
+class RallyPointAdmin(PositionShown, _AirspaceAdmin):
     """Rally points every RV's autopilot gets (where it may land or wait instead of home)."""
 
-    list_display = ["name", "lat", "lng", "alt"]
+    list_display = ["name", "lat_shown", "lng_shown", "alt_shown"]
     search_fields = ["name"]
 
     def _save(self, obj: Any) -> None:
@@ -197,7 +303,7 @@ class RallyPointAdmin(_AirspaceAdmin):
 
 
 @admin.register(Vehicle)
-class VehicleAdmin(admin.ModelAdmin):
+class VehicleAdmin(PositionShown, admin.ModelAdmin):
     """RVs: their limits and sensors; status changes go through the actions, which move the
     VVs aboard an RV that leaves service to RVs that can serve them."""
 
@@ -205,7 +311,7 @@ class VehicleAdmin(admin.ModelAdmin):
         "name",
         "status",
         "driver",
-        "max_speed_mps",
+        "max_speed_shown",
         "phase",
         "tasks_done",
         "worker_seen",
@@ -219,15 +325,19 @@ class VehicleAdmin(admin.ModelAdmin):
         "status_changed",
         "health",
         "health_changed",
-        "lat",
-        "lng",
-        "alt",
+        "lat_shown",
+        "lng_shown",
+        "alt_shown",
         "phase",
-        "distance_m",
-        "flight_s",
+        "distance_shown",
+        "flight_shown",
         "tasks_done",
         "worker_seen",
     ]
+    # The floats of its state and speed as what they mean (cpcc_site/admin_display.py).
+    max_speed_shown = rounded("max_speed_mps", digits=SPEED, unit="m/s", description="max speed")
+    distance_shown = rounded("distance_m", digits=METRES, unit="m", description="distance flown")
+    flight_shown = duration("flight_s", description="flight time")
     actions = ["put_into_maintenance", "return_to_service", "remove_from_fleet"]
     fieldsets = [
         (
@@ -261,9 +371,9 @@ class VehicleAdmin(admin.ModelAdmin):
             {
                 "fields": [
                     "phase",
-                    ("lat", "lng", "alt"),
-                    "distance_m",
-                    "flight_s",
+                    ("lat_shown", "lng_shown", "alt_shown"),
+                    "distance_shown",
+                    "flight_shown",
                     "tasks_done",
                     "worker_seen",
                 ]
@@ -285,7 +395,12 @@ class VehicleAdmin(admin.ModelAdmin):
             self.admin_site.admin_view(self.overview_view),
             name="fleet_vehicle_overview",
         )
-        return [overview, *super().get_urls()]
+        act = path(
+            "overview/<int:object_id>/act/",
+            self.admin_site.admin_view(self.act_view),
+            name="fleet_vehicle_act",
+        )
+        return [overview, act, *super().get_urls()]
 
     def overview_view(self, request: HttpRequest) -> TemplateResponse:
         """The whole fleet on a map and in a table: status, position, battery, tasks done,
@@ -309,12 +424,72 @@ class VehicleAdmin(admin.ModelAdmin):
             "media": map_media(js=("js/admin/fleet-overview.js",)),
             "vehicles": vehicles,
             "stations": stations,
-            "map_data": {"vehicles": vehicles, "stations": stations},
+            "map_data": {
+                "vehicles": [
+                    {k: v for k, v in row.items() if k not in _NOT_FOR_THE_MAP} for row in vehicles
+                ],
+                "stations": stations,
+                "statuses": dict(VehicleStatus.choices),
+            },
             "tiles": settings.CPCC_MAP_TILES,
             "lease_s": lease_s,
             "now": now,
+            "can_act": self.has_change_permission(request),
         }
         return TemplateResponse(request, "admin/fleet/vehicle/overview.html", context)
+
+    def act_view(self, request: HttpRequest, object_id: int) -> HttpResponse:
+        """An operator's action on one RV from the fleet overview (POST ``act``: maintenance,
+        return, return_home, land), done once confirmed (``confirmed=yes``, which the page's
+        dialog adds; without a script the answer is a page that asks first). Audited like
+        every fleet change (django-auditlog: who, when, what changed); then back to the
+        overview with a message."""
+        if request.method != "POST":
+            return HttpResponseNotAllowed(["POST"])
+        if not self.has_change_permission(request):
+            raise PermissionDenied
+        vehicle = get_object_or_404(Vehicle, pk=object_id)
+        act = request.POST.get("act", "")
+        if act not in FLEET_ACTIONS:
+            known = ", ".join(FLEET_ACTIONS)
+            return HttpResponseBadRequest(f"act: {act!r} is not an action; one of {known}.")
+        label, confirm, _ = FLEET_ACTIONS[act]
+        if request.POST.get("confirmed") != "yes":
+            context = {
+                **self.admin_site.each_context(request),
+                "title": f"{label}: {vehicle.name}",
+                "opts": self.opts,
+                "vehicle": vehicle,
+                "act": act,
+                "label": label,
+                "confirm": confirm.format(name=vehicle.name),
+            }
+            return TemplateResponse(request, "admin/fleet/vehicle/overview_confirm.html", context)
+        try:
+            done = self._act(request, vehicle, act)
+        except VehicleRemoved as exc:
+            self.message_user(request, str(exc), messages.ERROR)
+        else:
+            self.message_user(request, done, messages.SUCCESS)
+        return HttpResponseRedirect(reverse("admin:fleet_vehicle_overview"))
+
+    def _act(self, request: HttpRequest, vehicle: Vehicle, act: str) -> str:
+        """Do a confirmed action through its service; what the operator is told."""
+        who = f"{request.user.get_username()} on the fleet overview"
+        if act in VehicleCommand.values:
+            command = VehicleCommand(act)
+            vehicle_command(
+                vehicle=vehicle,
+                command=command,
+                vvm=platform_vvm(),
+                reason=f"{command.label.lower()}: asked by {who}",
+            )
+            return f"{vehicle.name}: {command.label.lower()}, sent to its worker"
+        status = VehicleStatus.MAINTENANCE if act == "maintenance" else VehicleStatus.ACTIVE
+        vehicle_set_status(
+            vehicle=vehicle, status=status, vvm=platform_vvm(), reason=f"set by {who}"
+        )
+        return f"{vehicle.name}: {status.label.lower()}"
 
     def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
         # Through the services: a new RV takes work at once; one whose reach changed hands

@@ -105,6 +105,14 @@ class Driver(models.TextChoices):
     MAVLINK = "mavlink", "MAVLink autopilot"
 
 
+class VehicleCommand(models.TextChoices):
+    """What an operator tells an RV to do now, beyond taking it out of service (its worker's
+    control loop obeys it once; the RV stays in maintenance until an operator returns it)."""
+
+    RETURN_HOME = "return_home", "Return home now"
+    LAND = "land", "Land now"
+
+
 class Vehicle(models.Model):
     """A real vehicle (RV): where it may fly, how, which sensors it carries, and its state."""
 
@@ -119,6 +127,11 @@ class Vehicle(models.Model):
     # that changed: health, which never overrides the status a person set.
     health = models.JSONField(default=dict, blank=True)
     health_changed = models.DateTimeField(null=True, blank=True)
+    # The last command an operator gave the RV (VehicleCommand), when it was asked, and when
+    # the RV's worker took it (null while it waits for the worker; taken exactly once).
+    command = models.CharField(max_length=12, choices=VehicleCommand.choices, blank=True)
+    command_requested = models.DateTimeField(null=True, blank=True)
+    command_taken = models.DateTimeField(null=True, blank=True)
     driver = models.CharField(max_length=10, choices=Driver.choices, default=Driver.SIM)
     driver_url = models.CharField(
         max_length=200, blank=True, help_text="MAVLink connection, e.g. udpin:0.0.0.0:14550."

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from django.db.models import Q, QuerySet
 
 from fleet.geo import Position
-from fleet.models import GroundStation, NoFlyZone, RallyPoint, SensorType, Vehicle
+from fleet.models import GroundStation, NoFlyZone, RallyPoint, SensorType, Vehicle, VehicleStatus
+from fleet.service_area import Exclusion, Reach, service_area_geojson
 
 
 class UnknownSensors(LookupError):
@@ -70,3 +72,31 @@ def vehicle_fence(*, vehicle: Vehicle) -> VehicleFence:
         exclusions=[zone.area for zone in zones],
         rally=[point.position for point in RallyPoint.objects.all()],
     )
+
+
+# In service: serving, or back by themselves (a recharge, a link that returns); not in
+# maintenance (a person's decision) and not removed. The service area and a dry run's copy of
+# the fleet are made of these.
+IN_SERVICE = (VehicleStatus.ACTIVE, VehicleStatus.CHARGING, VehicleStatus.OFFLINE)
+
+
+def vehicles_in_service() -> QuerySet[Vehicle]:
+    """The RVs in service (IN_SERVICE), with their sensors, in the order they were added."""
+    return Vehicle.objects.filter(status__in=IN_SERVICE).prefetch_related("sensors").order_by("pk")
+
+
+def service_area() -> dict[str, Any]:
+    """Where the platform can serve tasks now, for customers: the operation areas of the RVs
+    in service merged per altitude band, and the no-fly zones, as a GeoJSON FeatureCollection
+    (``fleet.service_area.service_area_geojson``). It names no vehicle."""
+    reaches = [
+        Reach(v.area_polygon, v.min_altitude_m, v.max_altitude_m)
+        for v in Vehicle.objects.filter(status__in=IN_SERVICE).only(
+            "area", "min_altitude_m", "max_altitude_m"
+        )
+    ]
+    zones = [
+        Exclusion(z.area_polygon, z.min_altitude_m, z.max_altitude_m)
+        for z in NoFlyZone.objects.order_by("pk")
+    ]
+    return service_area_geojson(reaches, zones)

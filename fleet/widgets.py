@@ -26,8 +26,9 @@ class AreaWidget(forms.Textarea):
     ``static/js/admin/area-widget.js`` draws the polygon and lets the operator draw, reshape,
     drag or delete it (Leaflet-Geoman), writing the ring back into the textarea, which stays
     editable; the form is validated and saved as before. ``others`` (``{name, status, area}``
-    of the other RVs) and ``stations`` (``{name, lat, lng}``) are drawn for orientation, on a
-    plain background unless ``CPCC_MAP_TILES`` names tiles.
+    of the other RVs) and ``stations`` (``{name, lat, lng}``) are drawn for orientation, on the
+    tiles ``CPCC_MAP_TILES`` names, or else on the platform's own tiles of the simulated world
+    (fleet/views.py).
     """
 
     map_template_name = "admin/fleet/vehicle/area_widget.html"

@@ -1,12 +1,40 @@
-from django.contrib import admin
+from collections.abc import Callable
+from typing import Any
 
+from django.contrib import admin
+from django.http import HttpRequest
+
+from cpcc_site.admin_display import PositionShown, moment, number_text
 from missions.models import LogEntry, Migration, StorageDocument, Task, VirtualVehicle
 
 
-class TaskInline(admin.TabularInline):
+def _vv_time(
+    field: str, description: str, *, vv: Callable[[Any], VirtualVehicle] = lambda obj: obj.vv
+) -> Any:
+    """A display method of a time on a VV's platform clock (the VV's own, or a task's, a log
+    line's, a migration's: ``obj.vv``) as a UTC date and time."""
+    return moment(
+        field, description=description, to_datetime=lambda obj, t: vv(obj).platform_datetime(t)
+    )
+
+
+class MadeByThePlatform:
+    """Tasks, log lines, stored documents and migrations come from running VVs only: the
+    admin shows them and offers no "Add"."""
+
+    def has_add_permission(self, request: HttpRequest, *args: Any) -> bool:
+        return False
+
+
+class TaskInline(PositionShown, admin.TabularInline):
     model = Task
-    fields = ["q", "index", "lat", "lng", "alt", "status", "vehicle", "requested_s", "done_s"]
+    fields = [
+        "q", "index", "lat_shown", "lng_shown", "alt_shown", "status", "vehicle", "requested",
+        "done",
+    ]  # fmt: skip
     readonly_fields = fields
+    requested = _vv_time("requested_s", "requested")
+    done = _vv_time("done_s", "done")
     extra = 0
     can_delete = False
     show_change_link = True
@@ -14,15 +42,16 @@ class TaskInline(admin.TabularInline):
 
 class MigrationInline(admin.TabularInline):
     model = Migration
-    fields = ["from_name", "to_name", "at_s", "reason"]
+    fields = ["from_name", "to_name", "at", "reason"]
     readonly_fields = fields
+    at = _vv_time("at_s", "at")
     extra = 0
     can_delete = False
 
 
 @admin.register(VirtualVehicle)
 class VirtualVehicleAdmin(admin.ModelAdmin):
-    list_display = ["name", "customer", "status", "host_gs", "host_rv", "steps", "submitted_s"]
+    list_display = ["name", "customer", "status", "host_gs", "host_rv", "steps", "submitted"]
     list_filter = ["status", "customer"]
     search_fields = ["name", "customer__name"]
     readonly_fields = [
@@ -34,35 +63,50 @@ class VirtualVehicleAdmin(admin.ModelAdmin):
         "effects_applied",
         "pending",
         "steps",
-        "last_step_s",
+        "last_step",
         "storage_bytes",
-        "submitted_s",
-        "started_s",
-        "finished_s",
+        "submitted",
+        "started",
+        "finished_at",
         "created",
         "finished",
     ]
+    # The platform clock's floats, shown by the methods below instead.
+    exclude = ["last_step_s", "submitted_s", "started_s", "finished_s"]
     inlines = [TaskInline, MigrationInline]
+
+    submitted = _vv_time("submitted_s", "submitted", vv=lambda vv: vv)
+    started = _vv_time("started_s", "started", vv=lambda vv: vv)
+    finished_at = _vv_time("finished_s", "ended", vv=lambda vv: vv)
+
+    @admin.display(description="last step's replay", ordering="last_step_s")
+    def last_step(self, vv: VirtualVehicle) -> str:
+        """How long a replay of its program up to where it waits takes: milliseconds."""
+        return number_text(vv.last_step_s * 1000, 1, "ms")
 
 
 @admin.register(Task)
-class TaskAdmin(admin.ModelAdmin):
-    list_display = ["vv", "q", "index", "status", "vehicle", "requested_s", "done_s"]
+class TaskAdmin(MadeByThePlatform, admin.ModelAdmin):
+    list_display = ["vv", "q", "index", "status", "vehicle", "requested", "done"]
     list_filter = ["status", "vehicle"]
+    requested = _vv_time("requested_s", "requested")
+    done = _vv_time("done_s", "done")
 
 
 @admin.register(StorageDocument)
-class StorageDocumentAdmin(admin.ModelAdmin):
+class StorageDocumentAdmin(MadeByThePlatform, admin.ModelAdmin):
     list_display = ["vv", "key", "size_bytes"]
     search_fields = ["key", "vv__name"]
 
 
 @admin.register(LogEntry)
-class LogEntryAdmin(admin.ModelAdmin):
-    list_display = ["vv", "seq", "at_s", "message"]
+class LogEntryAdmin(MadeByThePlatform, admin.ModelAdmin):
+    list_display = ["vv", "seq", "at", "message"]
+    at = _vv_time("at_s", "at")
     search_fields = ["message", "vv__name"]
 
 
 @admin.register(Migration)
-class MigrationAdmin(admin.ModelAdmin):
-    list_display = ["vv", "from_name", "to_name", "at_s", "reason"]
+class MigrationAdmin(MadeByThePlatform, admin.ModelAdmin):
+    list_display = ["vv", "from_name", "to_name", "at", "reason"]
+    at = _vv_time("at_s", "at")

@@ -4,9 +4,9 @@ Each socket reads the feed (missions/events.py) itself: it blocks on the changes
 positions stream, and sends its browser one frame with what came (filtered for its user), then
 waits a batch interval (CPCC_MAP_BATCH_S) so that whatever arrives meanwhile goes in the next
 frame. A browser that connects (or reconnects, or asks with ``{"type": "resync"}``) gets a
-snapshot of the database and then frames from the point the snapshot was taken; a socket that
-fell behind the changes stream's window sends a new snapshot. Frames are numbered (``seq``)
-per socket.
+snapshot of the database (and ``now``, the time on the platform's clock) and then frames from
+the point the snapshot was taken; a socket that fell behind the changes stream's window sends
+a new snapshot. Frames are numbered (``seq``) per socket.
 """
 
 from __future__ import annotations
@@ -125,7 +125,15 @@ class MapConsumer(AsyncJsonWebsocketConsumer):  # type: ignore[misc]
         self.shown: dict[str, float] = {}
         vehicles = self._visible(json.loads(raw) for raw in states.values())
         self.seq += 1
-        return {"type": "snapshot", "seq": self.seq, **data, "vehicles": vehicles}
+        # "now" on the platform's clock: the page's time window counts back from it, whatever
+        # the browser's own clock says.
+        return {
+            "type": "snapshot",
+            "seq": self.seq,
+            "now": time.time(),
+            **data,
+            "vehicles": vehicles,
+        }
 
     async def _last_id(self, stream: str) -> str:
         last = await self.redis.xrevrange(stream, count=1)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import unicodedata
 import uuid
 
@@ -21,6 +22,15 @@ class VVStatus(models.TextChoices):
     FAILED = "failed", "Failed"
     KILLED = "killed", "Killed"
     CANCELLED = "cancelled", "Cancelled"
+
+
+class WaitReason(models.TextChoices):
+    """What a VV that has not ended waits for, in the API's words (``waiting.reason``). Only
+    NO_VEHICLE is kept on the VV's row; the others follow from where it is."""
+
+    NO_VEHICLE = "no_vehicle", "No vehicle in service covers its next task"
+    QUEUE = "queue", "In the customer's queue"
+    FLYING = "flying", "A vehicle flies to its task"
 
 
 ACTIVE_STATUSES = (VVStatus.RUNNING, VVStatus.MIGRATING)
@@ -103,6 +113,15 @@ class VirtualVehicle(models.Model):
     submitted_s = models.FloatField()
     started_s = models.FloatField(null=True, blank=True)
     finished_s = models.FloatField(null=True, blank=True)
+    # Why it waits while no RV in service could serve its next task (routing parks it on a
+    # ground station), in the customer's words, and since when; blank once it moves on.
+    waiting_reason = models.CharField(
+        max_length=20, choices=WaitReason.choices, blank=True, default=""
+    )
+    waiting_message = models.CharField(max_length=300, blank=True, default="")
+    waiting_since_s = models.FloatField(null=True, blank=True)
+    # When the RV it is aboard expects to reach its next task (its control loop's plan).
+    next_task_eta_s = models.FloatField(null=True, blank=True)
     created = models.DateTimeField(auto_now_add=True)
     finished = models.DateTimeField(null=True, blank=True)
     updated = models.DateTimeField(auto_now=True)
@@ -134,6 +153,20 @@ class VirtualVehicle(models.Model):
     @property
     def is_ended(self) -> bool:
         return self.status in ENDED_STATUSES
+
+    def platform_datetime(self, t_s: float | None) -> dt.datetime | None:
+        """A time on the platform clock (this VV's ``*_s`` fields and its tasks', log lines'
+        and migrations') as a date in UTC; None for None.
+
+        The platform clock is the Unix epoch in a live system; ``simulate`` counts from 0 and
+        gives its VVs dates from 2025-01-01. The VV's logical start (``start_ms``, a date)
+        against its submission (``submitted_s``, platform clock) says which, so these times
+        line up with the ``time`` of its readings in both cases.
+        """
+        if t_s is None:
+            return None
+        offset_s = round(self.start_ms / 1000.0 - self.submitted_s)
+        return dt.datetime.fromtimestamp(t_s + offset_s, tz=dt.UTC)
 
 
 class JournalEntry(models.Model):
@@ -228,7 +261,9 @@ class LogEntry(models.Model):
 
     class Meta:
         ordering = ["vv", "at_s", "seq"]
-        verbose_name_plural = "log entries"
+        # Not "log entries": the admin lists the audit log under that name.
+        verbose_name = "VV log line"
+        verbose_name_plural = "VV log lines"
         constraints = [models.UniqueConstraint(fields=["vv", "seq"], name="log_unique_seq")]
 
     def __str__(self) -> str:

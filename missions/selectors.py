@@ -70,6 +70,9 @@ def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:
 _LISTED = (
     "id", "name", "status", "host_gs_id", "host_rv_id", "error", "error_line", "error_column",
     "created", "finished", "host_gs__name", "host_rv__name",
+    # What it waits for (``missions.waiting``), its times on the platform clock.
+    "waiting_reason", "waiting_message", "waiting_since_s", "next_task_eta_s", "submitted_s",
+    "start_ms",
 )  # fmt: skip
 
 
@@ -195,6 +198,12 @@ def vv_storage_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[Stora
     """The VV's storage documents, by key."""
     vv = vv_get_for_user(user=user, vv_id=vv_id)
     return vv.storage.order_by("key")  # each document's ``vv`` is this VV
+
+
+def vv_track_for_user(*, user: User, vv_id: uuid.UUID | str) -> QuerySet[TrackPoint]:
+    """Where the VV was while RVs carried it (the map's green line), oldest point first."""
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    return vv.track.order_by("t_s", "id")  # each point's ``vv`` is this VV
 
 
 # The pages of a VV's log and storage, compiled once (the VV is read first, for the user).

@@ -42,7 +42,13 @@ from missions.models import (
     VirtualVehicle,
     VVStatus,
 )
-from missions.readings import image_file, image_references, is_camera_reading, map_camera_readings
+from missions.readings import (
+    image_file,
+    image_references,
+    is_camera_reading,
+    map_camera_readings,
+    reading_time_ms,
+)
 from missions.selectors import (
     VVNotFound,
     map_snapshot_for_user,
@@ -53,6 +59,7 @@ from missions.selectors import (
     vv_tasks_for_user,
     with_task_counts,
 )
+from missions.waiting import vv_waiting
 from vvm_worker.platform import platform_vvm
 from vvm_worker.runtime import SyntaxProblem, check_syntax
 from vvm_worker.services import (
@@ -216,22 +223,28 @@ class TaskRow:
 
 def chart_series(tasks: Iterable[Task]) -> list[dict[str, Any]]:
     """The scalar readings of the VV's tasks, one series per sensor: ``{sensor, unit,
-    points: [[n, value, "q.index"], ...]}`` where n is the task's place in the order the VV
-    asked for them (1 for its first task)."""
+    points: [[ms, value, "q.index"], ...]}`` where ms is the reading's time (Unix epoch
+    milliseconds, UTC), the points in time order: the chart plots them against time (a batch's
+    tasks are served in any order). A reading without a readable time is left out."""
     series: dict[str, dict[str, Any]] = {}
-    for n, task in enumerate(tasks, start=1):
+    for task in tasks:
         for reading in task.readings or []:
             if not isinstance(reading, dict) or reading.get("kind") != "scalar":
                 continue
             value = reading.get("value")
             if not isinstance(value, int | float):
                 continue
+            taken_ms = reading_time_ms(reading.get("time"))
+            if taken_ms is None:
+                continue
             sensor = str(reading.get("sensor", "?"))
             entry = series.setdefault(
                 sensor, {"sensor": sensor, "unit": reading.get("unit") or "", "points": []}
             )
             label = f"{task.q}.{task.index}" if task.index else str(task.q)
-            entry["points"].append([n, value, label])
+            entry["points"].append([taken_ms, value, label])
+    for entry in series.values():
+        entry["points"].sort(key=lambda point: point[0])
     return sorted(series.values(), key=lambda s: (s["unit"], s["sensor"]))
 
 
@@ -337,7 +350,14 @@ def _editor(
     problem: SyntaxProblem | None = None,
     status: int = 200,
 ) -> HttpResponse:
-    context = {"form": form, "vv": vv, "problem": problem, "copies": vv is None}
+    context = {
+        "form": form,
+        "vv": vv,
+        "problem": problem,
+        "copies": vv is None,
+        # The service-area map's background (static/js/map.js).
+        "tiles": settings.CPCC_MAP_TILES,
+    }
     return render(request, "missions/editor.html", context, status=status)
 
 
@@ -376,10 +396,10 @@ def vv_new(request: HttpRequest) -> HttpResponse:
         return _editor(request, form, status=429)
     if problem is not None:
         return _editor(request, form, problem=problem, status=400)
-    if len(vvs) == 1:
+    if len(vvs) == 1:  # on to the new VV's page: where it runs, what it reads
         messages.success(request, f"“{vvs[0].name}” is submitted.")
-    else:
-        messages.success(request, f"{len(vvs)} copies of “{data['name']}” are submitted.")
+        return redirect("vv-detail", vv_id=vvs[0].pk)
+    messages.success(request, f"{len(vvs)} copies of “{data['name']}” are submitted.")
     return redirect("home")
 
 
@@ -499,6 +519,9 @@ def vv_detail(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
     context = {
         "vv": vv,
         "where": where(vv, staff=staff),
+        # What it waits for (static/js/vv.js keeps it up to date from the API while it runs).
+        "waiting": vv_waiting(vv, tasks_open=vv.tasks_open),  # type: ignore[attr-defined]
+        "api_url": reverse("vv-detail", kwargs={"pk": str(vv.pk)}),
         "actions": actions_for(vv),
         "ended": vv.is_ended,
         "tasks": [
@@ -554,10 +577,21 @@ def vv_storage_json(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
 # --- the map ----------------------------------------------------------------------------------
 
 
+# Stands for the chosen VV's id in the URL of its history that the live map's page is given.
+_CHOSEN_VV = uuid.UUID(int=0)
+
+
 @customer_or_staff_required
 def live_map(request: HttpRequest) -> HttpResponse:
-    """The live map: the user's VVs (every VV and vehicle for staff), fed by /ws/map/."""
-    context = {"socket_path": "/ws/map/", "tiles": settings.CPCC_MAP_TILES}
+    """The live map: the user's VVs (every VV and vehicle for staff), fed by /ws/map/, with
+    filters (static/js/live_map.js): a time window (staff start with the last 15 minutes) and
+    one VV with its whole history (vv_map_history)."""
+    context = {
+        "socket_path": "/ws/map/",
+        "tiles": settings.CPCC_MAP_TILES,
+        "history_url": reverse("vv-map-history", args=[_CHOSEN_VV]),
+        "history_placeholder": str(_CHOSEN_VV),
+    }
     return render(request, "missions/map.html", context)
 
 

@@ -12,10 +12,13 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from django.conf import settings
 from django.db import connection
+
+from vvm_worker.services.waiting import PLATFORM_NOTE
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,6 +33,14 @@ def database_url() -> str:
     host = conf["HOST"] or "127.0.0.1"
     port = f":{conf['PORT']}" if conf["PORT"] else ""
     return f"postgres://{user}{password}@{host}{port}/{conf['NAME']}"
+
+
+def program_log(vv: Any) -> list[str]:
+    """The lines a VV's program logged, in order, without the notes the platform adds (a VV
+    that waited for a vehicle while a worker was gone has them; a run without faults has
+    none): what two runs of one program must agree on."""
+    lines = vv.log.exclude(level=PLATFORM_NOTE).order_by("seq")
+    return list(lines.values_list("message", flat=True))
 
 
 def wait_for(

@@ -13,6 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PURE = [
     "fleet.geo",
     "fleet.airspace",
+    "fleet.service_area",
     "fleet.driving",
     "fleet.sources",
     "fleet.simulation",
@@ -22,6 +23,7 @@ PURE = [
     "vvm_worker.mapping",
     "vvm_worker.scenario_gen",
     "vvm_worker.dispatch",
+    "vvm_worker.notify",
     "vvm_worker.clock",
     "vvm_worker.control",
     "fleet.catalog",

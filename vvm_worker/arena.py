@@ -27,7 +27,15 @@ from shapely.geometry import Polygon
 from fleet.geo import Position
 from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as Kinematics
-from vvm_worker.control import ACTIVE, Area, ControlLoop, LoopConfig, LoopTask, VehicleState
+from vvm_worker.control import (
+    ACTIVE,
+    Area,
+    ControlLoop,
+    LoopConfig,
+    LoopTask,
+    OperatorCommand,
+    VehicleState,
+)
 from vvm_worker.mapping import VehicleCaps, map_task
 from vvm_worker.planning import STANDBY_S, Planner, TravelTime, make_planner
 from vvm_worker.runtime.types import TaskRequest
@@ -95,6 +103,9 @@ class MemoryStore:
 
     def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
         raise RuntimeError("the arena's vehicles have no battery and never leave service")
+
+    def take_command(self) -> OperatorCommand | None:
+        return None  # no operator in the arena
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
         del self.open[task.id]

@@ -22,6 +22,7 @@ from vvm_worker.dispatch import (
     gs_queue,
     rv_queue,
 )
+from vvm_worker.notify import NOTIFY_QUEUE, NOTIFY_TASK
 
 logger = logging.getLogger("cpcc.dispatch")
 
@@ -86,3 +87,26 @@ def _safely(send: Callable[[Any], None], arg: Any) -> None:
         send(arg)
     except Exception:
         logger.exception("could not hand work to a worker; the hosts' sweeps will find it")
+
+
+class CeleryNotifier:
+    """Tells the ``notify`` queue's workers of an event once the transaction that made it
+    commits (vvm_worker/services/notifications.py: only events someone listens for come
+    here)."""
+
+    def vv_event(
+        self, *, event: str, vv_id: uuid.UUID, at_ms: int, task_id: int | None = None
+    ) -> None:
+        args = [event, str(vv_id), at_ms, task_id]
+        transaction.on_commit(lambda: _send_notify(args))
+
+
+def _send_notify(args: list[Any]) -> None:
+    """Send it; a broker that cannot be reached loses it (no sweep looks for events), which
+    is said in the log: the VV's state is committed whatever happens to its notification."""
+    try:
+        app.send_task(NOTIFY_TASK, args=args, queue=NOTIFY_QUEUE)
+    except Exception:
+        logger.exception(
+            "could not queue a notification: it is lost", extra={"event": args[0], "vv": args[1]}
+        )

@@ -14,7 +14,10 @@ the air at its standby position for a while (planners that ``stand_by``) and the
 and lands. Every flight keeps clear of the provider's no-fly zones (``fleet.airspace``): where
 a straight leg would cross one, the vehicle flies the way around it, turn point by turn point,
 and the planner weighs the way's length. A battery that cannot take the vehicle to its next
-task and home with its reserve sends it home to recharge, out of service meanwhile.
+task and home with its reserve sends it home to recharge, out of service meanwhile. An
+operator's command (``OperatorCommand``: return home now, land now), which the store hands
+over once, is obeyed at once; the store has the RV out of service already, so the loop sends
+it nowhere else until an operator returns it to service.
 """
 
 from __future__ import annotations
@@ -40,6 +43,11 @@ ACTIVE = "active"
 MAINTENANCE = "maintenance"
 CHARGING = "charging"
 OFFLINE = "offline"  # in service, but it cannot be flown (its link, its autopilot)
+
+# An operator's commands (the values of fleet.models.VehicleCommand).
+RETURN_HOME = "return_home"
+LAND = "land"
+PHASE_LANDING_DOWN = "landing"  # a driver's phase while it descends to land (Driver.phase_at)
 
 # A vehicle at its target serves every open task within the task's tolerance plus this much
 # (floating-point slack of the kinematics).
@@ -77,6 +85,15 @@ class LoopTask:
 
 
 @dataclass(frozen=True)
+class OperatorCommand:
+    """An operator's command for the RV (RETURN_HOME or LAND), and ``asked``: when it was
+    given (the store's words, shown back to the operator with what the loop does)."""
+
+    name: str
+    asked: str = ""
+
+
+@dataclass(frozen=True)
 class VehicleState:
     """What the loop reports of its vehicle at ``t_s``."""
 
@@ -110,6 +127,11 @@ class Store(Protocol):
 
     def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
         """Change the RV's status, for ``reason`` (only from ``expected`` when given)."""
+        ...
+
+    def take_command(self) -> OperatorCommand | None:
+        """An operator's command that waits for the RV, handed over once (None: none
+        waits). Read with the status: asking costs nothing until the status changes."""
         ...
 
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
@@ -189,6 +211,7 @@ class ControlLoop:
         config: LoopConfig = LoopConfig(),
         plan_timer: Callable[[], float] | None = None,
         airspace: Airspace = NO_ZONES,
+        on_estimates: Callable[[dict[Any, float]], None] | None = None,
     ) -> None:
         self.name = name
         self.driver = driver
@@ -199,6 +222,8 @@ class ControlLoop:
         self.sensing = sensing
         self.config = config
         self.airspace = airspace
+        # Told at each plan when the vehicle expects to reach each VV's next task (`_estimate`).
+        self.on_estimates = on_estimates
         # Endurance kept for the unexpected: never planned away (seconds of flight).
         self.reserve_s = config.reserve * config.battery_s if config.battery_s else 0.0
         self.standby_until: float | None = None  # waiting in the air for work until then
@@ -214,6 +239,9 @@ class ControlLoop:
         self._tolerance_m = 0.0
         self._homing = False  # flying the way home: it lands at the end
         self.returning = False
+        # An operator's "land now" under way: when the touchdown is due (None: none).
+        self._landing_due: float | None = None
+        self.command: OperatorCommand | None = None  # the operator's last, as obeyed
         self._token = 0  # invalidates the arrival of a leg that was replaced
         # What the live map shows between two plans: the status and the open tasks in the
         # order the vehicle means to serve them.
@@ -235,6 +263,8 @@ class ControlLoop:
         """The vehicle's tasks or status changed: re-plan, unless its target still stands and
         its planner keeps targets until it gets there."""
         now = self.clock()
+        if self._obey_command(now):
+            return
         if (
             self.config.wake_defers_to_arrival
             and self.target is not None
@@ -251,6 +281,7 @@ class ControlLoop:
                     here = self.driver.position_at(now)
                     plan = [t.as_plan_task() for t in tasks]
                     self.route = self.planner.route(here, plan, now)
+                    self._estimate(tasks)  # and its VVs when it gets to their tasks
                 return
         self._plan(now)
 
@@ -334,6 +365,7 @@ class ControlLoop:
                 self.scheduler.call_at(now + ARRIVAL_POLL_S, lambda: self._landed(token, due_s))
             return
         self.returning = False
+        self._landing_due = None
         logger.info("%s landed", self.name, extra=self._log())
         if self.status == CHARGING:
             self._charge(now)
@@ -418,6 +450,8 @@ class ControlLoop:
     # --- planning ------------------------------------------------------------------------------
 
     def _plan(self, now: float) -> None:
+        if self._obey_command(now):
+            return
         self._planned_at_change = self._changes
         self.status = self.store.status()
         tasks = list(self.store.open_tasks()) if self.status == ACTIVE else []
@@ -440,6 +474,7 @@ class ControlLoop:
         if self.status == CHARGING and self.driver.is_landed_at(now):
             self._charge(now)
         if choice is not None and choice.id == self.target and not self.returning:
+            self._estimate(tasks)  # (others' tasks may have joined the route)
             self._record(now)  # still the best target: fly on
             return
         self._token += 1
@@ -455,14 +490,120 @@ class ControlLoop:
             self._leg = None
             self.returning = False
             self._homing = False
+            self._landing_due = None
             self.standby_until = None
             self._via, self._tolerance_m = way, choice.tolerance_m
             self._next_leg(token, now)
+            self._estimate(tasks)
         else:
             self.target = None
-            if not self.driver.is_landed_at(now) and not self._stand_by(now, token):
+            if self._landing_due is not None:
+                self._keep_landing(now, token)  # an operator's "land now" holds
+            elif not self.driver.is_landed_at(now) and not self._stand_by(now, token):
                 self._go_home(now, token)
         self._record(now)
+
+    # --- an operator's commands --------------------------------------------------------------
+
+    def _obey_command(self, now: float) -> bool:
+        """Obey the operator's command that waits, if any (True: one was obeyed). The RV is
+        out of service (the store put it there with the command): nothing else is planned.
+        RETURN_HOME flies home at once, around the no-fly zones (a MAVLink autopilot gets its
+        RTL for the last leg), and takes off first where an earlier "land now" left it;
+        LAND lands where the vehicle is."""
+        command = self.store.take_command()
+        if command is None:
+            return False
+        logger.warning(
+            "%s: the operator's command: %s",
+            self.name,
+            command.name,
+            extra={**self._log(), "command": command.name},
+        )
+        self.command = command
+        self._planned_at_change = self._changes
+        self.status = self.store.status()
+        self._token += 1
+        token = self._token
+        self.target, self.route, self._leg, self._via = None, [], None, []
+        self.standby_until = None
+        self._homing = False
+        if command.name == LAND:
+            self.returning = False
+            self._land_here(now, token)
+        else:
+            self._landing_due = None
+            self.returning = False  # (logged anew: "returning home")
+            if self.driver.is_landed_at(now) and not within_m(
+                self.driver.position_at(now), self.driver.depot, TURN_TOLERANCE_M
+            ):
+                self._take_off_home(now, token)
+            else:
+                self._go_home(now, token)
+        self._record(now)
+        return True
+
+    def _land_here(self, now: float, token: int) -> None:
+        """Land where the vehicle is, and watch for the touchdown."""
+        try:
+            due = self.driver.land(now)
+        except DriverError as exc:
+            self._landing_due = now  # the operator's word stands: tried again at each plan
+            self._failed(exc)
+            return
+        self._landing_due = due
+        self.scheduler.call_at(self._first_look(now, due), lambda: self._landed(token, due))
+
+    def _keep_landing(self, now: float, token: int) -> None:
+        """A plan during an operator's landing: the landing goes on (watched anew, its old
+        watch superseded by the plan); one that did not start (the link was down) is asked
+        again."""
+        due = self._landing_due
+        if due is None or self.driver.phase_at(now) != PHASE_LANDING_DOWN:
+            self._land_here(now, token)
+            return
+        self.scheduler.call_at(self._first_look(now, due), lambda: self._landed(token, due))
+
+    def _take_off_home(self, now: float, token: int) -> None:
+        """Landed away from home (an operator's "land now"): up to the middle of the
+        altitudes it may fly, home around the no-fly zones, and down."""
+        area = self.store.area()
+        up = (area.min_altitude_m + area.max_altitude_m) / 2
+        here = self.driver.position_at(now)
+        way = self.airspace.way(here.with_alt(up), self.driver.depot.with_alt(up))
+        if way is None:
+            logger.warning("home walled in by no-fly zones: flying straight", extra=self._log())
+            way = [self.driver.depot.with_alt(up)]
+        logger.info("%s returning home", self.name, extra=self._log())
+        self.returning = True
+        self._homing = True
+        self._via = list(way)
+        self._next_leg(token, now)
+
+    def _estimate(self, tasks: Sequence[LoopTask]) -> None:
+        """Tell ``on_estimates`` when the vehicle expects to reach each VV's next task on its
+        route (platform clock, by VV: the store's ``LoopTask.vv``): the target at the end of
+        the way flown now, then each other task of the route one straight leg after the one
+        before it."""
+        if self.on_estimates is None or self.target is None or self._leg is None:
+            return
+        vv_of = {t.id: t.vv for t in tasks}
+        here, _, t_s = self._leg
+        for point in self._via:
+            t_s += self.driver.leg_s(here, point)
+            here = point
+        etas: dict[Any, float] = {}
+        if vv_of.get(self.target) is not None:
+            etas[vv_of[self.target]] = t_s
+        for task in self.route:
+            if task.id == self.target:
+                continue
+            t_s += self.driver.leg_s(here, task.position)
+            here = task.position
+            vv = vv_of.get(task.id)
+            if vv is not None:
+                etas.setdefault(vv, t_s)
+        self.on_estimates(etas)
 
     def _next_leg(self, token: int, now: float) -> None:
         """Fly the next leg of the way (``_via``): to a turn point, or to the way's end."""
@@ -606,6 +747,46 @@ class ControlLoop:
             "battery": self.battery_fraction(now),
             "vvs": self.store.aboard(),
             "route": [[here.lat, here.lng]] + [[p.lat, p.lng] for p in ahead],
+            "activity": self._activity(now),
+            "next_task": self._next_task(now),
+            "command": None if self.command is None else dataclasses.asdict(self.command),
+        }
+
+    def _activity(self, now: float) -> str:
+        """What the vehicle is doing, in an operator's words."""
+        landed = self.driver.is_landed_at(now)
+        if self._landing_due is not None and not landed:
+            return "landing here"
+        if self.returning and not landed:
+            return "returning home"
+        if self.target is not None:
+            return "flying to a task"
+        if self.standby_until is not None and not landed:
+            return "standing by"
+        if self._charged_at is not None and landed:
+            return "charging"
+        return "landed" if landed else "hovering"
+
+    def _next_task(self, now: float) -> dict[str, Any] | None:
+        """The task the vehicle flies to (its VV, where, seconds to get there by the
+        estimate), or None."""
+        if self.target is None or self.returning:
+            return None
+        task = next((t for t in self.store.open_tasks() if t.id == self.target), None)
+        if task is None:
+            return None
+        way = [task.position] if not self._via else [*self._via]
+        leg_end = self._leg[0] if self._leg is not None else task.position
+        eta_s = self.driver.time_to_s(leg_end, now)
+        eta_s += sum(self.driver.leg_s(a, b) for a, b in itertools.pairwise([leg_end, *way]))
+        p = task.position
+        return {
+            "id": task.id,
+            "vv": None if task.vv is None else str(task.vv),
+            "lat": p.lat,
+            "lng": p.lng,
+            "alt": p.alt,
+            "eta_s": round(max(0.0, eta_s)),
         }
 
     @property

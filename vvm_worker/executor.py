@@ -36,6 +36,7 @@ from vvm_worker.control import (
     ControlLoop,
     LoopConfig,
     LoopTask,
+    OperatorCommand,
     Scheduler,
     VehicleState,
 )
@@ -44,14 +45,18 @@ from vvm_worker.sensing import read_sensors, vehicle_reading
 from vvm_worker.services import (
     VVM,
     task_complete,
+    vehicle_command_take,
     vehicle_record_state,
     vehicle_record_track,
     vehicle_set_status,
 )
 from vvm_worker.services.base import LocalRV, Settled
 from vvm_worker.services.routing import fleet_airspace, planned_order
+from vvm_worker.services.waiting import vvs_record_next_task_eta
 
 _SDC_TTL_S = 10.0
+# An estimate of when an RV reaches a VV's task is written again when it moves by more.
+ESTIMATE_SLACK_S = 1.0
 _TASK_FIELDS = ("id", "lat", "lng", "alt", "tolerance_m", "requested_s", "sensors", "vv_id", "q")
 # An RV's open tasks, oldest request first (read again whenever they may have changed).
 _OPEN_TASKS = PreparedRead(
@@ -102,6 +107,10 @@ class DatabaseStore:
         self._tasks: list[LoopTask] | None = None
         self._added: list[Task] = []  # put on the list since (see `add`)
         self._status: str | None = None
+        self.status_reason = ""  # why the status is what it is, as read with it
+        # An operator's command that waits for the RV, as read with the status: (command,
+        # when it was asked), the fence that takes it exactly once.
+        self._command: tuple[str, Any] | None = None
         self._aboard: list[dict[str, Any]] = []
         # Where the vehicle stopped, to be recorded with the first task it serves there (one
         # transaction), or on its own by the next record.
@@ -109,6 +118,8 @@ class DatabaseStore:
         # A report that did not move the vehicle (a new plan, a phase): it waits for the next
         # write, which supersedes it, or for the host's next ``write_waiting`` (a map tick).
         self._waiting: VehicleState | None = None
+        # When the loop last said the vehicle reaches each VV's next task (see `estimated`).
+        self._estimates: dict[Any, float] = {}
 
     def changed(self) -> None:
         """The RV's tasks or status may have changed: read them again when next asked."""
@@ -151,10 +162,23 @@ class DatabaseStore:
 
     def status(self) -> str:
         if self._status is None:
-            self._status = str(
-                Vehicle.objects.values_list("status", flat=True).get(pk=self.vehicle_id)
-            )
+            status, reason, command, asked, taken = Vehicle.objects.values_list(
+                "status", "status_reason", "command", "command_requested", "command_taken"
+            ).get(pk=self.vehicle_id)
+            self._status, self.status_reason = str(status), reason
+            pending = command and asked is not None and taken is None
+            self._command = (command, asked) if pending else None
         return self._status
+
+    def take_command(self) -> OperatorCommand | None:
+        self.status()
+        if self._command is None:
+            return None
+        (command, asked), self._command = self._command, None
+        if not vehicle_command_take(vehicle_id=self.vehicle_id, command=command, asked=asked):
+            self._status = None  # another command came meanwhile: read it with the status
+            return None
+        return OperatorCommand(command, asked.isoformat())
 
     def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
         vehicle_set_status(
@@ -225,6 +249,19 @@ class DatabaseStore:
             self._arrival = state
             return
         self._write(state, moved=moved)
+
+    def estimated(self, etas: dict[Any, float]) -> None:
+        """The loop's plan: when the vehicle expects to reach each VV's next task (by VV).
+        Only the estimates that moved by more than ESTIMATE_SLACK_S are written: a plan that
+        keeps its target (most of them) writes nothing, a new target one VV's."""
+        told = self._estimates
+        changed = {
+            vv: eta_s
+            for vv, eta_s in etas.items()
+            if vv not in told or abs(told[vv] - eta_s) > ESTIMATE_SLACK_S
+        }
+        vvs_record_next_task_eta(etas=changed)
+        self._estimates = {vv: changed.get(vv, told.get(vv, eta_s)) for vv, eta_s in etas.items()}
 
     def write_waiting(self) -> None:
         """Write the report that waits, if any (the host's map tick: a row is never more than
@@ -595,5 +632,6 @@ def build_rig(
             live=live,
             wake_defers_to_arrival=wake_defers_to_arrival,
         ),
+        on_estimates=store.estimated,
     )
     return VehicleRig(vehicle.pk, vehicle.name, driver, store, loop, readings, planner_for)

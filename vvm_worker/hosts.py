@@ -310,9 +310,13 @@ class RVHost:
         rows = (
             Vehicle.objects.filter(pk__in=ids)
             .annotate(busy=Exists(open_tasks))
-            .values_list("pk", "status", "busy")
+            .values_list("pk", "status", "busy", "command", "command_taken")
         )
-        seen = {pk: (status, busy) for pk, status, busy in rows}
+        # An operator's command its loop has not taken is work too (its message was lost).
+        seen = {
+            pk: (status, busy or (bool(command) and taken is None))
+            for pk, status, busy, command, taken in rows
+        }
         self._each(lambda rv: rv.look_again(*seen.get(rv.vehicle_id, (None, True))), "sweep")
         self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
 
@@ -478,8 +482,8 @@ class HostedRV:
     def beacon(self, now: float) -> None:
         """Tell the live maps where the vehicle is, what it carries and where it goes next:
         when that changed, else now and then (a map forgets a state VEHICLE_STALE_S old)."""
-        self._note_health(now)
-        state = self.loop.live_state(now)
+        health = self._note_health(now)
+        state = self.loop.live_state(now) | self._for_operators(now, health)
         if self._told is not None and self._told[0] == state and now < self._told[1]:
             return
         self._told = (state, now + BEACON_KEYFRAME_S)
@@ -488,8 +492,33 @@ class HostedRV:
             state | {"id": self.vehicle_id, "name": self.name, "t": clock.epoch_ms(now) / 1000}
         )
 
-    def _note_health(self, now: float) -> None:
-        """Record the vehicle's health when it changed (the battery in steps of 5 %)."""
+    def _for_operators(self, now: float, health: dict[str, Any]) -> dict[str, Any]:
+        """What only staff see of the vehicle live (missions.events.vehicle_for keeps it
+        from customers): why its status is what it is, its ground speed (a simulated
+        vehicle's at its own speed, not the worker's time acceleration), its link and health,
+        and its battery's charge, or why there is none."""
+        battery = self.loop.battery_fraction(now)
+        why = ""
+        if isinstance(self.driver, MavlinkDriver):
+            if battery is None:  # no endurance configured: the autopilot's charge still counts
+                battery = self.driver.battery_fraction()
+            if battery is None:
+                why = "the autopilot has not reported its battery"
+        elif battery is None:
+            why = "simulated without a battery (no battery_s set)"
+        return {
+            "driver": "mavlink" if isinstance(self.driver, MavlinkDriver) else "sim",
+            "status_reason": self.rig.store.status_reason,
+            "speed_mps": round(self.driver.speed_at(now) / self._scale, 1),
+            "link": health.get("link"),
+            "health": health,
+            "battery": battery,
+            "battery_why": why,
+        }
+
+    def _note_health(self, now: float) -> dict[str, Any]:
+        """Record the vehicle's health when it changed (the battery in steps of 5 %);
+        returns it."""
         if isinstance(self.driver, MavlinkDriver):
             health = self.driver.health()
         else:
@@ -503,6 +532,7 @@ class HostedRV:
         if seen != self._health:
             vehicle_record_health(vehicle_id=self.vehicle_id, health=health)
             self._health = seen
+        return health
 
     def close(self) -> None:
         self.rig.sensing.close()

@@ -6,7 +6,7 @@ from __future__ import annotations
 from django.conf import settings
 
 from fleet.simulation import SensorField
-from vvm_worker.celery_dispatch import CeleryDispatcher
+from vvm_worker.celery_dispatch import CeleryDispatcher, CeleryNotifier
 from vvm_worker.clock import SystemClock
 from vvm_worker.dispatch import LocalHost
 from vvm_worker.live import FeedAnnouncer
@@ -24,4 +24,5 @@ def platform_vvm(*, local: LocalHost | None = None) -> VVM:
         field=SensorField(0),
         lease_s=settings.CPCC_RV_LEASE_S,
         announcer=FeedAnnouncer(batched=local is not None, in_background=local is not None),
+        notifier=CeleryNotifier(),
     )

@@ -77,7 +77,8 @@ def read_sensors(
         }
         reading.update(field.sample(spec, position, time_s, battery_fraction=battery_fraction))
         if spec.kind == "camera":
-            image = render_camera(spec, position, time_s, seed=seed)
+            # The caption prints the reading's time (a simulation's clock counts from 0).
+            image = render_camera(spec, position, time_s, seed=seed, epoch_s=epoch_ms / 1000)
             reading["image"] = save_picture(image, str(spec.params.get("format", "png")))
         readings.append(reading)
     return readings

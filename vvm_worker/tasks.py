@@ -9,15 +9,18 @@ waited out and the work done again, the message unacknowledged meanwhile.
 from __future__ import annotations
 
 import uuid
+from typing import Any
 
 from celery import shared_task
 
 from cpcc_site import database
 from vvm_worker.dispatch import ADMIT_TASK, VEHICLE_CHANGED_TASK, VV_ADVANCE_TASK
 from vvm_worker.hosts import GSHost, current_host
+from vvm_worker.notify import NOTIFY_QUEUE, NOTIFY_TASK, WEBHOOK_DELIVER_TASK
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_admit_queued
 from vvm_worker.services import vv_advance as advance
+from vvm_worker.services.notifications import WebhookJob, vv_event_fan_out, webhook_attempt
 
 
 @shared_task(name=VV_ADVANCE_TASK, acks_late=True, ignore_result=True)
@@ -49,3 +52,50 @@ def admit(customer_id: int) -> None:
         database.through_outages(
             lambda: vv_admit_queued(customer_id=customer_id, vvm=platform_vvm())
         )
+
+
+# --- notifications (the ``notify`` queue: vvm_worker/services/notifications.py) ---------------
+
+
+@shared_task(name=NOTIFY_TASK, acks_late=True, ignore_result=True)
+def notify(event: str, vv_id: str, at_ms: int, task_id: int | None = None) -> None:
+    """An event someone of the VV's customer listens for: e-mail the users who chose it, and
+    hand each webhook that hears of it a delivery of its own."""
+    jobs = database.through_outages(
+        lambda: vv_event_fan_out(event=event, vv_id=uuid.UUID(vv_id), at_ms=at_ms, task_id=task_id)
+    )
+    for job in jobs:
+        _deliver(job, attempt=1)
+
+
+@shared_task(name=WEBHOOK_DELIVER_TASK, acks_late=True, ignore_result=True)
+def webhook_deliver(job: dict[str, Any], attempt: int) -> None:
+    """One attempt to POST an event to a webhook; a failed one (no answer, or not 2xx) is
+    tried again later with back-off (CPCC_WEBHOOK_RETRY_S, doubling), CPCC_WEBHOOK_ATTEMPTS
+    times in all."""
+    parsed = WebhookJob(
+        webhook_id=int(job["webhook_id"]),
+        delivery=uuid.UUID(job["delivery"]),
+        event=str(job["event"]),
+        vv_id=uuid.UUID(job["vv_id"]),
+        task_id=None if job["task_id"] is None else int(job["task_id"]),
+        body=str(job["body"]),
+    )
+    retry_in_s = database.through_outages(lambda: webhook_attempt(job=parsed, attempt=attempt))
+    if retry_in_s is not None:
+        _deliver(parsed, attempt=attempt + 1, countdown_s=retry_in_s)
+
+
+def _deliver(job: WebhookJob, *, attempt: int, countdown_s: float = 0.0) -> None:
+    args = [
+        {
+            "webhook_id": job.webhook_id,
+            "delivery": str(job.delivery),
+            "event": job.event,
+            "vv_id": str(job.vv_id),
+            "task_id": job.task_id,
+            "body": job.body,
+        },
+        attempt,
+    ]
+    webhook_deliver.apply_async(args=args, queue=NOTIFY_QUEUE, countdown=countdown_s or None)

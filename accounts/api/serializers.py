@@ -7,7 +7,12 @@ from typing import Any
 from rest_framework import serializers
 
 from accounts.models import Customer
-from cpcc_site.api import StrictBooleanField, StrictCharField, StrictIntegerField
+from cpcc_site.api import (
+    StrictBooleanField,
+    StrictCharField,
+    StrictIntegerField,
+    StrictSlugField,
+)
 from vvm_worker.runtime import VVM_API_CALLS
 from vvm_worker.services import CustomerConfig
 
@@ -16,7 +21,7 @@ class CustomerInSerializer(serializers.Serializer):
     """A customer and its quotas; quotas left out keep their defaults (or current values)."""
 
     name = StrictCharField(max_length=120)
-    slug = serializers.SlugField(
+    slug = StrictSlugField(
         max_length=120, required=False, help_text="Made from the name when left out."
     )
     privileged = StrictBooleanField(required=False)

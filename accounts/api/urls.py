@@ -1,10 +1,14 @@
-"""Routes of the customer endpoints."""
+"""Routes of the customer endpoints, and of a user's API tokens and webhooks."""
 
 from rest_framework.routers import SimpleRouter
 
+from accounts.api.tokens import ApiTokenViewSet
 from accounts.api.views import CustomerViewSet
+from accounts.api.webhooks import WebhookViewSet
 
 router = SimpleRouter()
 router.register("customers", CustomerViewSet, basename="customer")
+router.register("tokens", ApiTokenViewSet, basename="api-token")
+router.register("webhooks", WebhookViewSet, basename="webhook")
 
 urlpatterns = router.urls

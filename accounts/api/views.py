@@ -7,39 +7,49 @@ from typing import Any
 from django.core.exceptions import ValidationError as DjangoValidationError
 from django.db.models import QuerySet
 from drf_spectacular.types import OpenApiTypes
-from drf_spectacular.utils import extend_schema, extend_schema_view
+from drf_spectacular.utils import OpenApiResponse, extend_schema, extend_schema_view
 from rest_framework import mixins, status, viewsets
-from rest_framework.exceptions import NotFound, ValidationError
+from rest_framework.exceptions import NotFound
 from rest_framework.permissions import IsAuthenticated
 from rest_framework.request import Request
 from rest_framework.response import Response
-from rest_framework.serializers import as_serializer_error
 
 from accounts.api.serializers import CustomerInSerializer, CustomerOutSerializer
 from accounts.models import Customer
 from accounts.selectors import customer_list
-from cpcc_site.api import Conflict, DetailSerializer, IsStaff, object_id
+from cpcc_site.api import Conflict, DetailSerializer, IsStaff, object_id, refusal
 from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import CustomerBusy, customer_create, customer_delete, customer_update
 
 STAFF_ERRORS = {403: DetailSerializer, 404: DetailSerializer}
-BAD_INPUT = {400: OpenApiTypes.OBJECT}
+BAD_INPUT = {
+    400: OpenApiResponse(
+        OpenApiTypes.OBJECT,
+        description="A value is malformed, or names a sensor the catalog does not hold (a rule "
+        "that depends on what is stored). The body names the field.",
+    )
+}
 
 
 @extend_schema_view(
     retrieve=extend_schema(responses={200: CustomerOutSerializer, **STAFF_ERRORS}),
     create=extend_schema(
         request=CustomerInSerializer,
-        responses={201: CustomerOutSerializer, **BAD_INPUT, 403: DetailSerializer},
+        responses={
+            201: CustomerOutSerializer,
+            **BAD_INPUT,
+            409: DetailSerializer,
+            403: DetailSerializer,
+        },
     ),
     update=extend_schema(
         request=CustomerInSerializer,
-        responses={200: CustomerOutSerializer, **BAD_INPUT, **STAFF_ERRORS},
+        responses={200: CustomerOutSerializer, **BAD_INPUT, 409: DetailSerializer, **STAFF_ERRORS},
     ),
     partial_update=extend_schema(
         request=CustomerInSerializer,
-        responses={200: CustomerOutSerializer, **BAD_INPUT, **STAFF_ERRORS},
+        responses={200: CustomerOutSerializer, **BAD_INPUT, 409: DetailSerializer, **STAFF_ERRORS},
     ),
     destroy=extend_schema(responses={204: None, 409: DetailSerializer, **STAFF_ERRORS}),
 )
@@ -65,7 +75,7 @@ class CustomerViewSet(
 
     def handle_exception(self, exc: Exception) -> Response:
         if isinstance(exc, DjangoValidationError):
-            exc = ValidationError(as_serializer_error(exc))
+            exc = refusal(exc)
         elif isinstance(exc, CustomerBusy):
             exc = Conflict(
                 f"{exc.customer.name} has {exc.count} VV(s) that have not ended; "

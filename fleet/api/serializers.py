@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from drf_spectacular.utils import extend_schema_field
 from rest_framework import serializers
 
 from cpcc_site.api import StrictCharField, StrictFloatField, StrictIntegerField
@@ -18,10 +19,33 @@ def _check_lat_lng(lat: float, lng: float, where: str) -> None:
         raise serializers.ValidationError(f"{where}: longitude {lng:g} is outside -180..180")
 
 
+LATITUDE = {"type": "number", "minimum": -90, "maximum": 90, "description": "latitude, degrees"}
+LONGITUDE = {"type": "number", "minimum": -180, "maximum": 180, "description": "longitude, degrees"}
+ALTITUDE = {"type": "number", "description": "altitude, m above ground"}
+
+
+@extend_schema_field(
+    {"type": "array", "prefixItems": [LATITUDE, LONGITUDE, ALTITUDE], "minItems": 2, "maxItems": 3}
+)
+class PositionField(serializers.ListField):
+    """``[lat, lng]`` or ``[lat, lng, alt]``; the schema gives each coordinate its range."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(child=StrictFloatField(), min_length=2, max_length=3, **kwargs)
+
+
+@extend_schema_field(
+    {"type": "array", "prefixItems": [LATITUDE, LONGITUDE], "minItems": 2, "maxItems": 2}
+)
+class LatLngField(serializers.ListField):
+    """A point of an area: ``[lat, lng]``."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(child=StrictFloatField(), min_length=2, max_length=2, **kwargs)
+
+
 def _position_field(help_text: str) -> serializers.ListField:
-    return serializers.ListField(
-        child=StrictFloatField(), min_length=2, max_length=3, help_text=help_text
-    )
+    return PositionField(help_text=help_text)
 
 
 class SensorOutSerializer(serializers.ModelSerializer):
@@ -54,7 +78,12 @@ class VehicleInSerializer(serializers.Serializer):
     )
     depot = _position_field("[lat, lng] or [lat, lng, alt]: where it takes off and lands.")
     area = serializers.ListField(
-        child=serializers.ListField(child=StrictFloatField(), min_length=2, max_length=2),
+        child=LatLngField(),
+        min_length=4,
+        error_messages={
+            "min_length": "needs at least 3 distinct points, closed by repeating the first "
+            "(at least {min_length} points)"
+        },
         help_text="Operation area: a closed ring of [lat, lng] points (the last repeats the "
         "first), at least 3 distinct points, not crossing itself.",
     )
@@ -129,6 +158,9 @@ class VehicleOutSerializer(serializers.ModelSerializer):
             "status_changed",
             "health",
             "health_changed",
+            "command",
+            "command_requested",
+            "command_taken",
             "driver",
             "driver_url",
             "depot",

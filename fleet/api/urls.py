@@ -3,6 +3,7 @@
 from django.urls import path
 from rest_framework.routers import SimpleRouter
 
+from fleet.api.service_area import ServiceAreaView
 from fleet.api.views import GroundStationViewSet, SensorListView, VehicleViewSet
 
 router = SimpleRouter()
@@ -11,5 +12,6 @@ router.register("ground-stations", GroundStationViewSet, basename="ground-statio
 
 urlpatterns = [
     path("sensors/", SensorListView.as_view(), name="sensor-list"),
+    path("service-area/", ServiceAreaView.as_view(), name="service-area"),
     *router.urls,
 ]

@@ -11,17 +11,21 @@ from typing import Any
 from django.core.exceptions import ValidationError as DjangoValidationError
 from django.db.models import QuerySet
 from drf_spectacular.types import OpenApiTypes
-from drf_spectacular.utils import OpenApiParameter, extend_schema, extend_schema_view
+from drf_spectacular.utils import (
+    OpenApiParameter,
+    OpenApiResponse,
+    extend_schema,
+    extend_schema_view,
+)
 from rest_framework import generics, mixins, status, viewsets
 from rest_framework.decorators import action
 from rest_framework.exceptions import NotFound, ValidationError
 from rest_framework.permissions import IsAuthenticated
 from rest_framework.request import Request
 from rest_framework.response import Response
-from rest_framework.serializers import as_serializer_error
 
 from accounts.selectors import sensor_list_for_user
-from cpcc_site.api import Conflict, DetailSerializer, IsStaff, object_id
+from cpcc_site.api import Conflict, DetailSerializer, IsStaff, object_id, refusal
 from fleet.api.serializers import (
     GroundStationInSerializer,
     GroundStationOutSerializer,
@@ -30,15 +34,17 @@ from fleet.api.serializers import (
     VehicleInSerializer,
     VehicleOutSerializer,
 )
-from fleet.models import GroundStation, SensorType, Vehicle, VehicleStatus
+from fleet.models import GroundStation, SensorType, Vehicle, VehicleCommand, VehicleStatus
 from fleet.selectors import ground_station_list, vehicle_list
 from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     GroundStationBusy,
+    VehicleRemoved,
     ground_station_create,
     ground_station_delete,
     ground_station_update,
+    vehicle_command,
     vehicle_create,
     vehicle_set_status,
     vehicle_update,
@@ -58,10 +64,9 @@ class FleetErrorsMixin:
 
     def handle_exception(self, exc: Exception) -> Response:
         if isinstance(exc, DjangoValidationError):
-            errors: dict[str, list[Any]] = {}
-            for field, messages in as_serializer_error(exc).items():
-                errors.setdefault(API_FIELD.get(field, field), []).extend(messages)
-            exc = ValidationError(errors)
+            exc = refusal(exc, API_FIELD)
+        elif isinstance(exc, VehicleRemoved):
+            exc = Conflict(f"{exc.vehicle.name} was removed from the fleet: it takes no command.")
         elif isinstance(exc, GroundStationBusy):
             exc = Conflict(
                 f"{exc.station.name} holds {exc.count} VV(s) that have not ended; "
@@ -87,10 +92,21 @@ class SensorListView(generics.ListAPIView):  # type: ignore[type-arg]
         return sensor_list_for_user(user=self.request.user)  # type: ignore[arg-type]
 
 
-def _vehicle_command_schema(what: str) -> Any:
+def _vehicle_command_schema(what: str, *, refused: bool = False) -> Any:
+    errors = {**STAFF_ERRORS, 409: DetailSerializer} if refused else STAFF_ERRORS
     return extend_schema(
-        request=None, responses={200: VehicleOutSerializer, **STAFF_ERRORS}, description=what
+        request=None, responses={200: VehicleOutSerializer, **errors}, description=what
     )
+
+
+# Rules a schema cannot say, each a 400 naming the field.
+VEHICLE_REFUSED = OpenApiResponse(
+    OpenApiTypes.OBJECT,
+    description="A value is malformed, or breaks a rule the schema cannot say: the area is not "
+    "a closed ring of at least 3 distinct points that does not cross itself, a sensor is not "
+    "in the catalog, a sensor source does not fit its sensor, max_altitude_m is below "
+    "min_altitude_m. The body names the field.",
+)
 
 
 @extend_schema_view(
@@ -104,11 +120,21 @@ def _vehicle_command_schema(what: str) -> Any:
     retrieve=extend_schema(responses={200: VehicleOutSerializer, **STAFF_ERRORS}),
     create=extend_schema(
         request=VehicleInSerializer,
-        responses={201: VehicleOutSerializer, 400: OpenApiTypes.OBJECT, 403: DetailSerializer},
+        responses={
+            201: VehicleOutSerializer,
+            400: VEHICLE_REFUSED,
+            409: DetailSerializer,
+            403: DetailSerializer,
+        },
     ),
     partial_update=extend_schema(
         request=VehicleInSerializer,
-        responses={200: VehicleOutSerializer, 400: OpenApiTypes.OBJECT, **STAFF_ERRORS},
+        responses={
+            200: VehicleOutSerializer,
+            400: VEHICLE_REFUSED,
+            409: DetailSerializer,
+            **STAFF_ERRORS,
+        },
     ),
     destroy=extend_schema(
         responses={200: VehicleOutSerializer, **STAFF_ERRORS},
@@ -141,6 +167,17 @@ class VehicleViewSet(
                 }
             )
         return self._vehicles(status=wanted or None)
+
+    def get_object(self) -> Vehicle:
+        """A vehicle in the fleet: a removed one is gone for the API (404), though its record
+        stays for its history (``?status=removed`` in the list, the admin)."""
+        vehicle: Vehicle = super().get_object()
+        if vehicle.status == VehicleStatus.REMOVED:
+            raise NotFound(
+                f"Vehicle {self.kwargs['pk']!r} was removed from the fleet; its record is "
+                "listed with ?status=removed."
+            )
+        return vehicle
 
     @staticmethod
     def _vehicles(status: str | None = None) -> QuerySet[Vehicle]:
@@ -197,6 +234,40 @@ class VehicleViewSet(
     def remove(self, request: Request, pk: str) -> Response:
         return self._set_status(VehicleStatus.REMOVED)
 
+    # An operator's commands: the vehicle goes into maintenance at once (its VVs move on) and
+    # its worker obeys the command once; it stays in maintenance until .../return/.
+
+    def _command(self, command: VehicleCommand) -> Response:
+        vehicle = vehicle_command(
+            vehicle=self.get_object(),
+            command=command,
+            vvm=platform_vvm(),
+            reason=f"{command.label.lower()}: asked by {self.request.user.get_username()} "
+            "over the API",
+        )
+        return self._shown(vehicle)
+
+    @_vehicle_command_schema(
+        "Return home now: the vehicle goes into maintenance (its VVs move on) and flies home "
+        "(a MAVLink autopilot gets MAV_CMD_NAV_RETURN_TO_LAUNCH) and lands; back into service "
+        "with .../return/. `command_taken` says when its worker took the command. 404 for a "
+        "removed vehicle (409 if it was removed while the command was on its way).",
+        refused=True,
+    )
+    @action(detail=True, methods=["post"], url_path="return-home", url_name="return-home")
+    def return_home(self, request: Request, pk: str) -> Response:
+        return self._command(VehicleCommand.RETURN_HOME)
+
+    @_vehicle_command_schema(
+        "Land now, where the vehicle is: it goes into maintenance (its VVs move on) and lands "
+        "(a MAVLink autopilot gets MAV_CMD_NAV_LAND); back into service with .../return/. "
+        "404 for a removed vehicle (409 if it was removed while the command was on its way).",
+        refused=True,
+    )
+    @action(detail=True, methods=["post"])
+    def land(self, request: Request, pk: str) -> Response:
+        return self._command(VehicleCommand.LAND)
+
 
 @extend_schema_view(
     retrieve=extend_schema(responses={200: GroundStationOutSerializer, **STAFF_ERRORS}),
@@ -205,16 +276,27 @@ class VehicleViewSet(
         responses={
             201: GroundStationOutSerializer,
             400: OpenApiTypes.OBJECT,
+            409: DetailSerializer,
             403: DetailSerializer,
         },
     ),
     update=extend_schema(
         request=GroundStationInSerializer,
-        responses={200: GroundStationOutSerializer, 400: OpenApiTypes.OBJECT, **STAFF_ERRORS},
+        responses={
+            200: GroundStationOutSerializer,
+            400: OpenApiTypes.OBJECT,
+            409: DetailSerializer,
+            **STAFF_ERRORS,
+        },
     ),
     partial_update=extend_schema(
         request=GroundStationInSerializer,
-        responses={200: GroundStationOutSerializer, 400: OpenApiTypes.OBJECT, **STAFF_ERRORS},
+        responses={
+            200: GroundStationOutSerializer,
+            400: OpenApiTypes.OBJECT,
+            409: DetailSerializer,
+            **STAFF_ERRORS,
+        },
     ),
     destroy=extend_schema(responses={204: None, 409: DetailSerializer, **STAFF_ERRORS}),
 )

@@ -21,6 +21,8 @@ How it flies:
   enters it once the stream has run for a second), frame GLOBAL_INT with AMSL altitude
   (what every PX4 release accepts in offboard), and the switch to OFFBOARD; home with
   MAV_CMD_NAV_RETURN_TO_LAUNCH.
+- An operator's "land now" (``land``): MAV_CMD_NAV_LAND where the vehicle is (LAND mode if
+  the command is unsupported); the autopilot lands and disarms there.
 
 If the vehicle leaves the mode the driver put it in while flying (a pilot, or a failsafe:
 battery, fence, radio), the driver stops commanding it: ``fly_to`` raises VehicleTookOver and
@@ -94,11 +96,13 @@ _MODES = {
         "takeoff": frozenset({"GUIDED"}),
         "goto": frozenset({"GUIDED"}),
         "return": frozenset({"RTL", "LAND"}),
+        "land": frozenset({"LAND"}),
     },
     Autopilot.PX4: {
         "takeoff": frozenset({"AUTO.TAKEOFF", "AUTO.LOITER"}),
         "goto": frozenset({"OFFBOARD", "AUTO.LOITER", "AUTO.TAKEOFF"}),
         "return": frozenset({"AUTO.RTL", "AUTO.LAND"}),
+        "land": frozenset({"AUTO.LAND"}),
     },
 }
 _RETURN_MODES = frozenset({"RTL", "LAND", "AUTO.RTL", "AUTO.LAND", "SMART_RTL", "AUTO_RTL"})
@@ -196,6 +200,7 @@ class MavlinkDriver:
 
         # Telemetry.
         self._position = depot
+        self._ground_speed_mps = 0.0  # GLOBAL_POSITION_INT's vx, vy
         self._position_seen_s: float | None = None
         self._home_amsl_m: float | None = None
         self._battery: float | None = None
@@ -209,7 +214,7 @@ class MavlinkDriver:
         self._flight_before_s = 0.0
         self._armed_since_s: float | None = None
         # What the driver is doing.
-        self._state = "idle"  # "idle", "takeoff", "goto", "return"
+        self._state = "idle"  # "idle", "takeoff", "goto", "return", "land"
         self._target: Position | None = None  # where the vehicle is going now
         self._pending: Position | None = None  # where to go once the take-off is done
         self._goal_modes: frozenset[str] = frozenset()
@@ -479,6 +484,47 @@ class MavlinkDriver:
             logger.info("%s: returning to launch", self.name)
             return eta
 
+    def land(self, now_s: float) -> float:
+        """Land where the vehicle is (an operator's "land now"); returns the estimated
+        touchdown time: the descent at the climb rate.
+
+        MAV_CMD_NAV_LAND at the current position (LAND or AUTO.LAND mode when the command is
+        unsupported); the autopilot lands and disarms there, and the guidance thread disarms
+        a vehicle that stays armed on the ground. ``now_s`` when it is already landed. Sent
+        also to a vehicle returning or landing by itself (a failsafe's RTL becomes a landing
+        here). Raises LinkLost, VehicleTookOver (a pilot flies it), CommandDenied/
+        CommandTimeout, ModeChangeFailed.
+        """
+        with self._command_lock:
+            if self.is_landed_at(now_s):
+                return now_s
+            self._check_usable(returning_ok=True)
+            eta = now_s + max(0.0, self._position.alt - self.depot.alt) / self.spec.climb_rate_mps
+            px4 = self.autopilot is Autopilot.PX4
+            with self._lock:
+                before = (self._state, self._target, self._pending, self._stream_since)
+                self._state = "land"
+                self._target = self._position.with_alt(self.depot.alt)
+                self._pending = None
+                self._stream_since = None
+                self._set_goal(_MODES[self._flavour()]["land"])
+            # Where it is: NaN (PX4) or 0 (ArduPilot) for latitude and longitude.
+            nan = math.nan
+            params = (0.0, 0.0, 0.0, nan, nan, nan, 0.0) if px4 else (0.0,) * 7
+            try:
+                try:
+                    self.link.command_long(mavlink.MAV_CMD_NAV_LAND, params)
+                except CommandDenied as exc:
+                    if exc.result != mavlink.MAV_RESULT_UNSUPPORTED:
+                        raise
+                    self.link.set_mode("AUTO.LAND" if px4 else "LAND")
+            except MavlinkError:
+                with self._lock:  # still doing what it did: say so
+                    self._state, self._target, self._pending, self._stream_since = before
+                raise
+            logger.info("%s: landing where it is", self.name)
+            return eta
+
     def recharge(self, now_s: float, duration_s: float) -> float:
         """When a charge (or a battery swap) of ``duration_s`` started now will be done.
 
@@ -640,6 +686,10 @@ class MavlinkDriver:
                 return PHASE_HOVERING if near else PHASE_CRUISE
             if self._state == "return":
                 return self._return_phase(here)
+            if self._state == "land":
+                # Down once near home's height (EXTENDED_SYS_STATE may still say "on the
+                # ground" from before the take-off), or once it disarms (higher ground).
+                return PHASE_LANDED if here.alt - self.depot.alt < 0.5 else PHASE_LANDING
             if self._landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND or (
                 here.alt - self.depot.alt < 0.5
             ):
@@ -667,6 +717,11 @@ class MavlinkDriver:
         """Metres flown since the driver started, from telemetry (steps under half a metre,
         GPS jitter, do not count)."""
         return self._distance_m
+
+    def speed_at(self, t: float) -> float:
+        """Ground speed in metres a second as the last GLOBAL_POSITION_INT reported it (its
+        north and east velocities); 0 on the ground. ``t`` is not used."""
+        return self._ground_speed_mps if self._armed else 0.0
 
     def flight_s(self, t: float) -> float:
         """Seconds flown (armed) up to platform time ``t``."""
@@ -903,7 +958,7 @@ class MavlinkDriver:
             elif now - self._last_setpoint >= _ARDUPILOT_RESEND_S:
                 # SET_POSITION_TARGET has no acknowledgement: re-send against packet loss.
                 self._send_setpoint(target)
-        if state == "return" and self._armed:
+        if state in ("return", "land") and self._armed:
             on_ground = self._landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND
             if not on_ground:
                 self._on_ground_since = None
@@ -970,6 +1025,7 @@ class MavlinkDriver:
             return  # out-of-range garbage
         with self._lock:
             self._position = here
+            self._ground_speed_mps = math.hypot(msg.vx, msg.vy) / 100  # cm/s
             self._position_seen_s = self.clock()
             anchor = self._odometer_anchor
             if self._armed and anchor is not None:

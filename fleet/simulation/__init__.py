@@ -1,4 +1,4 @@
-"""Pure simulation core of the fleet: kinematic vehicles, sensor fields, camera images.
+"""Pure simulation core of the fleet: kinematic vehicles, sensor fields, camera images, map tiles.
 
 No Django here: time and randomness are injected (times in seconds on the caller's clock, an
 integer seed), so the same inputs always give the same outputs.
@@ -15,6 +15,7 @@ from fleet.simulation.sensors import (
     SensorSpec,
     camera_settings,
 )
+from fleet.simulation.tiles import render_tile
 from fleet.simulation.vehicle import Leg, SimVehicle, VehicleSpec
 
 __all__ = [
@@ -30,4 +31,5 @@ __all__ = [
     "VehicleSpec",
     "camera_settings",
     "render_camera",
+    "render_tile",
 ]

@@ -5,7 +5,7 @@ from a position: the "belly" view looks straight down (an aerial map of fields, 
 roads, footprint ``max(10, 2 * alt * tan 35°)`` metres wide); the "front" and "fpv" views look
 ahead along the heading, with sky, haze and the same ground in perspective, and a horizon
 slightly tilted and offset by seeded attitude jitter (stronger for "fpv"). A caption (sensor
-name, lat/lng/alt, time) and a crosshair are drawn on top.
+name, lat/lng/alt, the UTC date and time, see ``overlay_text``) and a crosshair are drawn on top.
 
 The world is the one of ``fleet.simulation.world``: continuous, so nearby positions show
 related pictures, and a pure function of the seed, so the same arguments always give identical
@@ -14,6 +14,7 @@ bytes (the encoders are run with fixed settings and no metadata).
 
 from __future__ import annotations
 
+import datetime as dt
 import functools
 import io
 import math
@@ -90,18 +91,23 @@ def render_camera(
     *,
     seed: int,
     heading_deg: float = 0.0,
+    epoch_s: float | None = None,
 ) -> bytes:
     """The encoded image that camera ``sensor`` takes at ``position`` and ``time_s``.
 
     ``seed`` picks the world (use the same seed as the ``SensorField``); ``heading_deg`` is the
     direction the vehicle faces, clockwise from north (the top of a belly image points there).
-    Returns PNG bytes, or JPEG bytes when ``params["format"]`` is "jpeg", of exactly
+    ``epoch_s`` is the moment the caption prints, Unix epoch seconds (the reading's ``time``);
+    by default ``time_s``, which is on the Unix epoch in a live system but counts from 0 in a
+    simulation. Returns PNG bytes, or JPEG bytes when ``params["format"]`` is "jpeg", of exactly
     ``params["width"]`` x ``params["height"]`` pixels (default 640x480). Raises ValueError if the
-    sensor is not a valid camera (see ``camera_settings``) or time or heading is not finite.
+    sensor is not a valid camera (see ``camera_settings``) or a time or the heading is not finite.
     """
     settings = camera_settings(sensor)
     if not math.isfinite(time_s):
         raise ValueError(f"time_s must be a finite number, got {time_s!r}")
+    if epoch_s is not None and not math.isfinite(epoch_s):
+        raise ValueError(f"epoch_s must be a finite number, got {epoch_s!r}")
     if not math.isfinite(heading_deg):
         raise ValueError(f"heading_deg must be a finite number, got {heading_deg!r}")
     heading = math.radians(heading_deg % 360.0)
@@ -110,7 +116,8 @@ def render_camera(
     else:
         pixels = _render_perspective(settings, position, seed, heading, sensor.name, time_s)
     image = Image.fromarray(np.clip(pixels + 0.5, 0.0, 255.0).astype(np.uint8), "RGB")
-    _draw_overlay(image, sensor.name, position, time_s)
+    caption = overlay_text(sensor.name, position, time_s if epoch_s is None else epoch_s)
+    _draw_overlay(image, caption)
     return _encode(image, settings.format)
 
 
@@ -319,16 +326,26 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
     return ImageFont.load_default(size=size)
 
 
-def _draw_overlay(image: Image.Image, sensor_name: str, position: Position, time_s: float) -> None:
-    """Caption box in the top-left corner and a crosshair in the centre."""
+def overlay_text(sensor_name: str, position: Position, epoch_s: float) -> str:
+    """The caption a picture carries: the sensor, where (degrees to 6 decimals, about 0.1 m;
+    altitude to 0.1 m) and when, as a UTC date and time to the second (``2026-11-27 13:04:05
+    UTC``, the time of the reading rounded down, as a clock shows it). A moment no calendar date
+    can hold (beyond the year 9999) is printed as epoch seconds instead."""
+    try:
+        moment = dt.datetime.fromtimestamp(math.floor(epoch_s), tz=dt.UTC)
+        when = moment.strftime("%Y-%m-%d %H:%M:%S UTC")
+    except (OverflowError, OSError, ValueError):
+        when = f"t = {epoch_s:.2f} s"
+    return (
+        f"{sensor_name}\n{position.lat:.6f}, {position.lng:.6f}  alt {position.alt:.1f} m\n{when}"
+    )
+
+
+def _draw_overlay(image: Image.Image, text: str) -> None:
+    """Caption box with ``text`` in the top-left corner and a crosshair in the centre."""
     width, height = image.size
     draw = ImageDraw.Draw(image)
     font = _font(max(10, min(width, height) // 40))
-    text = (
-        f"{sensor_name}\n"
-        f"{position.lat:.6f}, {position.lng:.6f}  alt {position.alt:.1f} m\n"
-        f"t = {time_s:.2f} s"
-    )
     left, top, right, bottom = draw.multiline_textbbox((8, 6), text, font=font, spacing=2)
     box = (
         max(0, math.floor(left) - 4),

@@ -173,6 +173,21 @@ class SimVehicle:
         # Appended even with zero length: it is what marks the vehicle as landed.
         return self._append(t, above, self.depot, PHASE_LANDING, landed_after=True)
 
+    def land(self, now_s: float) -> float:
+        """Plan a landing where the vehicle is: straight down to the depot's height (altitudes
+        are above ground, as the autopilot's are relative to its home).
+
+        Replaces the rest of the plan; afterwards the vehicle is landed there, and a later
+        ``fly_to`` takes off from there. Returns the touchdown time (``now_s`` if already
+        landed). Raises ValueError like ``fly_to``.
+        """
+        here, landed = self._begin_command(now_s)
+        if landed:
+            return now_s
+        # Appended even with zero length: it is what marks the vehicle as landed.
+        ground = here.with_alt(self.depot.alt)
+        return self._append(now_s, here, ground, PHASE_LANDING, landed_after=True)
+
     def recharge(self, now_s: float, duration_s: float) -> float:
         """Charge the battery on the ground: full again ``duration_s`` after ``now_s``.
 
@@ -244,8 +259,19 @@ class SimVehicle:
         return PHASE_LANDED if step.landed_after else PHASE_HOVERING
 
     def is_landed_at(self, t: float) -> bool:
-        """True when the vehicle sits on the ground at its depot at time t."""
+        """True when the vehicle sits on the ground at time t (at its depot, unless it was
+        told to ``land`` elsewhere)."""
         return self.phase_at(t) == PHASE_LANDED
+
+    def speed_at(self, t: float) -> float:
+        """Ground speed at time t in metres a second (0 landed or hovering)."""
+        i = self._index_at(t)
+        if i < 0:
+            return 0.0
+        leg = self._steps[i].leg
+        if not leg.start_s <= t < leg.end_s:
+            return 0.0
+        return ground_distance_m(leg.start, leg.end) / (leg.end_s - leg.start_s)
 
     def planned_legs(self, from_s: float) -> list[Leg]:
         """The legs not yet finished at ``from_s``, in order: the rest of the plan.

@@ -14,20 +14,64 @@ from rest_framework import serializers
 
 from cpcc_site.api import StrictCharField
 from missions.models import (
+    BIDI_CONTROLS,
     PROGRAM_MAX_CHARS,
     PROGRAM_TOO_LONG,
     LogEntry,
     StorageDocument,
     Task,
     VirtualVehicle,
+    VVStatus,
     validate_vv_name,
 )
 from missions.readings import image_file, map_camera_readings
 from missions.selectors import with_task_counts
+from missions.waiting import QueuePlace, queue_places, vv_waiting
+
+# The ``waiting`` object of a VV, for the schema.
+WAITING_SCHEMA = {
+    "type": "object",
+    "nullable": True,
+    "description": "What the VV waits for, in your words; null when it runs without waiting "
+    "or has ended. `reason`: `no_vehicle` (no vehicle in service covers its next task; it "
+    "continues when one does), `queue` (behind your other VVs: your limit of VVs in "
+    "parallel) or `flying` (a vehicle flies to its task). `since`: when it started waiting "
+    "(null when not known); `next_task_eta_s`: seconds until the vehicle is expected at its "
+    "next task, by its plan (null when not known).",
+    "properties": {
+        "reason": {"type": "string", "enum": ["no_vehicle", "queue", "flying"]},
+        "message": {"type": "string"},
+        # (OpenAPI 3.1: drf-spectacular makes only the field itself nullable.)
+        "since": {"type": ["string", "null"], "format": "date-time"},
+        "next_task_eta_s": {"type": ["number", "null"]},
+    },
+    "required": ["reason", "message", "since", "next_task_eta_s"],
+}
+
+
+# A VV's name as the schema says it: plain text (no control character, no bidirectional
+# formatting: missions.models.vv_name_problem) with something besides white space.
+_NOT_PLAIN = r"\x00-\x1f\x7f-\x9f" + "".join(
+    f"\\u{ord(char):04x}" for char in sorted(BIDI_CONTROLS)
+)
+VV_NAME_PATTERN = rf"^[^{_NOT_PLAIN}]*[^{_NOT_PLAIN}\s][^{_NOT_PLAIN}]*$"
+
+
+@extend_schema_field(
+    {
+        "type": "string",
+        "minLength": 1,
+        "maxLength": 120,
+        "pattern": VV_NAME_PATTERN,
+        "description": "Plain text: no control or bidirectional formatting characters.",
+    }
+)
+class VVNameField(StrictCharField):
+    """A new VV's name."""
 
 
 class VVCreateSerializer(serializers.Serializer):
-    name = StrictCharField(
+    name = VVNameField(
         max_length=120,
         validators=[validate_vv_name],
         help_text="Plain text: no control or bidirectional formatting characters.",
@@ -46,6 +90,7 @@ class VVSerializer(serializers.ModelSerializer):
     tasks_done = serializers.SerializerMethodField()
     tasks_open = serializers.SerializerMethodField()
     error = StrictCharField()
+    waiting = serializers.SerializerMethodField()
 
     class Meta:
         model = VirtualVehicle
@@ -61,6 +106,7 @@ class VVSerializer(serializers.ModelSerializer):
             "error_column",
             "created",
             "finished",
+            "waiting",
         ]
 
     def get_host(self, vv: VirtualVehicle) -> str | None:
@@ -81,6 +127,31 @@ class VVSerializer(serializers.ModelSerializer):
     def get_tasks_open(self, vv: VirtualVehicle) -> int:
         return _task_counts(vv)[1]
 
+    @extend_schema_field(WAITING_SCHEMA)
+    def get_waiting(self, vv: VirtualVehicle) -> dict[str, Any] | None:
+        waiting = vv_waiting(vv, tasks_open=_task_counts(vv)[1], place=self._queue_place(vv))
+        if waiting is None:
+            return None
+        return {
+            "reason": waiting.reason,
+            "message": waiting.message,
+            "since": platform_time(vv, waiting.since_s),
+            "next_task_eta_s": waiting.next_task_eta_s,
+        }
+
+    def _queue_place(self, vv: VirtualVehicle) -> QueuePlace | None:
+        """A queued VV's place in its queue: for every VV of the list it is in at once (one
+        statement for a page, or for a bulk submission's answer), as the task counts."""
+        if vv.status != VVStatus.QUEUED:
+            return None
+        if not hasattr(vv, "queue_place"):
+            listed = getattr(self.parent, "instance", None)
+            vvs = listed if isinstance(listed, list) and vv in listed else [vv]
+            places = queue_places(vvs=vvs)
+            for one in vvs:
+                one.queue_place = places.get(one.pk)  # type: ignore[attr-defined]
+        return vv.queue_place  # type: ignore[attr-defined, no-any-return]
+
     def to_representation(self, instance: VirtualVehicle) -> dict[str, Any]:
         # What the declared fields give (tests/missions/api/test_vvs.py compares the two), written
         # out: a ModelSerializer builds its fields from the model anew for every instance it
@@ -99,6 +170,7 @@ class VVSerializer(serializers.ModelSerializer):
             "error_column": vv.error_column,
             "created": api_datetime(vv.created),
             "finished": api_datetime(vv.finished),
+            "waiting": self.get_waiting(vv),
         }
 
 
@@ -120,17 +192,8 @@ def api_datetime(moment: dt.datetime | None) -> str | None:
 
 
 def platform_datetime(vv: VirtualVehicle, t_s: float | None) -> dt.datetime | None:
-    """A time on the platform clock (``*_s`` fields) as a date.
-
-    The platform clock is the Unix epoch in a live system; ``simulate`` counts from 0 and gives
-    its VVs dates from 2025-01-01. The VV's logical start (``start_ms``, a date) against its
-    submission (``submitted_s``, platform clock) says which, so task and log times line up
-    with the ``time`` of the readings in both cases.
-    """
-    if t_s is None:
-        return None
-    offset_s = round(vv.start_ms / 1000.0 - vv.submitted_s)
-    return dt.datetime.fromtimestamp(t_s + offset_s, tz=dt.UTC)
+    """A time on the platform clock (``*_s`` fields) as a date: ``vv.platform_datetime``."""
+    return vv.platform_datetime(t_s)
 
 
 def platform_time(vv: VirtualVehicle, t_s: float | None) -> str | None:

@@ -88,7 +88,10 @@ NOT_A_CUSTOMER = "Only a customer's users can submit VVs."
 # in the same form.
 SUBMISSIONS = PolymorphicProxySerializer(
     component_name="VVSubmission",
-    serializers=[VVCreateSerializer, VVCreateSerializer(many=True)],
+    serializers=[
+        VVCreateSerializer,
+        VVCreateSerializer(many=True, min_length=1, max_length=MAX_SUBMISSIONS),
+    ],
     resource_type_field_name=None,
     many=False,
 )

@@ -1,18 +1,100 @@
-// The live map page (/map/): one CPCCMap on the socket the page names, and a status line.
+// The live map page (/map/): one CPCCMap on the socket the page names, a status line, and the
+// filters: how much history it shows (staff start with the last 15 minutes, customers with
+// all the map holds) and one VV alone with its whole history, fetched from the server
+// (/vvs/<id>/map.json: staff may see any VV, a customer only its own).
+// State for whoever looks, on #live-map besides CPCCMap's: data-window (seconds, empty for
+// all), data-only (the VV shown alone), data-history-of (the VV whose history has come).
 // A file of its own rather than an inline script: the pages' Content Security Policy allows
 // scripts from this site only.
 (function () {
   'use strict';
+  var REDRAW_MS = 15000; // what leaves the time window goes, frames or not
+  var ENDED = { finished: true, failed: true, killed: true, cancelled: true };
+
   var element = document.getElementById('live-map');
   var status = document.getElementById('map-status');
+  var windowChoice = document.getElementById('map-window');
+  var vvChoice = document.getElementById('map-vv');
+  var vvStatus = document.getElementById('map-vv-status');
+  var listed = ''; // the VVs the choice lists, as a key: rebuilt only when they change
+
+  /* The choice of VVs: every one the map knows, by name (ended ones say so). */
+  function listVVs(map) {
+    var vvs = Object.keys(map.vvs).map(function (id) { return map.vvs[id]; })
+      .filter(function (vv) { return vv.name; });
+    vvs.sort(function (a, b) { return a.name.localeCompare(b.name) || (a.id < b.id ? -1 : 1); });
+    var names = {};
+    vvs.forEach(function (vv) { names[vv.name] = (names[vv.name] || 0) + 1; });
+    var labels = vvs.map(function (vv) {
+      // Two VVs of one name (staff see every customer's) are told apart by their id.
+      var label = vv.name + (names[vv.name] > 1 ? ' · ' + vv.id.slice(0, 8) : '');
+      return ENDED[vv.status] ? label + ' (' + vv.status + ')' : label;
+    });
+    var key = vvs.map(function (vv, k) { return vv.id + '=' + labels[k]; }).join('\n');
+    if (key === listed) return;
+    listed = key;
+    var chosen = vvChoice.value;
+    while (vvChoice.options.length > 1) vvChoice.remove(1);
+    vvs.forEach(function (vv, k) {
+      var option = document.createElement('option');
+      option.value = vv.id;
+      option.textContent = labels[k];
+      vvChoice.appendChild(option);
+    });
+    vvChoice.value = chosen;
+    if (vvChoice.selectedIndex < 0) vvChoice.value = '';
+  }
+
   var map = new CPCCMap(element, {
     tiles: element.dataset.tiles || '',
     onDraw: function () {
       status.textContent = (element.dataset.connected === 'true' ? 'live' : 'reconnecting…') +
         ' · ' + element.dataset.vehicles + ' vehicle(s) · ' + element.dataset.tasksOpen +
         ' open, ' + element.dataset.tasksDone + ' done task(s)';
+      listVVs(map);
     }
   });
   window.cpccMap = map;
+
+  map.setWindow(windowChoice.value);
+  element.dataset.window = windowChoice.value;
+  windowChoice.addEventListener('change', function () {
+    map.setWindow(windowChoice.value);
+    element.dataset.window = windowChoice.value;
+  });
+
+  /* One VV alone, with all the server keeps of it; or every VV again. */
+  vvChoice.addEventListener('change', function () {
+    var id = vvChoice.value;
+    map.showOnly(id || null);
+    element.dataset.only = id;
+    if (!id) {
+      vvStatus.textContent = '';
+      map.fit();
+      return;
+    }
+    windowChoice.value = '';
+    windowChoice.dispatchEvent(new Event('change'));
+    vvStatus.textContent = 'loading its whole history…';
+    element.dataset.historyOf = '';
+    var url = element.dataset.history.replace(element.dataset.historyPlaceholder, id);
+    fetch(url, { credentials: 'same-origin' })
+      .then(function (response) {
+        if (!response.ok) throw new Error('answered ' + response.status);
+        return response.json();
+      })
+      .then(function (snapshot) {
+        if (vvChoice.value !== id) return; // another choice was made meanwhile
+        map.mergeHistory(snapshot);
+        map.fit();
+        vvStatus.textContent = 'its whole history';
+        element.dataset.historyOf = id;
+      })
+      .catch(function (error) {
+        vvStatus.textContent = 'its history could not be loaded (' + error.message + ')';
+      });
+  });
+
+  setInterval(function () { map.redraw(); }, REDRAW_MS);
   map.connect(element.dataset.socket);
 })();

@@ -7,7 +7,18 @@
  * frames, live from the socket (connect) or from a mission's history (replay).
  *
  * Its state is on the map element for whoever looks (tests, the page): data-seq (last frame),
- * data-connected, data-vehicles, data-tasks-open, data-tasks-done, data-vvs, data-frames.
+ * data-connected, data-vehicles, data-tasks-open, data-tasks-done, data-vvs (every VV it
+ * knows), data-vvs-shown (those with something in view), data-frames, data-tiles-loaded.
+ *
+ * The background is the tile server of the CPCC_MAP_TILES setting, or else the platform's own
+ * tiles of the simulated world (/tiles/{z}/{x}/{y}.png: what the cameras photograph). The map
+ * fits, once, the operation areas and the tasks the platform accepted: a point no vehicle
+ * may fly to (a rejected task) never pulls the view away from the fleet.
+ *
+ * What it shows can be narrowed (the live map's filters): setWindow(seconds) keeps the
+ * history (paths, done tasks, migrations) of that last stretch of time, open tasks and
+ * vehicles always; showOnly(vv) one VV; mergeHistory(snapshot) adds what the server keeps of
+ * a VV (/vvs/<id>/map.json) to what the socket brought.
  *
  * Names (VVs, vehicles, areas, ground stations) are the customers' and operators' words, never
  * markup: every tooltip is a DOM node whose text is set by text() (Leaflet would take a string
@@ -28,6 +39,8 @@
     migration: '#d62828'
   };
   var LABELS_UP_TO = 60; // permanent vehicle labels only while they stay readable
+  var PLATFORM_TILES = '/tiles/{z}/{x}/{y}.png'; // fleet/views.py: the simulated world
+  var MAX_ZOOM = 21;
 
   /* Tooltip content from text: a node Leaflet shows as it is. */
   function text(value) {
@@ -41,11 +54,10 @@
     this.element = element;
     this.options = options;
     this.renderer = L.canvas({ padding: 0.3 });
-    this.map = L.map(element, { preferCanvas: true, renderer: this.renderer, zoomSnap: 0.25 });
-    if (options.tiles) {
-      L.tileLayer(options.tiles, { maxZoom: 20, attribution: options.attribution || '' })
-        .addTo(this.map);
-    }
+    this.map = L.map(element, {
+      preferCanvas: true, renderer: this.renderer, zoomSnap: 0.25, maxZoom: MAX_ZOOM
+    });
+    this.tiles = this._tileLayer(options);
     this.layers = {};
     var order = ['areas', 'stations', 'routes', 'intended', 'carried', 'migrations', 'tasks',
                  'vehicles'];
@@ -60,14 +72,50 @@
     this.seq = 0;
     this.frames = 0;
     this.time = null;     // replay: show the mission as it was at this time (seconds)
+    this.window = null;   // live: show the history of only this many last seconds
+    this.only = null;     // show this VV (its id) alone
+    this.clockOffset = 0; // the platform's clock minus this browser's (seconds)
+    this._since = null;   // while drawing: the start of the window on the platform's clock
+    this.areaBounds = L.latLngBounds([]);
+    this.stationBounds = L.latLngBounds([]);
     this._fitted = false;
+    this._snapshots = 0;  // applied so far: the first decides the view the tiles are shown in
     this._dirty = false;
     this.map.setView([0, 0], 2);
+    // The background comes with the first view the page sets (a fit, here or by the page
+    // that made the map), or with the first snapshot when there is nothing to fit.
+    this.map.once('moveend', this.showTiles, this);
   }
+
+  /* The background: not on the map before its first view is set (tiles of the provisional
+   * world view would be asked for, then dropped half-loaded): see showTiles. */
+  CPCCMap.prototype._tileLayer = function (options) {
+    var own = !options.tiles;
+    var layer = L.tileLayer(options.tiles || PLATFORM_TILES, {
+      maxZoom: MAX_ZOOM, maxNativeZoom: own ? MAX_ZOOM : 19,
+      attribution: own ? 'Background: the simulated world' : (options.attribution || '')
+    });
+    var el = this.element;
+    el.dataset.tilesLoaded = '0';
+    layer.on('tileload', function () {
+      el.dataset.tilesLoaded = String(Number(el.dataset.tilesLoaded) + 1);
+    });
+    layer.on('load', function () { el.dataset.tilesIdle = 'true'; });
+    layer.on('loading', function () { el.dataset.tilesIdle = 'false'; });
+    return layer;
+  };
+
+  /* Put the background on the map (once); a page that uses the map without snapshots calls
+   * it if it never sets a view of its own. */
+  CPCCMap.prototype.showTiles = function () {
+    if (!this.map.hasLayer(this.tiles)) this.tiles.addTo(this.map);
+  };
 
   CPCCMap.prototype.applySnapshot = function (snapshot) {
     this.staff = !!snapshot.staff;
     this.seq = snapshot.seq || 0;
+    if (typeof snapshot.now === 'number') this.clockOffset = snapshot.now - Date.now() / 1000;
+    this._snapshots += 1;
     this.vvs = {};
     for (var i = 0; i < (snapshot.vvs || []).length; i++) {
       var vv = snapshot.vvs[i];
@@ -150,6 +198,7 @@
 
   CPCCMap.prototype._drawStatic = function (areas, stations) {
     var bounds = L.latLngBounds([]);
+    var stationBounds = L.latLngBounds([]);
     this.layers.areas.clearLayers();
     this.layers.stations.clearLayers();
     for (var i = 0; i < areas.length; i++) {
@@ -169,37 +218,134 @@
       });
       marker.bindTooltip(text(gs.name ? 'Ground station ' + gs.name : 'Ground station'));
       marker.addTo(this.layers.stations);
-      bounds.extend([gs.lat, gs.lng]);
+      stationBounds.extend([gs.lat, gs.lng]);
     }
-    if (!this._fitted) {
-      for (var id in this.vvs) {
-        var tasks = this.vvs[id].tasks;
-        for (var t in tasks) bounds.extend([tasks[t].lat, tasks[t].lng]);
-      }
-      if (bounds.isValid()) {
-        this.map.fitBounds(bounds.pad(0.08));
-        this._fitted = true;
-      }
-    }
+    this.areaBounds = bounds;
+    this.stationBounds = stationBounds;
   };
 
-  // Only what had happened by the replay's time (everything when live).
+  /* The tasks a vehicle may fly to: every one but those refused (outside every operation
+   * area, out of the altitude band, a sensor no vehicle has). */
+  function accepted(task) {
+    return task.status !== 'rejected';
+  }
+
+  /* What the view should hold: the operation areas and the accepted tasks (of the VV shown
+   * alone, when one is: its path too); the ground stations when there is nothing else. */
+  CPCCMap.prototype.boundsOfInterest = function () {
+    var bounds = L.latLngBounds([]);
+    if (!this.only) bounds.extend(this.areaBounds);
+    for (var id in this.vvs) {
+      if (this.only && id !== this.only) continue;
+      var vv = this.vvs[id];
+      for (var t in vv.tasks) {
+        if (accepted(vv.tasks[t])) bounds.extend([vv.tasks[t].lat, vv.tasks[t].lng]);
+      }
+      if (this.only) {
+        for (var p = 0; p < vv.track.length; p++) bounds.extend([vv.track[p][1], vv.track[p][2]]);
+      }
+    }
+    if (!bounds.isValid() && this.only) bounds.extend(this.areaBounds);
+    if (!bounds.isValid()) bounds.extend(this.stationBounds);
+    return bounds;
+  };
+
+  /* Fit the view to what matters; false when there is nothing to fit to yet. */
+  CPCCMap.prototype.fit = function () {
+    var bounds = this.boundsOfInterest();
+    if (!bounds.isValid()) return false;
+    this.map.fitBounds(bounds.pad(0.08), { maxZoom: 19, animate: false });
+    this._fitted = true;
+    return true;
+  };
+
+  // Only what had happened by the replay's time (everything when live), and, with a time
+  // window, what happened within it.
   CPCCMap.prototype._seen = function (t) {
+    if (this._since !== null && !(t !== null && t !== undefined && t >= this._since)) return false;
     return this.time === null || (t !== null && t !== undefined && t <= this.time);
   };
 
+  /* Seconds on the platform's clock now (as far as this browser can tell). */
+  CPCCMap.prototype.now = function () {
+    return Date.now() / 1000 + this.clockOffset;
+  };
+
+  /* Show the history of the last `seconds` only (null: all of it). */
+  CPCCMap.prototype.setWindow = function (seconds) {
+    this.window = seconds === null || seconds === undefined || seconds === '' ? null
+      : Number(seconds);
+    this._changed();
+  };
+
+  /* Draw again (what has left the time window goes). */
+  CPCCMap.prototype.redraw = function () {
+    this._changed();
+  };
+
+  /* Show one VV alone (its id), or every VV again (null). */
+  CPCCMap.prototype.showOnly = function (vvId) {
+    this.only = vvId || null;
+    this._changed();
+  };
+
+  /* Add a VV's history as the server keeps it (the shape of a snapshot's "vvs") to what the
+   * map knows: its tasks (a newer word from the socket stays), its whole path, its
+   * migrations. */
+  CPCCMap.prototype.mergeHistory = function (snapshot) {
+    var list = snapshot.vvs || [];
+    for (var i = 0; i < list.length; i++) {
+      var kept = list[i];
+      var entry = this._vv(kept.vv);
+      if (!entry.name) entry.name = kept.name;
+      if (!entry.status) entry.status = kept.status;
+      for (var t = 0; t < kept.tasks.length; t++) {
+        var known = entry.tasks[kept.tasks[t].id];
+        if (!known || known.status === 'open') entry.tasks[kept.tasks[t].id] = kept.tasks[t];
+      }
+      var seen = {};
+      for (var m = 0; m < entry.migrations.length; m++) seen[entry.migrations[m].id] = true;
+      for (m = 0; m < kept.migrations.length; m++) {
+        if (!seen[kept.migrations[m].id]) entry.migrations.push(kept.migrations[m]);
+      }
+      entry.migrations.sort(function (a, b) { return a.at_s - b.at_s; });
+      var track = entry.track.concat(kept.track);
+      track.sort(function (a, b) { return a[0] - b[0]; });
+      entry.track = track.filter(function (p, k) {
+        var q = track[k - 1];
+        return !q || q[0] !== p[0] || q[1] !== p[1] || q[2] !== p[2];
+      });
+    }
+    this._changed();
+  };
+
+  /* A VV's path as shown: within the window, from the leg it was on when the window began. */
+  CPCCMap.prototype._path = function (track) {
+    var path = [];
+    for (var p = 0; p < track.length; p++) {
+      var t = track[p][0];
+      var next = track[p + 1];
+      if (this._seen(t) || (this._since !== null && next && next[0] >= this._since)) {
+        path.push([track[p][1], track[p][2]]);
+      }
+    }
+    return path;
+  };
+
   CPCCMap.prototype._draw = function () {
+    if (!this._fitted) this.fit();
+    if (this._snapshots) this.showTiles();
     var L_ = this.layers;
     L_.tasks.clearLayers(); L_.carried.clearLayers(); L_.intended.clearLayers();
     L_.migrations.clearLayers(); L_.routes.clearLayers();
-    var open = 0, done = 0, count = 0;
+    this._since = this.window === null || this.time !== null ? null : this.now() - this.window;
+    var open = 0, done = 0, count = 0, shown = 0;
     for (var id in this.vvs) {
       var vv = this.vvs[id];
       count += 1;
-      var path = [];
-      for (var p = 0; p < vv.track.length; p++) {
-        if (this._seen(vv.track[p][0])) path.push([vv.track[p][1], vv.track[p][2]]);
-      }
+      if (this.only && id !== this.only) continue;
+      var before = open + done, moves = 0;
+      var path = this._path(vv.track);
       if (path.length > 1) {
         L.polyline(path, { renderer: this.renderer, color: COLOR.carried, weight: 3 })
           .bindTooltip(text(vv.name)).addTo(L_.carried);
@@ -231,12 +377,14 @@
       for (var m = 0; m < vv.migrations.length; m++) {
         var move = vv.migrations[m];
         if (!move.from_pos || !move.to_pos || !this._seen(move.at_s)) continue;
+        moves += 1;
         L.polyline([move.from_pos, move.to_pos], {
           renderer: this.renderer, color: COLOR.migration, weight: 2
         }).bindTooltip(text(vv.name + ' migrated' +
                             (move.from ? ': ' + move.from + ' → ' + move.to : '')))
           .addTo(L_.migrations);
       }
+      if (open + done > before || path.length > 1 || moves) shown += 1;
     }
     this._drawVehicles();
     var el = this.element;
@@ -245,6 +393,7 @@
     el.dataset.tasksOpen = String(open);
     el.dataset.tasksDone = String(done);
     el.dataset.vvs = String(count);
+    el.dataset.vvsShown = String(shown);
     if (this.options.onDraw) this.options.onDraw(this);
   };
 
@@ -328,5 +477,6 @@
     this._changed();
   };
 
+  CPCCMap.text = text; // for the other maps' tooltips
   window.CPCCMap = CPCCMap;
 })();

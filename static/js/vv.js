@@ -1,10 +1,14 @@
 /* A VV's page (templates/missions/vv_detail.html): its mission on a small map, live from the
  * map's socket (/ws/map/?vv=<id>) while it has not ended, and replayed from its history
  * (/vvs/<id>/map.json) with a time slider once it has; and the chart of its scalar readings
- * (Chart.js), one series per sensor, one chart per unit, against the order of its tasks.
+ * (Chart.js), one series per sensor, one chart per unit, against the time of the readings
+ * (UTC clock times; a 'linear' axis of seconds, so no date adapter is needed).
  *
  * State for whoever looks (tests): window.cpccMap (static/js/map.js) and, on #vv-map,
- * data-replay-from / data-replay-to (seconds on the platform clock) once a replay is ready. */
+ * data-replay-from / data-replay-to (seconds on the platform clock) once a replay is ready;
+ * on #vv-charts, data-time-origin: the epoch milliseconds of the charts' x = 0 (each point
+ * also keeps its reading's time as t, epoch milliseconds); on #vv-waiting, data-reason: what
+ * the VV waits for (the API's waiting.reason, '' when nothing). */
 (function () {
   'use strict';
 
@@ -49,6 +53,38 @@
       }
     };
     map.connect(el.dataset.socket);
+  }
+
+  // What the VV waits for (#vv-waiting, while it has not ended): read again from the API
+  // (GET /api/v1/vvs/<id>/, its `waiting`) every WAITING_POLL_MS until the VV ends.
+  var WAITING_POLL_MS = 5000;
+
+  function waiting() {
+    var box = document.getElementById('vv-waiting');
+    if (!box || !box.dataset.api) return;
+    var label = document.getElementById('vv-waiting-label');
+    var message = document.getElementById('vv-waiting-message');
+    function show(vv) {
+      var w = vv.waiting;
+      box.hidden = !w;
+      box.dataset.reason = w ? w.reason : '';
+      if (!w) return;
+      label.textContent = (w.reason === 'flying' ? 'On its way' : 'Waiting') + ':';
+      message.textContent = w.message;
+    }
+    function look() {
+      fetch(box.dataset.api, { credentials: 'same-origin', headers: { Accept: 'application/json' } })
+        .then(function (response) {
+          if (!response.ok) throw new Error(String(response.status));
+          return response.json();
+        })
+        .then(function (vv) {
+          show(vv);
+          if (!ENDED[vv.status]) setTimeout(look, WAITING_POLL_MS);
+        })
+        .catch(function () { setTimeout(look, WAITING_POLL_MS * 3); });
+    }
+    setTimeout(look, WAITING_POLL_MS);
   }
 
   function replay(el, map) {
@@ -116,11 +152,42 @@
       .catch(function (error) { status.textContent = 'its mission could not be loaded (' + error.message + ')'; });
   }
 
+  // Tick spacings of the time axis, in seconds: steps a clock shows.
+  var CLOCK_STEPS = [1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 10800,
+    21600, 43200, 86400];
+  var DAY_MS = 86400000;
+
+  // A moment (epoch milliseconds) as a UTC clock time, "13:04:05", with its date in front
+  // ("2026-11-27 13:04:05") when asked.
+  function utcClock(ms, withDate) {
+    var iso = new Date(ms).toISOString();
+    return (withDate ? iso.slice(0, 10) + ' ' : '') + iso.slice(11, 19);
+  }
+
+  // The smallest clock step that puts at most about 8 ticks on a span of seconds.
+  function clockStep(spanS) {
+    for (var i = 0; i < CLOCK_STEPS.length; i++) {
+      if (spanS / CLOCK_STEPS[i] <= 8) return CLOCK_STEPS[i];
+    }
+    return Math.ceil(spanS / 8 / 86400) * 86400;
+  }
+
   function charts() {
     var data = document.getElementById('chart-data');
     var holder = document.getElementById('vv-charts');
     if (!data || !holder || !window.Chart) return;
     var series = JSON.parse(data.textContent);
+    // x is seconds since midnight (UTC) of the first reading's day: ticks at multiples of a
+    // clock step fall on round clock times.
+    var first = Infinity, last = -Infinity;
+    series.forEach(function (s) {
+      s.points.forEach(function (p) { first = Math.min(first, p[0]); last = Math.max(last, p[0]); });
+    });
+    if (first === Infinity) return;
+    var origin = Math.floor(first / DAY_MS) * DAY_MS;
+    var spansDays = last - origin >= DAY_MS;
+    var step = clockStep(Math.max(1, (last - first) / 1000));
+    holder.dataset.timeOrigin = String(origin);
     var byUnit = {};
     var units = [];
     series.forEach(function (s) {
@@ -137,7 +204,7 @@
       wrap.className = 'canvas';
       var canvas = document.createElement('canvas');
       canvas.setAttribute('role', 'img');
-      canvas.setAttribute('aria-label', 'Chart of ' + title.textContent + ' by task');
+      canvas.setAttribute('aria-label', 'Chart of ' + title.textContent + ' over time (UTC)');
       wrap.appendChild(canvas);
       box.appendChild(title);
       box.appendChild(wrap);
@@ -150,7 +217,9 @@
             return {
               label: s.sensor, borderColor: c, backgroundColor: c, borderWidth: 2, pointRadius: 3,
               tension: 0, spanGaps: true,
-              data: s.points.map(function (p) { return { x: p[0], y: p[1], task: p[2] }; })
+              data: s.points.map(function (p) {
+                return { x: (p[0] - origin) / 1000, y: p[1], t: p[0], task: p[2] };
+              })
             };
           })
         },
@@ -158,14 +227,24 @@
           animation: false, responsive: true, maintainAspectRatio: false,
           interaction: { mode: 'nearest', intersect: false },
           scales: {
-            x: { type: 'linear', title: { display: true, text: 'task (in the order asked)' }, ticks: { precision: 0 } },
+            x: {
+              type: 'linear',
+              title: { display: true, text: 'time (UTC)' },
+              ticks: {
+                stepSize: step,
+                maxRotation: 0,
+                callback: function (value) { return utcClock(origin + value * 1000, spansDays); }
+              }
+            },
             y: { title: { display: !!unit, text: unit } }
           },
           plugins: {
             legend: { display: byUnit[unit].length > 1, position: 'bottom' },
             tooltip: {
               callbacks: {
-                title: function (items) { return 'task ' + items[0].raw.task; },
+                title: function (items) {
+                  return utcClock(items[0].raw.t, true) + ' UTC · task ' + items[0].raw.task;
+                },
                 label: function (item) { return item.dataset.label + ': ' + item.parsed.y + (unit ? ' ' + unit : ''); }
               }
             }
@@ -176,6 +255,7 @@
   }
 
   document.addEventListener('DOMContentLoaded', function () {
+    waiting();
     charts();
     var el = document.getElementById('vv-map');
     if (!el || !window.CPCCMap) return;

@@ -11,6 +11,7 @@ the staff's map, the customer's map, the dashboard, the VV's page and the fleet 
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -120,10 +121,13 @@ def submit(page: Page, name: str, program: str) -> str:
     page.keyboard.insert_text(program)
     screenshot(page, "editor")
     page.get_by_role("button", name="Submit").click()
+    # Submitting one VV opens its page; then on to the dashboard, where its row is.
+    page.wait_for_url(re.compile(r"/vvs/[0-9a-f-]{36}/$"))
     expect(page.locator(".messages")).to_contain_text(f"“{name}” is submitted.")
+    vv_id = page.url.rstrip("/").rsplit("/", 1)[1]
+    page.get_by_role("navigation", name="Main").get_by_role("link", name="Dashboard").click()
     row = page.locator("tr[data-vv]", has=page.get_by_role("link", name=name, exact=True))
-    vv_id = row.get_attribute("data-vv")
-    assert vv_id is not None
+    assert row.get_attribute("data-vv") == vv_id
     return vv_id
 
 

@@ -71,10 +71,13 @@ def write_and_submit(page: Page, name: str) -> str:
     expect(form).to_have_attribute("data-check", "ok")
 
     page.get_by_role("button", name="Submit").click()
+    # Submitting one VV opens its page; then on to the dashboard, where its row is.
+    page.wait_for_url(re.compile(r"/vvs/[0-9a-f-]{36}/$"))
     expect(page.locator(".messages")).to_contain_text(f"“{name}” is submitted.")
+    vv_id = page.url.rstrip("/").rsplit("/", 1)[1]
+    page.get_by_role("navigation", name="Main").get_by_role("link", name="Dashboard").click()
     row = page.locator("tr[data-vv]", has=page.get_by_role("link", name=name, exact=True))
-    vv_id = row.get_attribute("data-vv")
-    assert vv_id is not None
+    assert row.get_attribute("data-vv") == vv_id
     # A form sends a textarea's lines ending in CR LF (the HTML standard): the same program.
     assert VirtualVehicle.objects.get(pk=vv_id).program.replace("\r\n", "\n") == VV1
     return vv_id

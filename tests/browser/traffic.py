@@ -99,6 +99,11 @@ class Traffic:
         if request.failure == "net::ERR_ABORTED" and request.resource_type in ("document", "fetch"):
             # Left before it came: the test moved on (a navigation, a download), not an error.
             return
+        if request.failure == "net::ERR_ABORTED" and urlsplit(request.url).path.startswith(
+            "/tiles/"
+        ):
+            # A map tile the map dropped on its way: its view changed, or the page was left.
+            return
         self.problems.append(f"failed: {request.method} {request.url} ({request.failure})")
 
     def _navigating(self, page: Page, request: Request) -> None:

@@ -5,11 +5,12 @@ pages, auth views, schema and docs) and every WebSocket route of cpcc_site/asgi.
 classified in ROUTES and WEBSOCKET_ROUTES below; a pattern that is in neither fails
 ``test_every_url_pattern_is_classified``, so a new URL cannot be forgotten. Each classified
 pattern is then tried with real data of two customers (each with a VV flown to its end, with
-tasks, storage, log, camera pictures and migrations, and a queued one):
+tasks, storage, log, camera pictures and migrations, a queued one, a user's named API token and a
+webhook with a delivery attempt):
 
 - an object of a customer answers 404 to the other customer for every HTTP method, exactly as
   an object that does not exist, changes nothing, and shows none of the owner's data;
-- a list shows its caller's data only;
+- a list shows its caller's data only (its VVs, its API tokens, its customer's webhooks);
 - anyone who is not logged in is sent to the login page (pages, admin) or refused (API);
 - staff routes refuse customers' users, and let staff in;
 - the live map's socket refuses strangers and other sites, and never sends a customer another
@@ -44,7 +45,7 @@ from django.utils.http import urlsafe_base64_encode
 from rest_framework.authtoken.models import Token
 from rest_framework.test import APIClient
 
-from accounts.models import Customer, User
+from accounts.models import ApiToken, Customer, NotifyEvent, User, Webhook, WebhookDelivery
 from cpcc_site.asgi import application
 from cpcc_site.websocket import SameOriginValidator
 from fleet.models import GroundStation, SensorType, Vehicle
@@ -64,16 +65,36 @@ ANY = METHODS  # a plain Django view answers whatever the method
 # An id that no object has: another customer's object must answer exactly like it.
 MISSING_VV = "00000000-0000-4000-8000-000000000000"
 MISSING_ID = "987654321"
-# What a hole would act on: a valid program, a name, a form's confirmation.
-API_BODY = {"name": "taken over", "program": "var x = 1;"}
-FORM_BODY = {"name": "taken over", "program": "var x = 1;", "copies": "1", "post": "yes"}
+# The objects of a customer that the URLs name, each as one that does not exist.
+MISSING = {"vv": MISSING_VV, "queued": MISSING_VV, "api_token": MISSING_ID, "webhook": MISSING_ID}
+# What a hole would act on: a valid program, a name, a form's confirmation, a webhook (on this
+# machine: TestHttp allows such URLs, as the tests' receivers need), an e-mail choice.
+HOOK_URL = "http://127.0.0.1:9/taken-over"
+API_BODY = {
+    "name": "taken over",
+    "program": "var x = 1;",
+    "url": HOOK_URL,
+    "events": ["vv.finished"],
+}
+FORM_BODY = {
+    "name": "taken over",
+    "program": "var x = 1;",
+    "copies": "1",
+    "post": "yes",
+    "url": HOOK_URL,
+    "events": "vv.finished",
+    "email": "taken-over@example.com",
+    "email_events": "vv.finished",
+}
 
 
 class Kind(StrEnum):
     PUBLIC = "public"  # anyone, logged in or not; no customer's data
     SIGNED_IN = "signed in"  # any logged-in user; no customer's data
-    OWN_LIST = "own list"  # the caller's customer's VVs (staff: all)
-    OBJECT = "object"  # one VV of a customer, or its data: 404 for anyone else
+    OWN_LIST = "own list"  # the caller's customer's VVs (staff: all), API tokens or webhooks
+    # One VV of a customer, or its data, or a user's API token, or a customer's webhook (or
+    # its delivery log): 404 for anyone else.
+    OBJECT = "object"
     STAFF = "staff"  # platform staff only: the admin, the fleet, the customers
 
 
@@ -94,6 +115,15 @@ class Route:
     staff_status: int | None = None
     # STAFF: the model of a view every ModelAdmin has (generated below).
     model: str = ""
+    # OWN_LIST: what it lists of the caller's own (Side.listed): its customer's "vvs", its
+    # "api tokens", its customer's "webhooks".
+    lists: str = "vvs"
+    # The methods a token may not use (a token cannot make another): 403 to a token, the
+    # declared answer to a session.
+    session_only: tuple[str, ...] = ()
+    # SIGNED_IN: the view revokes the caller's own token (the one an administrator made):
+    # B's request may change that, and nothing else.
+    revokes_own_token: bool = False
 
 
 # --- the classification -----------------------------------------------------------------------
@@ -112,11 +142,36 @@ ROUTES: dict[str, Route] = {
     # A's user id with a token that is not one: the page says the link is invalid.
     "accounts/reset/<uidb64>/<token>/": Route(Kind.PUBLIC, "/accounts/reset/{uidb64}/x-y/"),
     "accounts/reset/done/": Route(Kind.PUBLIC, "/accounts/reset/done/"),
+    # The Account pages (accounts/urls.py): the user's own API tokens (a POST makes one), the
+    # customer's webhooks and the user's e-mail choice (a POST saves it).
+    "accounts/tokens/": Route(
+        Kind.OWN_LIST, "/accounts/tokens/", ("GET", "POST"), lists="api tokens"
+    ),
+    "accounts/tokens/<int:token_id>/revoke/": Route(
+        Kind.OBJECT, "/accounts/tokens/{api_token}/revoke/", ("POST",)
+    ),
+    # The caller's own token made by an administrator (drf_create_token): no id in the URL.
+    "accounts/tokens/operator/revoke/": Route(
+        Kind.SIGNED_IN, "/accounts/tokens/operator/revoke/", ("POST",), revokes_own_token=True
+    ),
+    "accounts/notifications/": Route(
+        Kind.OWN_LIST, "/accounts/notifications/", ("GET", "POST"), lists="webhooks"
+    ),
+    # Adds a webhook to the caller's customer; the answer is the caller's Notifications page.
+    "accounts/webhooks/new/": Route(Kind.SIGNED_IN, "/accounts/webhooks/new/", ("POST",)),
+    "accounts/webhooks/<int:webhook_id>/": Route(
+        Kind.OBJECT, "/accounts/webhooks/{webhook}/", ("GET",)
+    ),
+    "accounts/webhooks/<int:webhook_id>/remove/": Route(
+        Kind.OBJECT, "/accounts/webhooks/{webhook}/remove/", ("POST",)
+    ),
     # The REST API: VVs (DefaultRouter, with format suffixes) and what hangs off one VV.
     "api/v1/": Route(Kind.SIGNED_IN, "/api/v1/"),
     "api/v1/<drf_format_suffix:format>": Route(Kind.SIGNED_IN, "/api/v1/.json"),
     "api/v1/vvs/$": Route(Kind.OWN_LIST, "/api/v1/vvs/", ("GET", "POST")),
     r"api/v1/vvs\.(?P<format>[a-z0-9]+)/?$": Route(Kind.OWN_LIST, "/api/v1/vvs.json"),
+    # A program tried against a simulated copy of the fleet: the caller's own, nothing stored.
+    "api/v1/vvs/dry-run/": Route(Kind.SIGNED_IN, "/api/v1/vvs/dry-run/", ("POST",)),
     "api/v1/vvs/(?P<pk>{uuid})/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/"),
     r"api/v1/vvs/(?P<pk>{uuid})\.(?P<format>[a-z0-9]+)/?$": Route(
         Kind.OBJECT, "/api/v1/vvs/{vv}.json"
@@ -137,8 +192,16 @@ ROUTES: dict[str, Route] = {
     "api/v1/vvs/(?P<id>{uuid})/tasks/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/tasks/"),
     "api/v1/vvs/(?P<id>{uuid})/log/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/log/"),
     r"api/v1/vvs/(?P<id>{uuid})/results\.zip$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/results.zip"),
+    r"api/v1/vvs/(?P<id>{uuid})/readings\.csv$": Route(
+        Kind.OBJECT, "/api/v1/vvs/{vv}/readings.csv"
+    ),
+    r"api/v1/vvs/(?P<id>{uuid})/readings\.geojson$": Route(
+        Kind.OBJECT, "/api/v1/vvs/{vv}/readings.geojson"
+    ),
     # The SDC entries the caller may use: the same catalog for every customer by default.
     "api/v1/sensors/": Route(Kind.SIGNED_IN, "/api/v1/sensors/"),
+    # Where tasks can be served: the same for everyone, no vehicle named.
+    "api/v1/service-area/": Route(Kind.SIGNED_IN, "/api/v1/service-area/"),
     "api/v1/vehicles/$": Route(Kind.STAFF, "/api/v1/vehicles/", ("GET", "POST")),
     "api/v1/vehicles/(?P<pk>[^/.]+)/$": Route(
         Kind.STAFF, "/api/v1/vehicles/{vehicle}/", ("GET", "PATCH", "DELETE")
@@ -152,6 +215,13 @@ ROUTES: dict[str, Route] = {
     "api/v1/vehicles/(?P<pk>[^/.]+)/return/$": Route(
         Kind.STAFF, "/api/v1/vehicles/{vehicle}/return/", ("POST",)
     ),
+    # An operator's commands (issue 26).
+    "api/v1/vehicles/(?P<pk>[^/.]+)/return-home/$": Route(
+        Kind.STAFF, "/api/v1/vehicles/{vehicle}/return-home/", ("POST",)
+    ),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/land/$": Route(
+        Kind.STAFF, "/api/v1/vehicles/{vehicle}/land/", ("POST",)
+    ),
     "api/v1/ground-stations/$": Route(Kind.STAFF, "/api/v1/ground-stations/", ("GET", "POST")),
     "api/v1/ground-stations/(?P<pk>[^/.]+)/$": Route(
         Kind.STAFF, "/api/v1/ground-stations/{gs}/", ("GET", "PUT", "PATCH", "DELETE")
@@ -159,6 +229,26 @@ ROUTES: dict[str, Route] = {
     "api/v1/customers/$": Route(Kind.STAFF, "/api/v1/customers/", ("GET", "POST")),
     "api/v1/customers/(?P<pk>[^/.]+)/$": Route(
         Kind.STAFF, "/api/v1/customers/{customer}/", ("GET", "PUT", "PATCH", "DELETE")
+    ),
+    # A user's named API tokens (made with a session only) and a customer's webhooks.
+    "api/v1/tokens/$": Route(
+        Kind.OWN_LIST,
+        "/api/v1/tokens/",
+        ("GET", "POST"),
+        lists="api tokens",
+        session_only=("POST",),
+    ),
+    "api/v1/tokens/(?P<pk>[^/.]+)/$": Route(
+        Kind.OBJECT, "/api/v1/tokens/{api_token}/", ("GET", "DELETE")
+    ),
+    "api/v1/webhooks/$": Route(
+        Kind.OWN_LIST, "/api/v1/webhooks/", ("GET", "POST"), lists="webhooks"
+    ),
+    "api/v1/webhooks/(?P<pk>[^/.]+)/$": Route(
+        Kind.OBJECT, "/api/v1/webhooks/{webhook}/", ("GET", "DELETE")
+    ),
+    "api/v1/webhooks/(?P<pk>[^/.]+)/deliveries/$": Route(
+        Kind.OBJECT, "/api/v1/webhooks/{webhook}/deliveries/"
     ),
     # The API's schema and docs are public (drf-spectacular's default): endpoints, no data.
     "api/schema/": Route(Kind.PUBLIC, "/api/schema/"),
@@ -185,6 +275,8 @@ ROUTES: dict[str, Route] = {
     "vvs/<uuid:vv_id>/map.json": Route(Kind.OBJECT, "/vvs/{vv}/map.json", ANY),
     # The live map's page holds no data: it comes over the socket (tested at the end).
     "map/": Route(Kind.SIGNED_IN, "/map/"),
+    # The maps' background: the simulated world, no one's data (fleet/views.py).
+    "tiles/<int:z>/<int:x>/<int:y>.png": Route(Kind.PUBLIC, "/tiles/0/0/0.png"),
     # The admin site's own views (every one behind AdminSite.admin_view but the login).
     "admin/": Route(Kind.STAFF, "/admin/", ("GET", "POST")),
     "admin/login/": Route(Kind.PUBLIC, "/admin/login/"),
@@ -204,6 +296,10 @@ ROUTES: dict[str, Route] = {
     "admin/(?P<url>.*)$": Route(Kind.STAFF, "/admin/no/such/page/", staff_status=404),
     # Custom views of the model admins (ModelAdmin.get_urls overrides).
     "admin/fleet/vehicle/overview/": Route(Kind.STAFF, "/admin/fleet/vehicle/overview/"),
+    # An action of the fleet overview: a POST without one is refused, saying which there are.
+    "admin/fleet/vehicle/overview/<int:object_id>/act/": Route(
+        Kind.STAFF, "/admin/fleet/vehicle/overview/{vehicle}/act/", ("POST",), staff_status=400
+    ),
     "admin/accounts/user/<id>/password/": Route(
         Kind.STAFF, "/admin/accounts/user/{user}/password/", ("GET", "POST")
     ),
@@ -316,14 +412,28 @@ class Side:
     image: str  # the file name of one of its camera pictures
     key: str  # a storage key whose value is a camera reading
     markers: tuple[str, ...] = ()  # strings that are its data and nobody else's
+    api_token: ApiToken | None = None  # the user's named API token
+    webhook: Webhook | None = None  # the customer's webhook, with one delivery attempt
 
     def values(self) -> dict[str, str]:
+        assert self.api_token is not None and self.webhook is not None
         return {
             "vv": str(self.flown.pk),
             "queued": str(self.queued.pk),
             "file": self.image,
             "key": self.key,
+            "api_token": str(self.api_token.pk),
+            "webhook": str(self.webhook.pk),
         }
+
+    def listed(self, what: str) -> str:
+        """What a list of the caller's ``what`` (Route.lists) shows of its own."""
+        assert self.api_token is not None and self.webhook is not None
+        return {
+            "vvs": self.flown.name,
+            "api tokens": self.api_token.name,
+            "webhooks": self.webhook.url,
+        }[what]
 
 
 @dataclass
@@ -340,8 +450,9 @@ class World:
         return re.sub(r"\{([^{}]+)\}", lambda m: values.get(m[1], MISSING_ID), template)
 
     def missing_url(self, template: str) -> str:
-        """The same URL with a VV that does not exist (the rest of A's values kept)."""
-        values = self.ids | self.a.values() | {"vv": MISSING_VV, "queued": MISSING_VV}
+        """The same URL with a VV (token, webhook) that does not exist (the rest of A's values
+        kept)."""
+        values = self.ids | self.a.values() | MISSING
         return re.sub(r"\{([^{}]+)\}", lambda m: values[m[1]], template)
 
 
@@ -356,8 +467,11 @@ def _flight(sim: Any, customer: Customer, prefix: str, program: str) -> Side:
 
 def _finish(side: Side, prefix: str, vvm: Any) -> None:
     """After the flights: the customer's queued VV (submitted now, or the simulation would
-    start it), and what only its data holds."""
+    start it), the user's named API token, the customer's webhook (made now, or the flights
+    would notify it) with an attempt of its own, and what only its data holds."""
     from vvm_worker.services import vv_submit
+    from vvm_worker.services.notifications import webhook_create
+    from vvm_worker.services.tokens import api_token_create
 
     side.queued = vv_submit(
         customer=side.customer,
@@ -377,6 +491,23 @@ def _finish(side: Side, prefix: str, vvm: Any) -> None:
         image_file(ref) for t in side.flown.tasks.all() for ref in image_references(t.readings)
     }
     assert side.image in images and Migration.objects.filter(vv=side.flown).exists()
+    side.api_token, _ = api_token_create(user=side.user, name=f"{prefix}-token-secret")
+    # It hears of every event: the other customer's POSTs (a webhook, an e-mail choice) leave
+    # that customer's row (the events it listens for) as it is.
+    side.webhook = webhook_create(
+        customer=side.customer,
+        url=f"http://127.0.0.1:9/{prefix}-hook-secret",
+        events=NotifyEvent.values,
+        allow_private=True,
+    )
+    WebhookDelivery.objects.create(
+        webhook=side.webhook,
+        event=NotifyEvent.VV_FINISHED,
+        vv_id=side.flown.pk,
+        attempt=1,
+        status_code=503,
+        error=f"{prefix}-delivery-secret",
+    )
     side.markers = (
         side.customer.name,
         side.user.username,
@@ -388,6 +519,12 @@ def _finish(side: Side, prefix: str, vvm: Any) -> None:
         f"{prefix}-storage-secret",
         f"{prefix}-log-secret",
         *sorted(images),
+        side.token,  # the key of the token an administrator made (the pages show 6 characters)
+        side.api_token.name,
+        side.api_token.token_key,  # what the pages and the API show of a named token's key
+        f"{prefix}-hook-secret",
+        side.webhook.secret,  # never shown again, not even to its customer
+        f"{prefix}-delivery-secret",
     )
 
 
@@ -499,11 +636,16 @@ def client_for(side: Side, via: str) -> Client:
     return token_client(side) if via == "token" else session_client(side.user)
 
 
-def fingerprint(world: World) -> dict[str, Any]:
+def fingerprint(world: World, revoked: Side | None = None) -> dict[str, Any]:
     """What the other customer or a customer's user must not be able to change: A's VVs and
-    their data, every customer, A's user and token, the fleet and the SDC."""
+    their data, every customer, A's user and tokens, A's webhooks and their delivery logs, the
+    fleet and the SDC. ``revoked``: a caller that revokes its own token (the one an
+    administrator made), which is left out."""
     a = world.a
     of_a = {"vv__customer": a.customer}
+    tokens = Token.objects.order_by("key")
+    if revoked is not None:
+        tokens = tokens.exclude(user=revoked.user)
     return {
         "vvs": list(
             VirtualVehicle.objects.filter(customer=a.customer)
@@ -515,7 +657,12 @@ def fingerprint(world: World) -> dict[str, Any]:
         "log": LogEntry.objects.filter(**of_a).count(),
         "customers": list(Customer.objects.order_by("pk").values()),
         "user": list(User.objects.filter(pk=a.user.pk).values()),
-        "tokens": list(Token.objects.order_by("key").values()),
+        "tokens": list(tokens.values()),
+        "api tokens": list(ApiToken.objects.filter(user=a.user).order_by("pk").values()),
+        "webhooks": list(Webhook.objects.filter(customer=a.customer).order_by("pk").values()),
+        "deliveries": list(
+            WebhookDelivery.objects.filter(webhook__customer=a.customer).order_by("pk").values()
+        ),
         "vehicles": list(Vehicle.objects.order_by("pk").values()),
         "stations": list(GroundStation.objects.order_by("pk").values()),
         "sensors": list(SensorType.objects.order_by("pk").values()),
@@ -640,8 +787,9 @@ class TestHttp:
     @pytest.fixture(autouse=True)
     def _world_media(self, settings, world: World) -> None:
         """The pictures the class's flights took (conftest.py gives each test its own
-        MEDIA_ROOT)."""
+        MEDIA_ROOT), and webhooks on this machine (HOOK_URL: a POST that would add one does)."""
         settings.MEDIA_ROOT = world.media
+        settings.CPCC_WEBHOOK_ALLOW_PRIVATE = True
 
     @pytest.mark.parametrize(("key", "url", "method", "via", "declared"), _object_cases())
     def test_another_customers_object_is_not_found(
@@ -696,19 +844,24 @@ class TestHttp:
     def test_lists_and_pages_hold_only_the_callers_data(
         self, world: World, key: str, url: str, method: str, via: str
     ) -> None:
-        declared = ROUTES[key].methods
+        route = ROUTES[key]
+        declared = route.methods
         for mine, other in ((world.a, world.b), (world.b, world.a)):
-            before = fingerprint(world)
+            revoked = mine if route.revokes_own_token else None
+            before = fingerprint(world, revoked)
             response, body = send(client_for(mine, via), method, url)
-            if method in declared:
+            if via == "token" and method in route.session_only:
+                assert response.status_code == 403, body[:300]
+            elif method in declared:
                 assert response.status_code < 400, body[:300]
             else:
                 assert response.status_code == 405, body[:300]
             assert not leaked(body, other.markers, url), body[:500]
             if mine is world.b:
-                assert fingerprint(world) == before, f"B's {method} changed A's data"
-            if ROUTES[key].kind is Kind.OWN_LIST and method == "GET":
-                assert mine.flown.name.encode() in body, "the caller's own VVs are listed"
+                assert fingerprint(world, revoked) == before, f"B's {method} changed A's data"
+            if route.kind is Kind.OWN_LIST and method == "GET":
+                own = mine.listed(route.lists)
+                assert own.encode() in body, f"the caller's own {route.lists} are listed"
 
     @pytest.mark.parametrize(
         ("key", "url", "method"),
@@ -791,6 +944,19 @@ class TestHttp:
         before = fingerprint(world)
         response, _ = send(token_client(world.a), "POST", "/api/v1/vvs/")
         assert response.status_code == 201 and fingerprint(world) != before
+        # Its named token, its webhook with its delivery log, its e-mail choice, the token an
+        # administrator made for it.
+        for template, parts in (
+            ("/accounts/tokens/{api_token}/revoke/", ("api tokens",)),
+            ("/accounts/webhooks/{webhook}/remove/", ("webhooks", "deliveries")),
+            ("/accounts/notifications/", ("user",)),
+            ("/accounts/tokens/operator/revoke/", ("tokens",)),
+        ):
+            before = fingerprint(world)
+            response, _ = send(a, "POST", world.url(template))
+            assert response.status_code == 302, template
+            after = fingerprint(world)
+            assert all(after[part] != before[part] for part in parts), template
 
 
 # --- the live map's socket ----------------------------------------------------------------------

@@ -338,3 +338,18 @@ async def test_a_browser_that_asks_to_resync_gets_the_whole_state_again(
     assert [v["vv"] for v in again["vvs"]] == [str(vv.pk)]
     assert again["seq"] == first["seq"] + len(frames), "numbered on from the first snapshot"
     await socket.disconnect()
+
+
+async def test_a_snapshot_says_the_time_on_the_platforms_clock(client, user_a) -> None:
+    """The page's time window counts back from it (static/js/map.js), not from the browser's
+    clock, which may be wrong."""
+    from asgiref.sync import sync_to_async
+
+    await sync_to_async(client.force_login)(user_a)
+    socket = _socket(client)
+    assert (await socket.connect())[0]
+    before = time.time()
+    snapshot = await socket.receive_json_from(timeout=5)
+    assert snapshot["type"] == "snapshot"
+    assert before - 5.0 <= snapshot["now"] <= time.time()
+    await socket.disconnect()

@@ -104,3 +104,23 @@ def test_a_snapshot_reads_every_vvs_latest_history_in_a_few_statements(
         # The latest ones, oldest first, and only this VV's.
         assert [t["q"] for t in v["tasks"]] == list(range(k % 4))[-2:]
         assert v["track"] == [[float(t), 48.0 + k, 12.0] for t in range(k % 5)][-3:]
+
+
+def test_staff_get_any_customers_whole_mission_with_the_fleets_names(
+    platform, ground_station, customer_a, staff, client
+) -> None:
+    """The staff map's "one VV with its whole history" (static/js/live_map.js)."""
+    vv = _flown(platform, ground_station, customer_a)
+    client.force_login(staff)
+    response = client.get(reverse("vv-map-history", args=[vv.pk]))
+    assert response.status_code == 200
+    body = response.json()
+    assert body["staff"] is True
+    (shown,) = body["vvs"]
+    assert (shown["vv"], shown["name"], shown["status"]) == (str(vv.pk), "VV", "finished")
+    assert [t["status"] for t in shown["tasks"]] == ["done", "done"]
+    assert [(m["from"], m["to"]) for m in shown["migrations"]] == [
+        (ground_station.name, "Heli One"),
+        ("Heli One", ground_station.name),
+    ]
+    assert len(shown["track"]) >= 2

@@ -8,6 +8,7 @@ import html
 import importlib
 import json
 import re
+from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
@@ -15,8 +16,9 @@ from django.conf import settings as django_settings
 from django.urls import clear_url_caches, reverse
 
 import cpcc_site.urls
-from missions.models import VirtualVehicle, VVStatus
+from missions.models import Task, VirtualVehicle, VVStatus
 from missions.readings import image_file, image_references
+from missions.views import chart_series
 from tests.api_fixtures import MISSION, MISSION_KEYS
 from tests.factories import UserFactory
 from vvm_worker.services import vv_create_copies_for_user, vv_submit
@@ -149,7 +151,7 @@ def test_a_gps_reading_shows_latitude_longitude_and_altitude(client, user_a, vv_
     assert "<strong>48.111120, 12.861910, 50.0 m</strong>" in page_of(client, vv_a)
 
 
-def test_the_chart_has_one_series_per_scalar_sensor_against_task_order(
+def test_the_chart_has_one_series_per_scalar_sensor_against_the_time_of_its_readings(
     client, user_a, mission
 ) -> None:
     client.force_login(user_a)
@@ -157,16 +159,38 @@ def test_the_chart_has_one_series_per_scalar_sensor_against_task_order(
     data = re.search(r'<script id="chart-data" type="application/json">(.*?)</script>', page)
     series = json.loads(data.group(1))
     tasks = list(mission.tasks.order_by("q", "index"))
-    co2 = [t.readings[1]["value"] for t in tasks if t.status == "done"]
-    # The rejected first task has no reading: the chart's points are tasks 2 and 3.
+    co2 = [t.readings[1] for t in tasks if t.status == "done"]
+
+    def epoch_ms(reading: dict) -> int:
+        return round(datetime.fromisoformat(reading["time"]).timestamp() * 1000)
+
+    # The rejected first task has no reading: the chart's points are the readings of tasks 2
+    # and 3, at the times they were taken (epoch milliseconds), labelled with their task.
     assert series == [
         {
             "sensor": "CO2",
             "unit": "ppm",
-            "points": [[2, co2[0], str(tasks[1].q)], [3, co2[1], str(tasks[2].q)]],
+            "points": [
+                [epoch_ms(co2[0]), co2[0]["value"], str(tasks[1].q)],
+                [epoch_ms(co2[1]), co2[1]["value"], str(tasks[2].q)],
+            ],
         }
     ]
+    assert epoch_ms(co2[0]) < epoch_ms(co2[1])
     assert "/static/vendor/chartjs/chart.umd.min.js" in page
+
+
+def test_the_chart_plots_a_batch_in_the_order_its_readings_were_taken() -> None:
+    def task(q: int, index: int, time: str, value: float) -> Task:
+        reading = {"sensor": "CO2", "kind": "scalar", "time": time, "value": value, "unit": "ppm"}
+        return Task(q=q, index=index, readings=[reading])
+
+    # An executeAll batch: its second task was served first.
+    (series,) = chart_series(
+        [task(4, 0, "2025-01-01T00:02:00.500Z", 1.0), task(4, 1, "2025-01-01T00:01:00Z", 2.0)]
+    )
+    start = datetime(2025, 1, 1, tzinfo=UTC).timestamp() * 1000
+    assert series["points"] == [[start + 60_000, 2.0, "4.1"], [start + 120_500, 1.0, "4"]]
 
 
 def test_the_vv_page_offers_the_downloads_and_its_replay(client, user_a, mission) -> None:
@@ -468,6 +492,26 @@ def test_the_editor_has_highlighting_check_file_upload_and_copies(client, user_a
     assert 'data-check-url="/vvs/check/"' in page and 'id="check-button"' in page
     assert 'type="file" name="program_file"' in page and 'enctype="multipart/form-data"' in page
     assert 'name="copies"' in page
+
+
+def test_one_submitted_vv_opens_its_own_page(client, user_a, page_vvm) -> None:
+    client.force_login(user_a)
+    response = client.post(reverse("vv-new"), {"name": "Survey", "copies": 1, "program": FINE})
+    vv = VirtualVehicle.objects.get(name="Survey")
+    assert response.status_code == 302 and response["Location"] == f"/vvs/{vv.pk}/"
+
+
+def test_a_cancelled_vv_shows_no_error_on_the_dashboard(client, user_a, page_vvm) -> None:
+    vv = vv_submit(customer=user_a.customer, name="Gone", program=FINE, vvm=page_vvm)
+    VirtualVehicle.objects.filter(pk=vv.pk).update(
+        status=VVStatus.CANCELLED, error="cancelled by its owner"
+    )
+    client.force_login(user_a)
+    page = client.get(reverse("home") + "?show=all").text
+    row = re.search(rf'<tr data-vv="{vv.pk}".*?</tr>', page, re.S)[0]
+    error_cell = re.search(r'<td class="error-text"[^>]*>(.*?)</td>', row, re.S)[1]
+    assert error_cell.strip() == ""
+    assert 'title="cancelled by its owner"' in row  # the reason stays at hand
 
 
 def test_n_copies_are_submitted_at_once(client, user_a, page_vvm) -> None:

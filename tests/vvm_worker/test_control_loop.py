@@ -40,6 +40,9 @@ class Store:
     def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
         raise AssertionError("no battery here")
 
+    def take_command(self) -> None:
+        return None  # no operator here
+
     def complete(self, task: LoopTask, readings: list[dict[str, Any]], now_s: float) -> None:
         del self.open[task.id]
         self.served.append((task.id, now_s))

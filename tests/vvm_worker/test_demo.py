@@ -5,14 +5,18 @@ from __future__ import annotations
 import json
 import os
 import queue
+import re
 import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
+
+import pytest
 
 from cpcc_site.embedded_redis import answers
 
@@ -79,6 +83,8 @@ def run_demo(tmp_path: Path, *args: str, interrupts: int = 1) -> tuple[str, int]
         assert answers(tmp_path / "redis" / "redis.sock")
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/accounts/login/", timeout=10) as page:
             assert page.status == 200
+            login_page = page.read().decode()
+        served_as_in_production(f"http://127.0.0.1:{port}", login_page)
     finally:
         demo.send_signal(signal.SIGINT)
         if interrupts > 1:
@@ -97,6 +103,24 @@ def run_demo(tmp_path: Path, *args: str, interrupts: int = 1) -> tuple[str, int]
     with socket.socket() as s:
         assert s.connect_ex(("127.0.0.1", port)) != 0  # the web server is gone too
     return output, port
+
+
+def served_as_in_production(url: str, login_page: str) -> None:
+    """DEBUG off: the site's own 404 page (not Django's debug page listing every URL), JSON
+    under /api/, the static files collected under hashed names and served."""
+    with pytest.raises(urllib.error.HTTPError) as missing:
+        urllib.request.urlopen(f"{url}/no-such-page/", timeout=10)
+    page = missing.value.read().decode()
+    assert missing.value.code == 404
+    assert "Not found" in page and "URLconf" not in page
+    with pytest.raises(urllib.error.HTTPError) as missing:
+        urllib.request.urlopen(f"{url}/api/v1/no-such-thing/", timeout=10)
+    assert missing.value.code == 404
+    assert json.loads(missing.value.read())["detail"].startswith("No API endpoint")
+    stylesheet = re.search(r'href="(/static/css/cpcc\.[0-9a-f]{12}\.css)"', login_page)
+    assert stylesheet, login_page
+    with urllib.request.urlopen(url + stylesheet[1], timeout=10) as css:
+        assert css.status == 200
 
 
 def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_path: Path) -> None:

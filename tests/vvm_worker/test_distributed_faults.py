@@ -37,7 +37,7 @@ from tests.factories import (
     UserFactory,
     VehicleFactory,
 )
-from tests.live import Workers, wait_for
+from tests.live import Workers, program_log, wait_for
 from vvm_worker.dispatch import SHARED_QUEUE, gs_queue, rv_queue
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_create_for_user, vv_submit
@@ -130,7 +130,7 @@ def ended(*vvs: VirtualVehicle) -> bool:
 def outcome(vv: VirtualVehicle) -> tuple[dict, list[str]]:
     """What a VV leaves behind for its owner: its storage and its log, in order."""
     storage = dict(vv.storage.values_list("key", "value"))
-    log = list(vv.log.order_by("seq").values_list("message", flat=True))
+    log = program_log(vv)
     return storage, log
 
 
@@ -336,7 +336,7 @@ def test_a_killed_gs_worker_and_lost_messages_leave_no_vv_behind(workers) -> Non
         vv.refresh_from_db()
         assert vv.status == VVStatus.FINISHED, vv.error
         assert dict(vv.storage.values_list("key", "value")).keys() == {"p0", "p1"}
-        assert list(vv.log.values_list("message", flat=True)) == ["done: 2 readings"]
+        assert program_log(vv) == ["done: 2 readings"]
         path = [(m.from_name, m.to_name) for m in Migration.objects.filter(vv=vv).order_by("id")]
         assert path == [("GS Base", "Heli One"), ("Heli One", "Heli Two"), ("Heli Two", "GS Base")]
     # No worker was restarted after the last messages were lost: their sweeps found the work.
@@ -382,7 +382,7 @@ def test_two_gs_workers_run_one_vv_at_a_time_for_a_customer_allowed_one(workers)
         vv.refresh_from_db()
         assert vv.status == VVStatus.FINISHED, vv.error
         assert vv.tasks.filter(status=TaskStatus.DONE).count() == 3
-        assert list(vv.log.order_by("seq").values_list("message", flat=True)) == ["start", "end"]
+        assert program_log(vv) == ["start", "end"]
         ran.append((vv.started_s, vv.finished_s, vv.name))
     # Oldest first, and each one admitted only once the one before had ended.
     ran.sort()

@@ -29,7 +29,7 @@ from tests.factories import (
     UserFactory,
     VehicleFactory,
 )
-from tests.live import Web, Workers, wait_for
+from tests.live import Web, Workers, program_log, wait_for
 from tests.tcp_proxy import TcpProxy
 from vvm_worker.dispatch import VV_ADVANCE_TASK
 from vvm_worker.platform import platform_vvm
@@ -117,7 +117,7 @@ def assert_each_reading_once(vv: VirtualVehicle, tasks: int = TASKS) -> None:
         f"visit {k}": {"n": 2 + 2 * k, "value": task.readings[0]["value"]}
         for k, task in enumerate(served)
     }
-    log = list(vv.log.order_by("seq").values_list("message", flat=True))
+    log = program_log(vv)
     assert len(log) == tasks + 2 and len(set(log)) == len(log), log
     assert [line.split(" random")[0] for line in log[1:-1]] == [
         f"visit {k} closure {3 + 2 * k}" for k in range(tasks)

@@ -12,6 +12,7 @@ when resuming would not be exact).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import time
 from collections.abc import Mapping, Sequence
@@ -311,6 +312,16 @@ class VVContext:
             column = self._program.user_column(line, column)
         return message, line, column
 
+    def _call_site(self, at: Any) -> tuple[int | None, int | None]:
+        """The line and column in the user's program of a place the prelude reported (its
+        ``callSite``: where in the script that holds the program), or (None, None)."""
+        if not (isinstance(at, list) and len(at) == 2 and all(isinstance(n, int) for n in at)):
+            return None, None
+        line, column = at
+        if line == 1:  # the platform's prefix is in front of the program's first line
+            column = max(1, column - len(self._program_prefix))
+        return line, self._program.user_column(line, column)
+
     def _interpret(self, state: Any, thrown: str | None, duration: float) -> StepResult:
         if not isinstance(state, dict) or "status" not in state:
             return StepResult(
@@ -337,12 +348,16 @@ class VVContext:
             line = column = None
             if thrown is not None:
                 _, line, column = self._place(thrown)
+            if line is None:  # stopped in the platform's code: where the program called it
+                line, column = self._call_site(fatal.get("at"))
             error = VVError(kind, str(fatal.get("message")), line, column, quota=fatal.get("quota"))
             return StepResult(Outcome(status), error=error, **common)
         if status == "suspended":
-            return StepResult(
-                Outcome.SUSPENDED, pending=PendingRequest.from_json(state["pending"]), **common
-            )
+            pending = PendingRequest.from_json(state["pending"])
+            line, column = self._call_site(state["pending"].get("at"))
+            if line is not None:
+                pending = dataclasses.replace(pending, line=line, column=column)
+            return StepResult(Outcome.SUSPENDED, pending=pending, **common)
         if thrown is not None:
             message, line, column = self._place(thrown)
             if message.startswith("Uncaught "):

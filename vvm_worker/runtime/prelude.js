@@ -63,6 +63,7 @@
   const stringIsWellFormed = String.prototype.isWellFormed;
   const stringToWellFormed = String.prototype.toWellFormed;
   const stringIndexOf = String.prototype.indexOf;
+  const stringLastIndexOf = String.prototype.lastIndexOf;
   const stringReplaceAll = String.prototype.replaceAll;
   const stringReplace = String.prototype.replace;
   const regExpExec = RegExp.prototype.exec;
@@ -507,6 +508,44 @@
     return value;
   }
 
+  // Where in the program a VVM-API call is being made: [line, column] of the innermost frame
+  // of the program's script (vv.js) on the stack, as V8 counts them in that script, or null.
+  // For reports only (a dry run lists the line of each task; a quota kill says where): nothing
+  // the program can observe depends on it (string functions only: a RegExp would change
+  // RegExp's legacy statics). Called once per step at most.
+  const PROGRAM_SCRIPT = 'vv.js:';
+  function callSite() {
+    // A call made at the edge of the stack: no place rather than a RangeError that only the
+    // run making the request would see (a replay answers the call without asking here).
+    try {
+      return placeIn(new RealError().stack);
+    } catch (e) {
+      return null;
+    }
+  }
+  function placeIn(stack) {
+    if (typeof stack !== 'string') return null;
+    let start = 0;
+    while (start < stack.length) {
+      let end = reflectApply(stringIndexOf, stack, ['\n', start]);
+      if (end < 0) end = stack.length;
+      let frame = reflectApply(stringSlice, stack, [start, end]);
+      start = end + 1;
+      // "    at NAME (PLACE)" or "    at PLACE": the place ends the line (a name cannot).
+      if (frame.length > 0 && frame[frame.length - 1] === ')') {
+        frame = reflectApply(stringSlice, frame, [reflectApply(stringLastIndexOf, frame, ['(']) + 1, frame.length - 1]);
+      } else {
+        frame = reflectApply(stringSlice, frame, [reflectApply(stringLastIndexOf, frame, [' ']) + 1]);
+      }
+      if (reflectApply(stringIndexOf, frame, [PROGRAM_SCRIPT]) !== 0) continue;
+      const colon = reflectApply(stringLastIndexOf, frame, [':']);
+      const line = +reflectApply(stringSlice, frame, [PROGRAM_SCRIPT.length, colon]);
+      const column = +reflectApply(stringSlice, frame, [colon + 1]);
+      if (line > 0 && column > 0) return [line, column];
+    }
+    return null;
+  }
+
   class TaskRejectedError extends RealError {
     constructor(message) {
       super(message);
@@ -600,7 +639,7 @@
     }
 
     function stop(kind, message, quota) {
-      fatal = { kind: kind, message: message, quota: quota === undefined ? null : quota };
+      fatal = { kind: kind, message: message, quota: quota === undefined ? null : quota, at: callSite() };
       suspended = true;
       halt();
     }
@@ -692,7 +731,7 @@
       countTasks(1);
       const q = requestSeq++;
       while (cursor >= journal.length) {
-        pending = { kind: 'task', q: q, r: jsonStringify(request), tasks: [request] };
+        pending = { kind: 'task', q: q, r: jsonStringify(request), tasks: [request], at: callSite() };
         suspended = true;
         yield PARK;
       }
@@ -718,11 +757,13 @@
       const q = requestSeq++;
       let first = true;
       let remaining = requests.length;
+      let at = null;
       while (remaining > 0) {
         while (cursor >= journal.length) {
           const open = [];
           for (let i = 0; i < requests.length; i++) if (results[i] === undefined) push(open, i);
-          pending = { kind: 'batch', q: q, r: first ? jsonStringify(requests) : null, tasks: requests, open: open };
+          if (at === null) at = callSite();
+          pending = { kind: 'batch', q: q, r: first ? jsonStringify(requests) : null, tasks: requests, open: open, at: at };
           suspended = true;
           yield PARK;
         }

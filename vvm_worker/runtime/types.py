@@ -111,7 +111,9 @@ class PendingRequest:
     ``kind`` is "task" (``VV.task.execute``) or "batch" (``VV.task.executeAll``); ``q`` the
     request's ordinal, which its journal answers carry; ``fingerprint`` the request as the
     program made it, kept in the journal to detect a non-deterministic program on replay (None
-    when a batch already has answers); ``open`` the batch indexes still without an answer.
+    when a batch already has answers); ``open`` the batch indexes still without an answer;
+    ``line`` and ``column`` where in the program the call is made, when the step that made
+    the request reports it (the row keeps neither: ``to_json``).
     """
 
     kind: str
@@ -119,6 +121,9 @@ class PendingRequest:
     fingerprint: str | None
     tasks: tuple[TaskRequest, ...]
     open: tuple[int, ...]
+    # Where it was asked for says nothing of what was asked: not compared.
+    line: int | None = field(default=None, compare=False)
+    column: int | None = field(default=None, compare=False)
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PendingRequest:

@@ -23,6 +23,10 @@ and ``vv_create_copies_for_user`` (N copies at once), ``vvs_submit_many_for_user
 programs at once, all or none: ``submissions``), ``vv_update_program_for_user`` (while it is
 queued), ``vv_restart_for_user`` (a new VV with the program of an ended one) and
 ``vv_cancel_for_user``.
+
+A user's API tokens (``tokens``) and a customer's webhooks and e-mails (``notifications``,
+which the services that end a VV or answer a task tell through ``vv_notify``) are used from
+their modules.
 """
 
 from vvm_worker.services.base import VVM, ProgramRejected
@@ -41,6 +45,7 @@ from vvm_worker.services.fleet import (
     GroundStationConfig,
     LeasesUnsure,
     VehicleConfig,
+    VehicleRemoved,
     ground_station_create,
     ground_station_delete,
     ground_station_update,
@@ -48,6 +53,8 @@ from vvm_worker.services.fleet import (
     no_fly_zone_save,
     rally_point_delete,
     rally_point_save,
+    vehicle_command,
+    vehicle_command_take,
     vehicle_create,
     vehicle_heartbeat,
     vehicle_reconfigured,
@@ -111,6 +118,7 @@ __all__ = [
     "VVNotQueued",
     "VVQueueFull",
     "VehicleConfig",
+    "VehicleRemoved",
     "copy_names",
     "customer_create",
     "customer_delete",
@@ -128,6 +136,8 @@ __all__ = [
     "task_complete",
     "user_set_login",
     "vehicle_caps",
+    "vehicle_command",
+    "vehicle_command_take",
     "vehicle_create",
     "vehicle_heartbeat",
     "vehicle_reconfigured",

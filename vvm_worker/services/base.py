@@ -25,6 +25,7 @@ from missions.models import (
 )
 from vvm_worker.clock import Clock
 from vvm_worker.dispatch import Announcer, Dispatcher, Silent
+from vvm_worker.notify import Notifier, Unheard
 from vvm_worker.runtime import (
     PendingRequest,
     Runtime,
@@ -98,6 +99,9 @@ class VVM:
     local_rvs: set[int] = dataclass_field(default_factory=set)
     # Those RVs' loops, as the services see them (None: ask the database, tell the dispatcher).
     local_fleet: LocalFleet | None = None
+    # Who tells the customers' webhooks and e-mail recipients that a VV ended or a task was
+    # done (vvm_worker/services/notifications.py); nobody in `simulate` and in most tests.
+    notifier: Notifier = dataclass_field(default_factory=Unheard)
 
     @property
     def listened(self) -> bool:

@@ -16,7 +16,14 @@ from django.utils import timezone
 
 from cpcc_site.prepared import deferred, update_row
 from fleet.geo import Position
-from fleet.models import GroundStation, NoFlyZone, RallyPoint, Vehicle, VehicleStatus
+from fleet.models import (
+    GroundStation,
+    NoFlyZone,
+    RallyPoint,
+    Vehicle,
+    VehicleCommand,
+    VehicleStatus,
+)
 from missions.models import (
     ACTIVE_STATUSES,
     ENDED_STATUSES,
@@ -135,6 +142,59 @@ def vehicle_set_status(
     if status == VehicleStatus.ACTIVE:
         vehicle_register(vehicle=vehicle, vvm=vvm)
     return True
+
+
+class VehicleRemoved(RuntimeError):
+    """The RV was removed from the fleet: no command reaches it any more."""
+
+    def __init__(self, vehicle: Vehicle) -> None:
+        super().__init__(f"{vehicle.name} was removed from the fleet: it takes no command")
+        self.vehicle = vehicle
+
+
+def vehicle_command(
+    *, vehicle: Vehicle, command: VehicleCommand, vvm: VVM, reason: str = ""
+) -> Vehicle:
+    """An operator's command for an RV (a person's decision): return home now, or land now
+    where it is. The RV goes into maintenance at once (``vehicle_set_status``: the VVs aboard
+    move on, and the platform sends it out again only once an operator returns it to
+    service), and the command waits for the RV's worker, whose control loop takes it exactly
+    once (``vehicle_command_take``) and obeys it: a MAVLink autopilot gets its RTL or LAND, a
+    simulated vehicle flies home or lands. A newer command replaces one not taken yet.
+    ``reason`` says who asked, for the operators. Returns the RV as saved; raises
+    VehicleRemoved for a removed RV."""
+    with transaction.atomic():
+        vehicle = Vehicle.objects.select_for_update().get(pk=vehicle.pk)
+        if vehicle.status == VehicleStatus.REMOVED:
+            raise VehicleRemoved(vehicle)
+        vehicle.command = command
+        vehicle.command_requested = timezone.now()
+        vehicle.command_taken = None
+        vehicle.save(update_fields=["command", "command_requested", "command_taken", "updated"])
+        changed = vehicle_set_status(
+            vehicle=vehicle, status=VehicleStatus.MAINTENANCE, vvm=vvm, reason=reason
+        )
+        if not changed:  # in maintenance already: its worker still hears of the command
+            vvm.dispatcher.vehicle_changed(vehicle.pk)
+        logger.info(
+            "vehicle %s: operator's command %s",
+            vehicle.name,
+            command,
+            extra={"vehicle": vehicle.name, "command": str(command), "reason": reason or None},
+        )
+    vehicle.refresh_from_db()
+    return vehicle
+
+
+def vehicle_command_take(*, vehicle_id: int, command: str, asked: Any) -> bool:
+    """The RV's worker takes the operator's command ``command`` asked at ``asked`` (as it
+    read them): a fenced UPDATE, so that it is taken once however many loops read it, and
+    not at all when a newer command replaced it meanwhile. Returns whether it was taken. (The
+    worker's doing, not a person's: not in the audit log.)"""
+    taken = Vehicle.objects.filter(
+        pk=vehicle_id, command=command, command_requested=asked, command_taken__isnull=True
+    ).update(command_taken=timezone.now())
+    return bool(taken)
 
 
 def vvs_reroute_waiting(*, vvm: VVM) -> None:

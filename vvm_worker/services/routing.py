@@ -44,6 +44,7 @@ from vvm_worker.services.base import (
     pending_of,
 )
 from vvm_worker.services.journal import journal_append
+from vvm_worker.services.waiting import vv_wait_end, vv_wait_start
 
 
 def vehicle_caps(
@@ -307,7 +308,26 @@ def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None 
 
     ``open_tasks``: the request's open tasks as the caller has them, in index order (new
     ones not saved yet: they are saved assigned, or rejected, by the caller); None: read them.
-    The caller saves the VV."""
+    The caller saves the VV.
+
+    A VV parked on a ground station because only RVs out of service could serve its next
+    task waits (``vv_wait_start``: its owner reads why); one that waited and moves on stops
+    waiting (``vv_wait_end``). Neither writes anything for a VV that did not wait and does
+    not (the common case)."""
+    waited = bool(vv.waiting_reason)
+    again, parked = _route(vv, vvm, open_tasks)
+    if parked is not None:
+        vv_wait_start(vv=vv, task=parked, vvm=vvm)
+    elif waited:
+        vv_wait_end(vv=vv, vvm=vvm)
+    return again
+
+
+def _route(
+    vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None
+) -> tuple[bool, Task | None]:
+    """``vv_route``'s decision: whether the VV must step again, and the task it waits for
+    when it is parked until an RV that serves it is in service again (else None)."""
     pending = pending_of(vv)
     assert pending is not None
     if open_tasks is None:
@@ -325,14 +345,14 @@ def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None 
         mine = _servable(caps, open_tasks)
         if mine and not shape.overlaps.get(host.pk):
             tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
-            return False
+            return False, None
         if not mine and any(t.vehicle_id == host.pk for t in open_tasks):
-            return False
+            return False, None
     fleet, rows = fleet_caps_and_rows(vvm, [request_of(t) for t in open_tasks], shape)
     decisions = [map_task(request_of(t), fleet) for t in open_tasks]
     if host is not None and mine and _stays(host, open_tasks, mine, fleet, decisions):
         tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
-        return False
+        return False, None
     rejected = [(t, d) for t, d in zip(open_tasks, decisions, strict=True) if d.rejected]
     # A batch is accepted or rejected as a whole, before any of its tasks is answered.
     if rejected and not _partly_answered(vv, pending):
@@ -340,9 +360,9 @@ def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None 
             vv_migrate_to_ground_station(
                 vv=vv, reason="no vehicle can serve its task", vvm=vvm, open_tasks=open_tasks
             )
-            return False
+            return False, None
         vv_reject_request(vv=vv, pending=pending, rejected=rejected, open_tasks=open_tasks, vvm=vvm)
-        return True
+        return True, None
 
     best = _best_vehicle(open_tasks, decisions)
     if best is not None:
@@ -354,16 +374,16 @@ def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None 
             # RV's list (what the RV's host would do with it next, without a message).
             vv.status = VVStatus.RUNNING
             tasks_assign(tasks=_servable(best, open_tasks), vehicle=vehicle, vvm=vvm)
-            return False
+            return False, None
         vv.status = VVStatus.MIGRATING
         vvm.dispatcher.vv_arrived(vv.id)
-        return False
+        return False, None
     # Only RVs in maintenance could serve it: park on a ground station until one returns.
     if vv.host_rv is not None:
         vv_migrate_to_ground_station(
             vv=vv, reason="waiting for a vehicle", vvm=vvm, open_tasks=open_tasks
         )
-    return False
+    return False, next((t for t, d in zip(open_tasks, decisions, strict=True) if d.parked), None)
 
 
 def _servable(caps: VehicleCaps, tasks: Sequence[Task]) -> list[Task]:

@@ -16,7 +16,7 @@ from django.db import connection, transaction
 from django.db.models import F
 from django.utils import timezone
 
-from accounts.models import Customer, User
+from accounts.models import Customer, NotifyEvent, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
 from cpcc_site.json_depth import MAX_VALUE_DEPTH  # how deeply a stored value may nest
@@ -62,6 +62,7 @@ from vvm_worker.services.base import (
 from vvm_worker.services.customers import customer_limits
 from vvm_worker.services.fleet import vehicle_record_state
 from vvm_worker.services.journal import JournalView, journal_append, journal_full
+from vvm_worker.services.notifications import ended_event, vv_notify
 from vvm_worker.services.routing import (
     tasks_reject,
     vv_record_migration,
@@ -635,6 +636,9 @@ def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
         extra={"vv": str(vv.id), "customer": vv.customer.slug, "status": vv.status},
     )
     vvm.dispatcher.customer_slot_freed(vv.customer_id)
+    event = ended_event(vv.status)
+    if event is not None:
+        vv_notify(vv=vv, event=event, vvm=vvm, at_ms=vvm.clock.epoch_ms(now))
 
 
 def _cancel_open_tasks(vv: VirtualVehicle, vvm: VVM) -> None:
@@ -737,6 +741,8 @@ def _answer_and_advance(
     else:
         entry = answer_task(pending, time_ms=time_ms, data=readings)
     vvm.announce(lambda: task_event(task, vv.customer_id))
+    if failure is None:
+        vv_notify(vv=vv, event=NotifyEvent.TASK_DONE, vvm=vvm, at_ms=time_ms, task_id=task_id)
     settled = (
         vvm.local_fleet.settle(vehicle_id, tasks_done=1)
         if vvm.local_fleet is not None and vehicle_id is not None

@@ -179,6 +179,7 @@ class Camera:
             shot.time_s,
             seed=self._seed,
             heading_deg=shot.heading_deg or 0.0,
+            epoch_s=capture.time_utc_us / 1e6,  # the caption prints when it was taken
         )
         with self._lock:
             self._images[index] = data

@@ -1,11 +1,13 @@
-/* What the admin's maps share (the area widget, the fleet overview): a Leaflet map on a plain
-   background, or on the tiles of the CPCC_MAP_TILES setting; the RVs' operation areas and the
-   ground stations. Nothing is loaded from outside the platform unless tiles are configured. */
+/* What the admin's maps share (the area widget, the fleet overview): a Leaflet map on the
+   tiles of the CPCC_MAP_TILES setting, or else on the platform's own tiles of the simulated
+   world (/tiles/{z}/{x}/{y}.png, fleet/views.py); the RVs' operation areas and the ground
+   stations. Nothing is loaded from outside the platform unless tiles are configured. */
 (function () {
   'use strict';
 
   var STATUS_COLORS = { active: '#1f77b4', maintenance: '#e08a00', removed: '#8a8a8a' };
   var STATION_COLOR = '#7b3fa0';
+  var PLATFORM_TILES = '/tiles/{z}/{x}/{y}.png';
 
   /* Tooltip and popup content from text: names are typed by operators, never HTML. */
   function text(value) {
@@ -18,7 +20,7 @@
     return STATUS_COLORS[status] || STATUS_COLORS.removed;
   }
 
-  /* Where the pointer is: without tiles, the only way to read a position off the map. */
+  /* Where the pointer is: the simulated world's tiles show no names to read a position by. */
   var Coordinates = L.Control.extend({
     options: { position: 'bottomleft' },
     onAdd: function (map) {
@@ -46,13 +48,18 @@
   function createMap(element, tiles, options) {
     var map = L.map(element, L.extend({ zoomSnap: 0.5, maxZoom: 21, attributionControl: false },
       options || {}));
-    if (tiles) {
-      L.control.attribution({ prefix: false }).addTo(map);
-      L.tileLayer(tiles, { maxZoom: 21, maxNativeZoom: 19, attribution: 'Tiles: ' + tileHost(tiles) })
-        .addTo(map);
-    } else {
-      element.classList.add('cpcc-map-plain');
-    }
+    L.control.attribution({ prefix: false }).addTo(map);
+    var layer = tiles
+      ? L.tileLayer(tiles, { maxZoom: 21, maxNativeZoom: 19, attribution: 'Tiles: ' + tileHost(tiles) })
+      : L.tileLayer(PLATFORM_TILES, { maxZoom: 21, attribution: 'Background: the simulated world' });
+    element.classList.add('cpcc-map-plain'); // under the tiles while they load
+    element.dataset.tilesLoaded = '0';
+    layer.on('tileload', function () {
+      element.dataset.tilesLoaded = String(Number(element.dataset.tilesLoaded) + 1);
+    });
+    // On the map once the page's script has fitted it to what it shows: tiles of the world
+    // view set below would be asked for, then dropped half-loaded.
+    setTimeout(function () { layer.addTo(map); }, 0);
     // A view before any layer: Leaflet's SVG renderer fails on paths added to a map without one.
     map.setView([20, 0], 2);
     L.control.scale({ imperial: false }).addTo(map);

@@ -68,10 +68,12 @@ def test_bad_quotas_are_refused_naming_the_field(api_staff, customer_a) -> None:
         ({"name": "X", "heap_bytes": 10}, "heap_bytes", "greater than or equal to 1048576"),
         ({"name": "Customer A"}, "name", "already exists"),
         ({}, "name", "required"),
+        ({"name": "X", "slug": 0}, "slug", "Expected a string"),
     ]
     for data, field, words in cases:
         response = api_staff.post("/api/v1/customers/", data, format="json")
-        assert response.status_code == 400, data
+        # A name in use is a conflict with what is stored (409), the rest malformed (400).
+        assert response.status_code == (409 if words == "already exists" else 400), data
         assert field in response.json(), response.json()
         assert words in str(response.json()[field])
     assert Customer.objects.count() == 1

@@ -49,7 +49,7 @@ def test_bad_ground_stations_are_refused_naming_the_field(api_staff, ground_stat
     taken = api_staff.post(
         "/api/v1/ground-stations/", {"name": "GS Base", "position": [48, 12]}, format="json"
     )
-    assert taken.status_code == 400 and "already exists" in str(taken.json()["name"])
+    assert taken.status_code == 409 and "already exists" in str(taken.json()["name"])
 
 
 def test_a_ground_station_holding_vvs_is_not_deleted(

@@ -126,7 +126,7 @@ def test_bad_configurations_are_refused_naming_the_field(
 
 def test_a_name_in_use_and_missing_fields_are_named(api_staff, heli_one, register_calls) -> None:
     taken = api_staff.post("/api/v1/vehicles/", {**NEW, "name": "Heli One"}, format="json")
-    assert taken.status_code == 400 and "already exists" in str(taken.json()["name"])
+    assert taken.status_code == 409 and "already exists" in str(taken.json()["name"])
     missing = api_staff.post("/api/v1/vehicles/", {"name": "X"}, format="json")
     assert missing.status_code == 400
     assert {"depot", "area", "max_altitude_m", "max_speed_mps"} <= set(missing.json())
@@ -216,9 +216,17 @@ def test_commands_pause_return_and_remove_a_vehicle(api_staff, heli_one) -> None
 
 
 def test_delete_removes_but_keeps_the_vehicle(api_staff, heli_one) -> None:
-    response = api_staff.delete(f"/api/v1/vehicles/{heli_one.pk}/")
+    url = f"/api/v1/vehicles/{heli_one.pk}/"
+    response = api_staff.delete(url)
     assert response.status_code == 200 and response.json()["status"] == "removed"
     assert Vehicle.objects.get(pk=heli_one.pk).status == VehicleStatus.REMOVED
+    # Gone for the API (a second DELETE too), its record kept for its history.
+    for method, path in [("get", url), ("patch", url), ("delete", url), ("post", url + "return/")]:
+        gone = getattr(api_staff, method)(path, {}, format="json")
+        assert gone.status_code == 404, (method, path)
+        assert "was removed from the fleet" in gone.json()["detail"]
+    removed = api_staff.get("/api/v1/vehicles/?status=removed").json()["results"]
+    assert [v["id"] for v in removed] == [heli_one.pk]
 
 
 def test_an_unknown_vehicle_is_a_404_that_says_which(api_staff, db) -> None:

@@ -99,7 +99,15 @@ def test_capture_an_image_and_fetch_it(sim: MavSim, gcs: Station) -> None:
         {"width": 640, "height": 480, "format": "png", "view": "front"},
     )
     heading = shot.heading_deg or 0.0  # still turning onto the spot, or facing north
-    assert png == render_camera(spec, shot.position, shot.time_s, seed=SEED, heading_deg=heading)
+    # Its caption prints the capture's UTC time, as CAMERA_IMAGE_CAPTURED reports it.
+    assert png == render_camera(
+        spec,
+        shot.position,
+        shot.time_s,
+        seed=SEED,
+        heading_deg=heading,
+        epoch_s=captured.time_utc / 1e6,
+    )
 
     # The next image gets the next index; one not taken is not there.
     assert camera_command(gcs, start, 0, 0, 1) == 0

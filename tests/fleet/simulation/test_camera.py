@@ -1,6 +1,7 @@
 """Rendered camera images: real, deterministic files of the catalog's size, of a continuous world."""
 
 import io
+from datetime import UTC, datetime
 
 import numpy as np
 import pytest
@@ -8,6 +9,7 @@ from PIL import Image
 
 from fleet.geo import Position, offset
 from fleet.simulation import SensorSpec, render_camera
+from fleet.simulation.camera import overlay_text
 
 POSITION = Position(47.0707, 15.4395, 60.0)
 FRONT = SensorSpec("Camera 640x480", "camera", params={"width": 640, "height": 480})
@@ -116,3 +118,28 @@ def test_bad_camera_parameters_are_refused() -> None:
         render_camera(SensorSpec("C", "camera", params={"format": "gif"}), POSITION, 0, seed=1)
     with pytest.raises(ValueError, match="width"):
         render_camera(SensorSpec("C", "camera", params={"width": 0}), POSITION, 0, seed=1)
+
+
+def test_the_caption_prints_the_utc_date_and_time_not_epoch_seconds() -> None:
+    epoch_s = datetime(2026, 11, 27, 13, 4, 5, 900_000, tzinfo=UTC).timestamp()
+    text = overlay_text("Camera 640x480", Position(48.11112345, 12.8619, 50.04), epoch_s)
+    # To the second, as a clock shows it (not rounded up to :06).
+    assert text.splitlines() == [
+        "Camera 640x480",
+        "48.111123, 12.861900  alt 50.0 m",
+        "2026-11-27 13:04:05 UTC",
+    ]
+    assert str(int(epoch_s)) not in text
+
+
+def test_a_picture_carries_the_time_it_is_given_to_print() -> None:
+    # A simulation's clock counts from 0: the reading's date is printed, not "1970-01-01".
+    first = render_camera(BELLY, POSITION, 12.0, seed=1, epoch_s=1_735_689_612.0)
+    assert first == render_camera(BELLY, POSITION, 12.0, seed=1, epoch_s=1_735_689_612.4)
+    assert first != render_camera(BELLY, POSITION, 12.0, seed=1, epoch_s=1_735_689_613.0)
+    # Without one it prints time_s, the Unix epoch in a live system.
+    assert render_camera(BELLY, POSITION, 12.0, seed=1) == render_camera(
+        BELLY, POSITION, 12.0, seed=1, epoch_s=12.0
+    )
+    with pytest.raises(ValueError, match="epoch_s"):
+        render_camera(BELLY, POSITION, 12.0, seed=1, epoch_s=float("nan"))

@@ -34,3 +34,29 @@ def test_a_fleet_or_customer_id_that_is_no_number_is_not_found(
         response = getattr(api_staff, method)(f"/api/v1/{path}/{bad_id}/", {}, format="json")
         assert response.status_code == 404, (method, path, bad_id)
         assert response.json()["detail"]
+
+
+@pytest.mark.django_db
+@pytest.mark.parametrize("debug", [True, False])
+@pytest.mark.parametrize(
+    "path",
+    ["/api/v1/customers/0.5/", "/api/v1/vvs/null%2Cnull/log/", "/api/v1/nothing-here/", "/api/"],
+)
+def test_an_unmatched_api_path_answers_json_whatever_debug_is(
+    api_a: APIClient, settings, debug: bool, path: str
+) -> None:
+    # With DEBUG on, Django's debug page (listing every URL pattern) would answer first.
+    settings.DEBUG = debug
+    response = api_a.get(path)
+    assert response.status_code == 404
+    assert response["Content-Type"] == "application/json"
+    assert response.json()["detail"].startswith("No API endpoint at /api/")
+
+
+@pytest.mark.django_db
+def test_a_refused_host_under_the_api_answers_json(api_a: APIClient, settings) -> None:
+    settings.DEBUG = True
+    response = api_a.get("/api/v1/vvs/", HTTP_HOST="evil.example")
+    assert response.status_code == 400
+    assert response["Content-Type"] == "application/json"
+    assert response.json()["detail"].startswith("Bad Request")

@@ -47,16 +47,40 @@ START_TIMEOUT_S = 60.0
 STOP_S = 30.0
 
 
-def _demo_password(name: str) -> str:
-    """A password kept in var/ so that every demo run shows the same logins."""
-    path = Path(settings.VAR_DIR) / f"demo-{name}-password.txt"
+def _demo_secret(name: str, nbytes: int = 9) -> str:
+    """A secret kept in var/ so that every demo run shows the same logins (and keeps its
+    sessions)."""
+    path = Path(settings.VAR_DIR) / f"demo-{name}.txt"
     if path.exists():
         return path.read_text().strip()
     path.parent.mkdir(parents=True, exist_ok=True)
-    password = secrets.token_urlsafe(9)
-    path.write_text(password + "\n")
+    secret = secrets.token_urlsafe(nbytes)
+    path.write_text(secret + "\n")
     path.chmod(0o600)
-    return password
+    return secret
+
+
+def _demo_password(name: str) -> str:
+    return _demo_secret(f"{name}-password")
+
+
+def _served_as_in_production(host: str) -> dict[str, str]:
+    """The environment of the demo's processes: DEBUG off, as in production (the site's own
+    error pages, never Django's debug pages that list every URL; static files collected with
+    hashed names), over plain HTTP on this machine. What the environment sets wins."""
+    hosts = (
+        "*" if host in ("0.0.0.0", "::") else ",".join([host, "localhost", "127.0.0.1", "[::1]"])
+    )
+    chosen = {
+        "DEBUG": "0",
+        "SECRET_KEY": _demo_secret("secret-key", 48),
+        "ALLOWED_HOSTS": hosts,
+        "CPCC_HTTPS": "0",
+        # Webhooks to a receiver on this machine (a customer trying them out); e-mails are
+        # printed by the workers (no EMAIL_HOST: Django's console backend).
+        "CPCC_WEBHOOK_ALLOW_PRIVATE": "1",
+    }
+    return {**chosen, **os.environ}
 
 
 class Processes:
@@ -165,12 +189,19 @@ class Command(BaseCommand):
         except ScenarioError as exc:
             raise CommandError(f"scenario error: {exc}") from None
         call_command("migrate", verbosity=0, interactive=False)
-        # For the web server's WhiteNoise when DEBUG is off (with DEBUG on it serves the
-        # files where they are); copies only what changed since the last run.
-        call_command("collectstatic", verbosity=0, interactive=False)
         redis = EmbeddedRedis(settings.EMBEDDED_REDIS_SOCKET) if not settings.REDIS_URL else None
         redis_url = settings.REDIS_URL or f"unix://{settings.EMBEDDED_REDIS_SOCKET}"
-        env = {**os.environ, "REDIS_URL": redis_url, "CPCC_SIM_SPEED": str(speed)}
+        env = {
+            **_served_as_in_production(options["host"]),
+            "REDIS_URL": redis_url,
+            "CPCC_SIM_SPEED": str(speed),
+        }
+        # For the web server's WhiteNoise with DEBUG off (hashed names, compressed copies),
+        # under the web server's settings; copies only what changed since the last run.
+        manage = str(Path(settings.BASE_DIR) / "manage.py")
+        subprocess.run(
+            [sys.executable, manage, "collectstatic", "--noinput", "-v", "0"], env=env, check=True
+        )
         processes = Processes(env)
         processes.catch_interrupts()
         try:
@@ -183,7 +214,6 @@ class Command(BaseCommand):
                 scenario=scenario,
                 password=settings.CPCC_SCENARIO_PASSWORD or _demo_password("customer"),
             )
-            manage = str(Path(settings.BASE_DIR) / "manage.py")
             processes.start(
                 "web",
                 "-m",

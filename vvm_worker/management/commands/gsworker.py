@@ -11,6 +11,7 @@ from fleet.models import GroundStation
 from vvm_worker.dispatch import SHARED_QUEUE, gs_queue
 from vvm_worker.hosts import GSHost
 from vvm_worker.management.commands._worker import host_named, prepare_isolates, serve
+from vvm_worker.notify import NOTIFY_QUEUE
 
 
 class Command(BaseCommand):
@@ -26,7 +27,9 @@ class Command(BaseCommand):
         serve(
             self,
             GSHost(station),
-            queues=[gs_queue(station.pk), SHARED_QUEUE],
+            # NOTIFY_QUEUE: webhook deliveries and e-mails (each POST waits at most
+            # CPCC_WEBHOOK_TIMEOUT_S; a worker of its own may serve them instead).
+            queues=[gs_queue(station.pk), SHARED_QUEUE, NOTIFY_QUEUE],
             node=f"gs{station.pk}",
             loglevel=options["loglevel"],
         )

@@ -1,0 +1,130 @@
+"""``/api/v1/tokens/``: a user's named API tokens. List them (with when each was last used),
+make one (its key is in that answer only; a name the user already gave a token: 409) and revoke
+one. Another user's token answers 404.
+
+A token is made by a user who logged in with a password (a session: the Account page, the
+browsable API), never with a token: a token that leaked cannot make others that would outlive
+its revocation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from django.core.exceptions import ValidationError as DjangoValidationError
+from django.db.models import QuerySet
+from drf_spectacular.types import OpenApiTypes
+from drf_spectacular.utils import extend_schema, extend_schema_view
+from rest_framework import mixins, serializers, status, viewsets
+from rest_framework.exceptions import NotFound, PermissionDenied
+from rest_framework.request import Request
+from rest_framework.response import Response
+
+from accounts.models import ApiToken
+from accounts.selectors import ApiTokenNotFound, api_token_get_for_user, api_token_list_for_user
+from cpcc_site.api import DetailSerializer, StrictCharField, object_id, refusal
+from vvm_worker.services.tokens import api_token_create, api_token_revoke
+
+NO_SUCH_TOKEN = "No API token with this id among yours (GET /api/v1/tokens/ lists them)."
+TOKENS_NEED_A_PASSWORD = (
+    "An API token cannot make another: make tokens on the platform's Account page (API "
+    "tokens), logged in with your password."
+)
+
+
+class ApiTokenInSerializer(serializers.Serializer):
+    """A new token: what to call it."""
+
+    name = StrictCharField(
+        max_length=100, help_text='Where it is used, e.g. "laptop" or "CI"; yours are unique.'
+    )
+
+
+class ApiTokenOutSerializer(serializers.ModelSerializer):
+    """A token as its owner sees it: never its key."""
+
+    prefix = StrictCharField(
+        source="token_key", help_text="The key's first characters, which identify it."
+    )
+    last_used = serializers.DateTimeField(
+        allow_null=True,
+        help_text="When a request last came with it (kept to the minute); null: never.",
+    )
+
+    class Meta:
+        model = ApiToken
+        fields = ["id", "name", "prefix", "created", "last_used"]
+
+
+class ApiTokenCreatedSerializer(ApiTokenOutSerializer):
+    """A token just made, with its key: shown in this answer only."""
+
+    key = StrictCharField(
+        help_text="The token: send it as 'Authorization: Token KEY'. Shown this once; the "
+        "platform keeps only a digest of it."
+    )
+
+    class Meta(ApiTokenOutSerializer.Meta):
+        fields = [*ApiTokenOutSerializer.Meta.fields, "key"]
+
+
+@extend_schema_view(
+    list=extend_schema(summary="Your API tokens, newest first"),
+    retrieve=extend_schema(
+        summary="One of your API tokens",
+        responses={200: ApiTokenOutSerializer, 404: DetailSerializer},
+    ),
+    create=extend_schema(
+        summary="Make an API token (its key is in this answer only)",
+        request=ApiTokenInSerializer,
+        responses={
+            201: ApiTokenCreatedSerializer,
+            400: OpenApiTypes.OBJECT,
+            403: DetailSerializer,
+            409: DetailSerializer,
+        },
+    ),
+    destroy=extend_schema(
+        summary="Revoke an API token: refused from now on",
+        responses={204: None, 404: DetailSerializer},
+    ),
+)
+class ApiTokenViewSet(
+    mixins.ListModelMixin,
+    mixins.RetrieveModelMixin,
+    viewsets.GenericViewSet,  # type: ignore[type-arg]
+):
+    """Your named API tokens: make one for each place you use the API (a laptop, CI), see when
+    each was last used, and revoke one you no longer use or that may have leaked."""
+
+    serializer_class = ApiTokenOutSerializer
+
+    def get_queryset(self) -> QuerySet[ApiToken]:
+        if getattr(self, "swagger_fake_view", False):  # the schema: ids are the model's
+            return ApiToken.objects.none()
+        return api_token_list_for_user(user=self.request.user)  # type: ignore[arg-type]
+
+    def get_object(self) -> ApiToken:
+        try:
+            token_id = object_id(self.kwargs["pk"])
+            return api_token_get_for_user(user=self.request.user, token_id=token_id)  # type: ignore[arg-type]
+        except (ValueError, ApiTokenNotFound):
+            raise NotFound(NO_SUCH_TOKEN) from None
+
+    def handle_exception(self, exc: Exception) -> Response:
+        if isinstance(exc, DjangoValidationError):
+            exc = refusal(exc)  # 409 for a name or URL in use, 400 otherwise
+        return super().handle_exception(exc)
+
+    def create(self, request: Request, *args: Any, **kwargs: Any) -> Response:
+        if request.auth is not None:
+            raise PermissionDenied(TOKENS_NEED_A_PASSWORD)
+        given = ApiTokenInSerializer(data=request.data)
+        given.is_valid(raise_exception=True)
+        token, key = api_token_create(user=request.user, name=given.validated_data["name"])  # type: ignore[arg-type]
+        token.key = key  # type: ignore[attr-defined]  # this answer's only: never stored
+        return Response(ApiTokenCreatedSerializer(token).data, status=status.HTTP_201_CREATED)
+
+    def destroy(self, request: Request, *args: Any, **kwargs: Any) -> Response:
+        api_token_revoke(token=self.get_object())
+        return Response(status=status.HTTP_204_NO_CONTENT)

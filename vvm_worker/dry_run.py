@@ -1,0 +1,220 @@
+"""The simulated copy of the fleet a dry run flies (``vvm_worker.services.dry_run`` says what a
+dry run is and why its copy runs in a process of its own: ``manage.py dry_run_copy FOLDER``).
+
+That process's default database is a new SQLite file: ``prepare_database`` gives it the
+platform's schema, ``run_copy`` loads the fleet (a scenario document) and the customer's quotas
+and runs ``manage.py simulate``'s simulation on discrete-event time until the VV ends or the
+wall-clock limit is reached, and reports what it saw.
+
+The copy's database starts as a copy of a database migrated once per version of the
+migrations, kept under VAR_DIR/dry-run/: migrating takes a second and a half, copying a file a
+few milliseconds.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import shutil
+import sqlite3
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from django.apps import apps
+from django.conf import settings
+from django.core.management import call_command
+from django.db import connection
+
+from accounts.models import Customer
+from fleet.geo import Position
+from fleet.models import SensorType
+from missions.models import ENDED_STATUSES, LogEntry, Task, VirtualVehicle
+from vvm_worker.executor import PlatformSensing
+from vvm_worker.runtime import ErrorKind, Outcome, Runtime, StepInput, StepResult, VVError
+from vvm_worker.scenario import parse_scenario
+from vvm_worker.sensing import iso_time, sensor_spec
+from vvm_worker.services.dry_run import (
+    COPY_CUSTOMER,
+    UNFINISHED,
+    DryRunReport,
+    DryRunTask,
+    QuotaStop,
+)
+from vvm_worker.simulation import Simulation
+
+# The first lines the program logs go in the report (a dry run's log is to look at, not keep).
+MAX_LOG_LINES = 200
+
+
+# --- the copy's database ------------------------------------------------------------------------
+
+
+def prepare_database(path: Path) -> None:
+    """Give the new default database at ``path`` (not opened yet) the platform's schema and
+    what the migrations put in it (the default SDC): a copy of the template of these
+    migrations, made now by migrating when there is none yet."""
+    # A throw-away file: what a power cut would lose does not matter, the fsyncs do.
+    connection.settings_dict["OPTIONS"]["init_command"] = (
+        "PRAGMA journal_mode=MEMORY; PRAGMA synchronous=OFF;"
+    )
+    template = Path(settings.VAR_DIR) / "dry-run" / f"schema-{_migrations_digest()}.sqlite3"
+    with contextlib.suppress(FileNotFoundError):  # none yet (or another version's went)
+        shutil.copyfile(template, path)
+        return
+    call_command("migrate", verbosity=0, interactive=False)
+    connection.close()
+    template.parent.mkdir(parents=True, exist_ok=True)
+    # Several dry runs may make the template at once: each writes a file of its own and puts
+    # it in place in one step (the last one stays; they are the same).
+    partial = template.with_name(f"{template.name}.{os.getpid()}.part")
+    with (
+        contextlib.closing(sqlite3.connect(path)) as source,
+        contextlib.closing(sqlite3.connect(partial)) as copy,
+    ):
+        source.backup(copy)
+    partial.replace(template)
+    for old in template.parent.glob("schema-*.sqlite3"):  # of migrations that are gone
+        if old != template:
+            old.unlink(missing_ok=True)
+
+
+def _migrations_digest() -> str:
+    """A digest of every installed app's migration files: a new migration, a new template."""
+    digest = hashlib.sha256()
+    for config in sorted(apps.get_app_configs(), key=lambda c: c.label):
+        for file in sorted((Path(config.path) / "migrations").glob("*.py")):
+            digest.update(f"{config.label}/{file.name}\n".encode())
+            digest.update(file.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+# --- the run ------------------------------------------------------------------------------------
+
+
+class _Recorder(Runtime):
+    """The copy's runtime: the platform's, noting where in the program each request was made
+    (by its ordinal) and how the VV ended."""
+
+    def __init__(self, *, max_contexts: int) -> None:
+        super().__init__(max_contexts=max_contexts)
+        self.places: dict[int, tuple[int | None, int | None]] = {}
+        self.error: VVError | None = None
+        self.ended = False
+
+    def step(self, step: StepInput) -> StepResult:
+        result = super().step(step)
+        pending = result.pending
+        if pending is not None:
+            self.places.setdefault(pending.q, (pending.line, pending.column))
+        if result.outcome is not Outcome.SUSPENDED:
+            self.ended = True
+            self.error = result.error
+        return result
+
+
+class _NoPictures(PlatformSensing):
+    """The copy's sensors: the simulated field's readings, but a camera's picture is neither
+    drawn nor kept (its ``image`` names no file): a dry run makes no file."""
+
+    IMAGE = "dry-run.png"
+
+    def read(
+        self, names: Sequence[str], position: Position, now_s: float, battery: float | None
+    ) -> list[dict[str, Any]]:
+        catalog = self.catalog()
+        readings: list[dict[str, Any]] = []
+        for name in names:
+            if catalog[name]["kind"] != "camera":
+                readings += super().read([name], position, now_s, battery)
+                continue
+            spec = sensor_spec(catalog[name])
+            readings.append(
+                {
+                    "sensor": spec.name,
+                    "kind": spec.kind,
+                    "time": iso_time(self.vvm.clock.epoch_ms(now_s)),
+                    "position": {"lat": position.lat, "lng": position.lng, "alt": position.alt},
+                    **self.vvm.field.sample(spec, position, now_s, battery_fraction=battery),
+                    "image": self.IMAGE,
+                }
+            )
+        return readings
+
+
+def run_copy(request: Mapping[str, Any]) -> DryRunReport:
+    """Run the request's ``scenario`` (the fleet and one VV of COPY_CUSTOMER, who gets the
+    request's ``customer`` quotas) on the default database until the VV ends or ``wall_s``
+    seconds of wall-clock time have passed, and report it."""
+    settings.DEBUG = False  # no statement log (this process is the copy's alone)
+    scenario = parse_scenario(request["scenario"], base_dir=Path.cwd())
+    simulation = Simulation(scenario, seed=1, speed=0.0, logins=False)
+    recorder = _Recorder(max_contexts=4)
+    simulation.vvm.runtime = recorder
+    simulation.sensing = _NoPictures(simulation.vvm)
+    loaded = simulation.start()  # the VV is submitted by the first event
+    _give_quotas(loaded.customers[COPY_CUSTOMER], request["customer"])
+    deadline = time.monotonic() + float(request["wall_s"])
+    simulation.drain(until=lambda: recorder.ended or time.monotonic() > deadline)
+    (vv,) = VirtualVehicle.objects.filter(pk__in=simulation.vv_ids)
+    return _report(vv, recorder, now_s=simulation.clock.t)
+
+
+def _give_quotas(customer: Customer, quotas: Mapping[str, Any]) -> None:
+    """The real customer's quotas, SDC entries and VVM-API calls on the copy's customer."""
+    fields = {key: value for key, value in quotas.items() if key != "allowed_sensors"}
+    Customer.objects.filter(pk=customer.pk).update(**fields)
+    customer.allowed_sensors.set(SensorType.objects.filter(name__in=quotas["allowed_sensors"]))
+
+
+def _report(vv: VirtualVehicle, recorder: _Recorder, *, now_s: float) -> DryRunReport:
+    tasks = []
+    for task in Task.objects.filter(vv=vv).order_by("q", "index"):
+        line, column = recorder.places.get(task.q, (None, None))
+        tasks.append(
+            DryRunTask(
+                q=task.q,
+                index=task.index,
+                position=(task.lat, task.lng, task.alt),
+                tolerance_m=task.tolerance_m,
+                sensors=tuple(task.sensors),
+                status=task.status,
+                message=task.message,
+                line=line,
+                column=column,
+                requested_s=_since(vv, task.requested_s),
+                done_s=_since(vv, task.done_s),
+            )
+        )
+    ended = vv.status in ENDED_STATUSES
+    end_s = vv.finished_s if ended and vv.finished_s is not None else now_s
+    error = recorder.error
+    quota = None
+    if error is not None and error.kind is ErrorKind.QUOTA:
+        quota = QuotaStop(
+            quota=error.quota or "",
+            message=error.message,
+            line=error.line,
+            column=error.column,
+            tasks_before=len(tasks),
+            at_s=round(end_s - vv.submitted_s, 3),
+        )
+    log = LogEntry.objects.filter(vv=vv, seq__isnull=False).order_by("seq")
+    return DryRunReport(
+        name=vv.name,
+        status=vv.status if ended else UNFINISHED,
+        error=vv.error if ended else "",
+        error_line=vv.error_line if ended else None,
+        error_column=vv.error_column if ended else None,
+        duration_s=round(end_s - vv.submitted_s, 3),
+        tasks=tuple(tasks),
+        quota=quota,
+        log=tuple(log.values_list("message", flat=True)[:MAX_LOG_LINES]),
+    )
+
+
+def _since(vv: VirtualVehicle, t_s: float | None) -> float | None:
+    """A time of the copy as seconds from the VV's submission."""
+    return None if t_s is None else round(t_s - vv.submitted_s, 3)

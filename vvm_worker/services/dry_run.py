@@ -1,0 +1,335 @@
+"""A dry run: a program tried against a simulated copy of the fleet before anything flies
+(``POST /api/v1/vvs/dry-run/``, the editor's *Dry run*, ``cpcc submit --dry-run``).
+
+The copy is what ``manage.py simulate`` runs (vvm_worker/simulation.py): the vehicles in
+service with their areas, altitudes, sensors and speeds, the ground stations and no-fly zones,
+the SDC, and one VV of the customer's with the customer's quotas; simulated sensors answer at
+once (no picture is drawn), and time is discrete (a flight takes no wall time). It runs in a
+process of its own (``manage.py dry_run_copy``, vvm_worker/dry_run.py) on a database of its
+own, a throw-away SQLite file, for three reasons:
+
+- nothing of the copy can reach the platform's database or its media: no VV, task, storage
+  document or picture of a dry run ever exists there;
+- the services that the copy runs keep process-wide caches of the fleet (the mapper's shape of
+  it, the airspace), which must never mix the copy's fleet with the real one in a web process
+  that routes real VVs too;
+- a hostile program is bounded from outside: each step has the customer's CPU and heap quotas,
+  as a real VV's has, and the whole run a wall-clock limit (DRY_RUN_WALL_S) after which the
+  report says how far it got; a process that overruns even that is killed.
+
+A web process runs at most MAX_RUNNING dry runs at once (each is a Python process of about
+100 MB for a few seconds); beyond that the request is refused with DryRunBusy.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from django.conf import settings
+from django.core.exceptions import ValidationError
+
+from accounts.models import Customer, User
+from fleet.models import NoFlyZone, SensorType
+from fleet.selectors import ground_station_list, vehicles_in_service
+from missions.models import vv_name_problem
+from vvm_worker.runtime import SyntaxProblem, check_syntax
+from vvm_worker.services.vvs import NotACustomer
+
+logger = logging.getLogger("cpcc.dry_run")
+
+# Wall-clock time the copy may compute (programs, planning, the database of the copy) once it
+# is loaded; then it stops and reports what it found so far.
+DRY_RUN_WALL_S = 20.0
+# On top of that: a new Python process, Django, the copy's database. A dry run that has not
+# answered by then is killed.
+START_ALLOWANCE_S = 40.0
+MAX_RUNNING = 2
+# How long a request waits for one of the MAX_RUNNING places before it is refused.
+WAIT_FOR_PLACE_S = 5.0
+_places = threading.BoundedSemaphore(MAX_RUNNING)
+
+SETTINGS = "cpcc_site.settings"  # of the copy's process, unless this one names others
+COPY_CUSTOMER = "Customer"
+# Statuses of the VV in the copy: how it would end, or "unfinished" (the wall-clock limit).
+UNFINISHED = "unfinished"
+
+
+class DryRunBusy(RuntimeError):
+    """This web process already runs as many dry runs as it may: try again shortly."""
+
+
+class DryRunFailed(RuntimeError):
+    """The copy could not be run (the platform's fault, not the program's): ``str`` says why."""
+
+
+class NoGroundStation(RuntimeError):
+    """The platform has no ground station, so no VV can start: there is nothing to try."""
+
+
+@dataclass(frozen=True)
+class DryRunTask:
+    """A task the program would ask for, as the copy served it.
+
+    ``status``: ``done`` (a vehicle would read it), ``rejected`` (no vehicle in service could
+    serve it: ``message`` says why), ``open`` (still waiting when the dry run stopped) or
+    ``cancelled`` (the program ended before it was served). ``line`` and ``column``: the
+    ``VV.task.execute`` (or ``executeAll``) call in the program. Times in seconds from the
+    submission.
+    """
+
+    q: int
+    index: int
+    position: tuple[float, float, float]
+    tolerance_m: float
+    sensors: tuple[str, ...]
+    status: str
+    message: str
+    line: int | None
+    column: int | None
+    requested_s: float | None
+    done_s: float | None
+
+    @property
+    def servable(self) -> bool:
+        return self.status != "rejected"
+
+
+@dataclass(frozen=True)
+class QuotaStop:
+    """The quota that would stop the VV, and where: ``quota`` as the runtime names it
+    (``tasks``, ``cpu``, ``heap``, ``storage``, ``api_calls``), its message, the place in the
+    program when known, the tasks asked for before, and when (seconds from submission)."""
+
+    quota: str
+    message: str
+    line: int | None
+    column: int | None
+    tasks_before: int
+    at_s: float
+
+
+@dataclass(frozen=True)
+class DryRunReport:
+    """What a dry run found.
+
+    ``status``: how the VV would end in the copy (``finished``, ``failed``, ``killed``), or
+    ``unfinished`` when the dry run reached its wall-clock limit first. ``error`` (with its
+    place) says why a VV failed or was killed. ``duration_s``: from submission to its end in
+    the copy (to where the dry run stopped, when unfinished), the vehicles' flights included,
+    with the fleet to itself. ``log``: the lines the program logged.
+    """
+
+    name: str
+    status: str
+    error: str
+    error_line: int | None
+    error_column: int | None
+    duration_s: float
+    tasks: tuple[DryRunTask, ...]
+    quota: QuotaStop | None
+    log: tuple[str, ...]
+
+    @property
+    def unservable(self) -> tuple[DryRunTask, ...]:
+        return tuple(task for task in self.tasks if not task.servable)
+
+    @property
+    def within_quotas(self) -> bool:
+        return self.quota is None
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> DryRunReport:
+        quota = data.get("quota")
+        return cls(
+            name=str(data["name"]),
+            status=str(data["status"]),
+            error=str(data.get("error") or ""),
+            error_line=data.get("error_line"),
+            error_column=data.get("error_column"),
+            duration_s=float(data["duration_s"]),
+            tasks=tuple(
+                DryRunTask(
+                    **{
+                        **task,
+                        "position": tuple(task["position"]),
+                        "sensors": tuple(task["sensors"]),
+                    }
+                )
+                for task in data["tasks"]
+            ),
+            quota=QuotaStop(**quota) if quota else None,
+            log=tuple(data.get("log") or ()),
+        )
+
+
+def vv_dry_run_for_user(
+    *, user: User, name: str, program: str, wall_s: float = DRY_RUN_WALL_S
+) -> tuple[DryRunReport | None, SyntaxProblem | None]:
+    """Try a program of the user's customer against a simulated copy of the fleet (see the
+    module's docstring); creates nothing and flies nothing.
+
+    Returns the report, or a program's syntax error with where it is (as a submission would
+    refuse it). Raises NotACustomer for a user of no customer, ValidationError for a name a
+    submission would refuse, NoGroundStation when no VV could start, DryRunBusy when this
+    process runs MAX_RUNNING dry runs already, and DryRunFailed when the copy could not run.
+    """
+    customer = user.customer
+    if customer is None:
+        raise NotACustomer(f"{user.username} belongs to no customer")
+    problem = vv_name_problem(name)
+    if problem is not None:
+        raise ValidationError({"name": [problem]})
+    syntax = check_syntax(program)
+    if syntax is not None:
+        return None, syntax
+    request = {
+        "scenario": fleet_copy(name=name, program=program),
+        "customer": customer_copy(customer=customer),
+        "wall_s": wall_s,
+    }
+    if not _places.acquire(timeout=WAIT_FOR_PLACE_S):
+        raise DryRunBusy(
+            f"{MAX_RUNNING} dry runs are running on this server already; try again in a few "
+            "seconds."
+        )
+    try:
+        report = _run_copy(request, timeout_s=wall_s + START_ALLOWANCE_S)
+    finally:
+        _places.release()
+    logger.info(
+        "dry run",
+        extra={
+            "customer": customer.slug,
+            "user": user.username,
+            "status": report.status,
+            "tasks": len(report.tasks),
+            "unservable": len(report.unservable),
+        },
+    )
+    return report, None
+
+
+def fleet_copy(*, name: str, program: str) -> dict[str, Any]:
+    """The fleet as a scenario document (vvm_worker/scenario.py, DESIGN.md section 5) with one
+    VV, ``name`` running ``program``, of one customer (COPY_CUSTOMER): the ground stations,
+    the RVs in service (a simulated vehicle each, at its depot), the no-fly zones and the SDC.
+
+    Vehicles, stations and zones are numbered, not named: the copy never holds a name it
+    could show the customer. An RV with no sensor (it could serve nothing) is left out.
+    """
+    stations = [
+        {"name": f"GS {i}", "position": [gs.lat, gs.lng, gs.alt]}
+        for i, gs in enumerate(ground_station_list(), 1)
+    ]
+    if not stations:
+        raise NoGroundStation(
+            "The platform has no ground station, so no VV can start now; ask its operator."
+        )
+    vehicles = []
+    for i, vehicle in enumerate(vehicles_in_service(), 1):
+        sensors = sorted(s.name for s in vehicle.sensors.all())
+        if not sensors:
+            continue
+        spec: dict[str, Any] = {
+            "name": f"RV {i}",
+            "depot": [vehicle.depot_lat, vehicle.depot_lng, vehicle.depot_alt],
+            "area": vehicle.area,
+            "min_altitude_m": vehicle.min_altitude_m,
+            "max_altitude_m": vehicle.max_altitude_m,
+            "max_speed_mps": vehicle.max_speed_mps,
+            "climb_rate_mps": vehicle.climb_rate_mps,
+            "sensors": sensors,
+        }
+        if vehicle.battery_s:
+            spec["battery_s"] = vehicle.battery_s
+        vehicles.append(spec)
+    zones = [
+        {
+            "name": f"zone {i}",
+            "area": zone.area,
+            "min_altitude_m": zone.min_altitude_m,
+            "max_altitude_m": zone.max_altitude_m,
+        }
+        for i, zone in enumerate(NoFlyZone.objects.order_by("pk"), 1)
+    ]
+    sensors = [
+        {
+            "name": s.name,
+            "kind": s.kind,
+            "unit": s.unit,
+            "params": s.params or {},
+            "privileged": s.privileged,
+            "description": s.description,
+        }
+        for s in SensorType.objects.order_by("pk")
+    ]
+    return {
+        "name": "dry run",
+        "ground_stations": stations,
+        "vehicles": vehicles,
+        "customers": [{"name": COPY_CUSTOMER, "max_parallel_vvs": 1}],
+        "vvs": [{"customer": COPY_CUSTOMER, "name": name, "source": program}],
+        "sensors": sensors,
+        "no_fly_zones": zones,
+    }
+
+
+def customer_copy(*, customer: Customer) -> dict[str, Any]:
+    """What of the customer the copy's VV runs with: its quotas, the SDC entries and VVM-API
+    calls it may use, and whether it is privileged."""
+    return {
+        **{field: getattr(customer, field) for field in Customer.QUOTA_FIELDS},
+        "privileged": customer.privileged,
+        "allowed_api_calls": list(customer.allowed_api_calls or []),
+        "allowed_sensors": sorted(customer.allowed_sensors.values_list("name", flat=True)),
+    }
+
+
+def _run_copy(request: dict[str, Any], *, timeout_s: float) -> DryRunReport:
+    """Run the copy in a process of its own (``manage.py dry_run_copy FOLDER``) on a
+    throw-away SQLite database in FOLDER, and read its report."""
+    with tempfile.TemporaryDirectory(prefix="cpcc-dry-run-") as tmp:
+        folder = Path(tmp)
+        (folder / "request.json").write_text(json.dumps(request), encoding="utf-8")
+        env = {
+            **os.environ,
+            "DJANGO_SETTINGS_MODULE": settings.SETTINGS_MODULE or SETTINGS,
+            "DATABASE_URL": f"sqlite:///{folder / 'copy.sqlite3'}",
+            "CPCC_MEDIA_ROOT": str(folder / "media"),
+            "CPCC_VAR_DIR": str(settings.VAR_DIR),
+            "CPCC_ISOLATE_POOL": "0",
+            "CPCC_LOG_LEVEL": "WARNING",
+        }
+        try:
+            done = subprocess.run(
+                [sys.executable, "manage.py", "dry_run_copy", str(folder)],
+                cwd=settings.BASE_DIR,
+                env=env,
+                stdin=subprocess.DEVNULL,
+                capture_output=True,
+                timeout=timeout_s,
+                check=False,
+            )
+        except subprocess.TimeoutExpired:
+            raise DryRunFailed(
+                f"the simulated copy of the fleet did not answer within {timeout_s:g} s"
+            ) from None
+        report = folder / "report.json"
+        if done.returncode != 0 or not report.exists():
+            tail = done.stderr.decode("utf-8", errors="replace")[-2000:]
+            logger.error("dry run failed", extra={"exit_status": done.returncode, "stderr": tail})
+            raise DryRunFailed(f"the simulated copy of the fleet failed ({done.returncode})")
+        return DryRunReport.from_json(json.loads(report.read_text(encoding="utf-8")))

@@ -1,0 +1,376 @@
+"""Hearing when a VV ends: a customer's webhooks, a user's choice of e-mails, and what happens
+when one of the events comes (``vv.finished``, ``vv.failed`` for a VV that failed or was
+killed, ``task.done``).
+
+The way of an event:
+
+1. ``vv_notify`` (called by the services that end a VV or answer a task, in their
+   transaction) looks at ``Customer.notify_events``, read with the VV: when nobody of the
+   customer listens for the event, that is all it costs. Otherwise the VVM's notifier sends
+   one message once the transaction commits (vvm_worker/notify.py).
+2. ``vv_event_fan_out`` (a worker on the ``notify`` queue) writes the event's JSON body once,
+   e-mails the users who chose the event, and gives back one ``WebhookJob`` per webhook.
+3. ``webhook_attempt`` POSTs a job's body, signed, records the attempt in the webhook's
+   delivery log and says after how long to try again, if at all.
+
+``Customer.notify_events`` is kept by the services here, in the transaction of every change of
+a webhook or of a user's e-mail choice, with the customer's row held.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import secrets
+import uuid
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from django.conf import settings
+from django.core import mail
+from django.core.exceptions import ValidationError
+from django.core.validators import EmailValidator
+from django.db import transaction
+
+from accounts.models import Customer, NotifyEvent, User, Webhook, WebhookDelivery
+from missions.models import Task, VirtualVehicle, VVStatus
+from vvm_worker import notify
+from vvm_worker.services.base import VVM
+
+logger = logging.getLogger("cpcc.notify")
+
+EVENTS = tuple(NotifyEvent.values)
+MAX_WEBHOOKS_PER_CUSTOMER = 20
+# The newest attempts kept per webhook: enough to see what went wrong this week.
+DELIVERY_LOG_KEPT = 1_000
+# One namespace for delivery ids: the same event to the same webhook has the same id, however
+# often its message is delivered (receivers may drop a second POST by its X-CPCC-Delivery).
+_DELIVERY_IDS = uuid.UUID("6f1c9a52-3f57-4c1e-9a4e-54d2b1b0c8a1")
+
+
+# --- 1. the event (the services that end a VV or answer a task) -------------------------------
+
+
+def vv_notify(
+    *, vv: VirtualVehicle, event: str, vvm: VVM, at_ms: int, task_id: int | None = None
+) -> None:
+    """Tell whoever of the VV's customer listens for ``event`` (once the caller's transaction
+    commits); nothing, and no query, when nobody does. ``vv.customer`` is read with the VV."""
+    if event in vv.customer.notify_events:
+        vvm.notifier.vv_event(event=event, vv_id=vv.pk, at_ms=at_ms, task_id=task_id)
+
+
+def ended_event(status: str) -> str | None:
+    """The event of a VV that ended with this status (None for one its owner cancelled)."""
+    if status == VVStatus.FINISHED:
+        return NotifyEvent.VV_FINISHED
+    if status in (VVStatus.FAILED, VVStatus.KILLED):
+        return NotifyEvent.VV_FAILED
+    return None
+
+
+# --- the customer's choices -------------------------------------------------------------------
+
+
+def webhook_create(
+    *, customer: Customer, url: str, events: Sequence[str], allow_private: bool
+) -> Webhook:
+    """Add a webhook: ``url`` hears of ``events`` by a POST signed with a new secret (the
+    returned webhook's ``secret``, to be shown to the customer once).
+
+    Raises ValidationError on ``url`` for a URL that is not http(s), is too long, or whose
+    host does not resolve or (unless ``allow_private``) has an address not on the public
+    internet; one the customer already has (code ``unique``); on ``events`` for none or an
+    unknown one; and when the customer has MAX_WEBHOOKS_PER_CUSTOMER webhooks.
+    """
+    url = url.strip()
+    chosen = _events(events, field="events")
+    if not chosen:
+        raise ValidationError({"events": f"Choose at least one of {', '.join(EVENTS)}."})
+    _check_url(url, allow_private=allow_private)
+    with transaction.atomic():
+        customer = Customer.objects.select_for_update().get(pk=customer.pk)
+        if customer.webhooks.count() >= MAX_WEBHOOKS_PER_CUSTOMER:
+            raise ValidationError(
+                f"You have {MAX_WEBHOOKS_PER_CUSTOMER} webhooks, the most one may have: remove "
+                "one first (a webhook hears of several events)."
+            )
+        if customer.webhooks.filter(url=url).exists():
+            raise ValidationError(
+                {
+                    "url": ValidationError(
+                        "You already have a webhook for this URL: remove it first to change it.",
+                        code="unique",
+                    )
+                }
+            )
+        webhook = Webhook.objects.create(
+            customer=customer, url=url, events=chosen, secret=_new_secret()
+        )
+        _listen(customer)
+    logger.info("webhook added", extra={"customer": customer.slug, "webhook": webhook.pk})
+    return webhook
+
+
+def _new_secret() -> str:
+    return "whsec_" + secrets.token_hex(32)
+
+
+def _check_url(url: str, *, allow_private: bool) -> None:
+    max_length = Webhook._meta.get_field("url").max_length or 2000
+    if len(url) > max_length:
+        raise ValidationError({"url": f"A webhook URL has at most {max_length} characters."})
+    if any(char.isspace() or ord(char) < 32 or ord(char) == 127 for char in url):
+        raise ValidationError(
+            {"url": "A URL has no spaces or control characters (percent-encode them)."}
+        )
+    try:
+        notify.check_url(url, allow_private=allow_private)
+    except notify.UnsafeURL as exc:
+        raise ValidationError({"url": str(exc)}) from None
+
+
+def _events(events: Sequence[str], *, field: str) -> list[str]:
+    unknown = [e for e in events if e not in EVENTS]
+    if unknown:
+        raise ValidationError(
+            {
+                field: f"Unknown event(s) {', '.join(map(repr, unknown))}; events: {', '.join(EVENTS)}."
+            }
+        )
+    return [e for e in EVENTS if e in events]  # in the usual order, each once
+
+
+def webhook_delete(*, webhook: Webhook) -> None:
+    """Remove a webhook (one the caller selected for its customer) with its delivery log;
+    attempts under way end unsent."""
+    with transaction.atomic():
+        customer = Customer.objects.select_for_update().get(pk=webhook.customer_id)
+        webhook.delete()
+        _listen(customer)
+
+
+def user_set_email_events(*, user: User, email: str, events: Sequence[str]) -> User:
+    """Set the address a customer's user gets e-mails at and the events it is e-mailed
+    (none: no e-mail). Raises ValidationError on ``email`` for an address that is not one, or
+    is missing while events are chosen; on ``email_events`` for an unknown event."""
+    email = email.strip()
+    chosen = _events(events, field="email_events")
+    if email:
+        try:
+            EmailValidator()(email)
+        except ValidationError:
+            raise ValidationError({"email": f"{email!r} is not an e-mail address."}) from None
+    elif chosen:
+        raise ValidationError({"email": "Give the address the e-mails should go to."})
+    if user.customer_id is None:
+        raise ValidationError("Only a customer's users have VVs to hear about.")
+    with transaction.atomic():
+        customer = Customer.objects.select_for_update().get(pk=user.customer_id)
+        user = User.objects.select_for_update().get(pk=user.pk)
+        user.email = email
+        user.email_events = chosen
+        user.save(update_fields=["email", "email_events"])
+        _listen(customer)
+    return user
+
+
+def _listen(customer: Customer) -> None:
+    """Write which events someone of the customer listens for (its row held by the caller)."""
+    events: set[str] = set()
+    for chosen in Webhook.objects.filter(customer=customer).values_list("events", flat=True):
+        events.update(chosen)
+    users = User.objects.filter(customer=customer, is_active=True).exclude(email="")
+    for chosen in users.values_list("email_events", flat=True):
+        events.update(chosen)
+    listened = [e for e in EVENTS if e in events]
+    if listened != customer.notify_events:
+        # An UPDATE of its own: no audit-log entry, no customer signal (Customer.save).
+        Customer.objects.filter(pk=customer.pk).update(notify_events=listened)
+        customer.notify_events = listened
+
+
+# --- 2. the event's fan-out (a worker on the notify queue) -------------------------------------
+
+
+@dataclass(frozen=True)
+class WebhookJob:
+    """One event to POST to one webhook: the same body (and delivery id) at every attempt."""
+
+    webhook_id: int
+    delivery: uuid.UUID
+    event: str
+    vv_id: uuid.UUID
+    task_id: int | None
+    body: str
+
+
+def vv_event_fan_out(
+    *, event: str, vv_id: uuid.UUID, at_ms: int, task_id: int | None = None
+) -> list[WebhookJob]:
+    """What an event becomes: an e-mail to each active user of the VV's customer who chose it
+    (sent now; a mail server that fails is logged, not retried), and a job per webhook that
+    hears of it. Nothing for a VV (or task) that is no longer there."""
+    vv = VirtualVehicle.objects.select_related("customer").filter(pk=vv_id).first()
+    task = None
+    if task_id is not None:
+        task = Task.objects.filter(pk=task_id, vv_id=vv_id).first()
+        if task is None:
+            return []
+    if vv is None:
+        return []
+    body = event_body(event=event, vv=vv, at_ms=at_ms, task=task)
+    _email(event, vv, body)
+    webhooks = Webhook.objects.filter(customer_id=vv.customer_id).order_by("pk")
+    return [
+        WebhookJob(
+            webhook_id=webhook.pk,
+            delivery=uuid.uuid5(_DELIVERY_IDS, f"{webhook.pk}:{event}:{vv_id}:{task_id}"),
+            event=event,
+            vv_id=vv_id,
+            task_id=task_id,
+            body=json.dumps(body, separators=(",", ":"), ensure_ascii=False),
+        )
+        for webhook in webhooks
+        if event in webhook.events
+    ]
+
+
+def event_body(
+    *, event: str, vv: VirtualVehicle, at_ms: int, task: Task | None = None
+) -> dict[str, object]:
+    """The JSON a webhook receives: ``event``, the VV's ``id``, ``name`` and ``status`` (as it
+    is when the event is sent), ``time`` (when it happened, ISO 8601 UTC), the ``error`` (with
+    ``error_line`` and ``error_column`` when known) of a VV that failed, and for ``task.done``
+    the ``task``."""
+    body: dict[str, object] = {
+        "event": event,
+        "id": str(vv.pk),
+        "name": vv.name,
+        "status": vv.status,
+        "time": _iso(at_ms),
+    }
+    if event == NotifyEvent.VV_FAILED:
+        body["error"] = vv.error
+        if vv.error_line is not None:
+            body["error_line"] = vv.error_line
+            body["error_column"] = vv.error_column
+    if task is not None:
+        body["task"] = {
+            "q": task.q,
+            "index": task.index,
+            "position": [task.lat, task.lng, task.alt],
+            "sensors": task.sensors,
+            "status": task.status,
+            "done": _iso(at_ms),
+        }
+    return body
+
+
+def _iso(at_ms: int) -> str:
+    moment = dt.datetime.fromtimestamp(at_ms / 1000, tz=dt.UTC)
+    return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+_SUBJECTS = {
+    NotifyEvent.VV_FINISHED: "{name} finished",
+    NotifyEvent.VV_FAILED: "{name} {status}",
+    NotifyEvent.TASK_DONE: "{name}: a task was done",
+}
+
+
+def _email(event: str, vv: VirtualVehicle, body: dict[str, object]) -> None:
+    users = User.objects.filter(customer_id=vv.customer_id, is_active=True).exclude(email="")
+    recipients = [u.email for u in users.order_by("pk") if event in u.email_events]
+    if not recipients:
+        return
+    subject = "[CPCC] " + _SUBJECTS[NotifyEvent(event)].format(name=vv.name, status=vv.status)
+    lines = [f"{key}: {json.dumps(value, ensure_ascii=False)}" for key, value in body.items()]
+    page = f"{settings.CPCC_SITE_URL.rstrip('/')}/vvs/{vv.pk}/"
+    text = "\n".join([*lines, "", f"See it on the platform: {page}", "", _WHY])
+    messages = [mail.EmailMessage(subject, text, to=[address]) for address in recipients]
+    try:
+        mail.get_connection().send_messages(messages)
+    except Exception:  # the mail server's problem must not hold up the webhooks
+        logger.exception(
+            "could not send the notification e-mails",
+            extra={"vv": str(vv.pk), "customer": vv.customer.slug, "event": event},
+        )
+
+
+_WHY = "You get this because you chose it on the platform's Notifications page."
+
+
+# --- 3. one attempt to deliver (a worker on the notify queue) ----------------------------------
+
+
+def webhook_attempt(*, job: WebhookJob, attempt: int) -> float | None:
+    """POST the job's body to its webhook (attempt 1, 2, ...), signed with the webhook's
+    secret, and record how it went in the webhook's delivery log. Returns after how many
+    seconds to try again (None: it was delivered, cannot be, or it was the last attempt of
+    ``CPCC_WEBHOOK_ATTEMPTS``).
+
+    Safe to run twice: an attempt already recorded is not made again, nor one after the
+    event was delivered; a webhook removed meanwhile is not tried.
+    """
+    webhook = Webhook.objects.filter(pk=job.webhook_id).first()
+    if webhook is None:
+        return None
+    tried = WebhookDelivery.objects.filter(webhook=webhook, delivery=job.delivery)
+    delivered = tried.filter(status_code__gte=200, status_code__lt=300)
+    if tried.filter(attempt__gte=attempt).exists() or delivered.exists():
+        return None
+    raw = job.body.encode()
+    answer = notify.post(
+        webhook.url,
+        raw,
+        {
+            notify.SIGNATURE_HEADER: notify.sign(raw, webhook.secret),
+            notify.EVENT_HEADER: job.event,
+            notify.DELIVERY_HEADER: str(job.delivery),
+        },
+        timeout_s=settings.CPCC_WEBHOOK_TIMEOUT_S,
+        allow_private=settings.CPCC_WEBHOOK_ALLOW_PRIVATE,
+    )
+    WebhookDelivery.objects.create(
+        webhook=webhook,
+        delivery=job.delivery,
+        event=job.event,
+        vv_id=job.vv_id,
+        task_id=job.task_id,
+        attempt=attempt,
+        status_code=answer.status,
+        error=answer.error[:300],
+        duration_ms=answer.duration_ms,
+    )
+    _prune(webhook)
+    last = answer.ok or answer.permanent or attempt >= settings.CPCC_WEBHOOK_ATTEMPTS
+    logger.log(
+        logging.INFO if answer.ok else logging.WARNING,
+        "webhook delivered" if answer.ok else "webhook delivery failed",
+        extra={
+            "webhook": webhook.pk,
+            "event": job.event,
+            "vv": str(job.vv_id),
+            "attempt": attempt,
+            "status": answer.status,
+            "error": answer.error,
+            "retry": not last,
+        },
+    )
+    if last:
+        return None
+    return notify.retry_delay_s(attempt, first_s=settings.CPCC_WEBHOOK_RETRY_S)
+
+
+def _prune(webhook: Webhook) -> None:
+    """Keep the webhook's newest DELIVERY_LOG_KEPT attempts."""
+    oldest_kept = (
+        WebhookDelivery.objects.filter(webhook=webhook)
+        .order_by("-id")
+        .values_list("id", flat=True)[DELIVERY_LOG_KEPT - 1 : DELIVERY_LOG_KEPT]
+    )
+    ids = list(oldest_kept)
+    if ids:
+        WebhookDelivery.objects.filter(webhook=webhook, id__lt=ids[0]).delete()

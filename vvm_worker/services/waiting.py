@@ -1,0 +1,84 @@
+"""Why a VV waits, as its owner reads it: parked on a ground station while no RV in service
+covers its next task (routing starts and ends that, each with a line in the VV's log), and
+when the RV it is aboard expects to reach its next task (that RV's control loop's plan).
+
+The queue (a customer's limit of VVs in parallel) needs nothing here: a queued VV's place in
+it is read when it is shown (``missions.waiting``).
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Mapping
+
+from cpcc_site.prepared import deferred, insert_rows, save_fields, update_row
+from missions.models import LogEntry, Task, VirtualVehicle, WaitReason
+from missions.waiting import duration_text
+from vvm_worker.services.base import VVM, customer_named, logger
+
+# The level of the lines the platform adds to a VV's log (its program's lines are "info"):
+# its owner, and a comparison of two runs, can tell them apart.
+PLATFORM_NOTE = "platform"
+# The VV's columns that say why it waits (written only when that changes).
+WAITING_FIELDS = ("waiting_reason", "waiting_message", "waiting_since_s")
+
+
+def no_vehicle_message(task: Task) -> str:
+    """What a VV waits for while only RVs out of service cover its next task ``task``, in
+    the customer's words (which never name a vehicle)."""
+    return (
+        f"no vehicle in service covers the next task at {task.lat:.6f}, {task.lng:.6f}, "
+        f"{task.alt:g} m; it continues when one does"
+    )
+
+
+def vv_wait_start(*, vv: VirtualVehicle, task: Task, vvm: VVM) -> None:
+    """The VV waits for an RV in service that covers its next task ``task``: routing parks it
+    on a ground station because only RVs out of service (maintenance, charging, a worker that
+    is gone) could serve it. Its row says so and its log gets ``waiting: ...``; a VV that
+    already waits so is left alone (nothing is written: routing looks at it again at every
+    fleet change). The caller holds the VV's row."""
+    message = no_vehicle_message(task)
+    if vv.waiting_reason == WaitReason.NO_VEHICLE and vv.waiting_message == message:
+        return
+    now = vvm.clock.now_s()
+    if not vv.waiting_reason:
+        vv.waiting_since_s = now
+    vv.waiting_reason, vv.waiting_message = WaitReason.NO_VEHICLE, message
+    with deferred():
+        save_fields(vv, WAITING_FIELDS)
+        insert_rows([LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"waiting: {message}")])
+    logger.info(
+        "vv waits: no vehicle in service covers its next task",
+        extra={"vv": str(vv.id), "customer": customer_named(vv), "task": task.pk},
+    )
+
+
+def vv_wait_end(*, vv: VirtualVehicle, vvm: VVM) -> None:
+    """The VV that waited moves on (an RV in service took its task, or none ever can and it
+    is rejected): its row no longer says why it waits and its log gets ``continues: waited
+    N s``. Nothing for a VV that was not waiting. The caller holds the VV's row."""
+    if not vv.waiting_reason:
+        return
+    now = vvm.clock.now_s()
+    waited = duration_text(now - (vv.waiting_since_s if vv.waiting_since_s is not None else now))
+    vv.waiting_reason, vv.waiting_message, vv.waiting_since_s = "", "", None
+    with deferred():
+        save_fields(vv, WAITING_FIELDS)
+        insert_rows(
+            [LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"continues: waited {waited}")]
+        )
+    logger.info(
+        "vv continues after waiting %s",
+        waited,
+        extra={"vv": str(vv.id), "customer": customer_named(vv)},
+    )
+
+
+def vvs_record_next_task_eta(*, etas: Mapping[uuid.UUID, float]) -> None:
+    """When the RV that each of these VVs is aboard expects to reach its next task (platform
+    clock seconds), as the RV's control loop just planned it (it tells only the estimates
+    that changed, mostly one). Each VV's row on its own, in the order of their ids: a
+    statement never holds one VV's row while it waits for another's."""
+    for vv_id in sorted(etas):
+        update_row(VirtualVehicle, vv_id, values={"next_task_eta_s": etas[vv_id]})
