@@ -1,8 +1,8 @@
 """Error pages: JSON under /api/ (what an API client can read), the site's own pages elsewhere.
 
-Under /api/ every answer is JSON whatever DEBUG is: with DEBUG on, Django answers an unmatched
-path (``/api/v1/vvs/null/log/``) or a refused host with its HTML debug page before any handler
-here is asked; ``JsonUnderApiMiddleware`` turns those into the API's JSON.
+Under /api/ every answer is JSON whatever DEBUG is: Django answers an unmatched path
+(``/api/v1/vvs/null/log/``) or a refused host with an HTML page (its debug page with DEBUG on,
+the site's 404.html with it off); ``JsonUnderApiMiddleware`` turns each into the API's JSON.
 
 While the database is unavailable (cpcc_site.database), every request that needs it answers
 503 with Retry-After, not 500: nothing is wrong with the request, and it can be sent again.
@@ -29,12 +29,6 @@ def _not_found_json(request: HttpRequest) -> JsonResponse:
     return JsonResponse(
         {"detail": f"No API endpoint at {request.path} (see /api/docs/)."}, status=404
     )
-
-
-def not_found(request: HttpRequest, exception: Exception) -> HttpResponse:
-    if request.path.startswith(API_PREFIX):
-        return _not_found_json(request)
-    return defaults.page_not_found(request, exception)
 
 
 def server_error(request: HttpRequest) -> HttpResponse:

@@ -33,5 +33,4 @@ urlpatterns = [
     path("", include("missions.urls")),
 ]
 
-handler404 = "cpcc_site.errors.not_found"
 handler500 = "cpcc_site.errors.server_error"

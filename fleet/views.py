@@ -16,10 +16,8 @@ from django.http import HttpRequest, HttpResponse, HttpResponseNotFound
 from django.views.decorators.http import require_safe
 
 from fleet.simulation.tiles import TileOutOfRange, check_tile, render_tile
+from fleet.simulation.world import PLATFORM_WORLD_SEED  # what the workers' sensors read
 
-# The world the platform's workers read (vvm_worker/platform.py: SensorField(0); the VVM's
-# world_seed for cameras): the map shows what their sensors and cameras see.
-PLATFORM_WORLD_SEED = 0
 # Tiles kept rendered in each web process: about 2 to 35 kB each (a few MB in all), enough
 # for the views a few people look at; a tile costs 20 to 60 ms to draw again.
 CACHED_TILES = 1_024

@@ -165,8 +165,13 @@ class VirtualVehicle(models.Model):
         """
         if t_s is None:
             return None
-        offset_s = round(self.start_ms / 1000.0 - self.submitted_s)
-        return dt.datetime.fromtimestamp(t_s + offset_s, tz=dt.UTC)
+        return dt.datetime.fromtimestamp(t_s + self.platform_offset_s, tz=dt.UTC)
+
+    @property
+    def platform_offset_s(self) -> int:
+        """What turns this VV's platform clock into Unix time (``platform_datetime`` says
+        why): 0 in a live system."""
+        return round(self.start_ms / 1000.0 - self.submitted_s)
 
 
 class JournalEntry(models.Model):

@@ -78,10 +78,8 @@ def flying_message(eta_s: float | None) -> str:
 
 def platform_now_s(vv: VirtualVehicle, now: dt.datetime | None = None) -> float:
     """Now (or ``now``) on the VV's platform clock: the Unix epoch in a live system, the
-    scenario's seconds in ``simulate`` (its logical start against its submission says
-    which, as ``missions.api.serializers.platform_datetime`` reads it)."""
-    offset_s = round(vv.start_ms / 1000.0 - vv.submitted_s)
-    return (now or timezone.now()).timestamp() - offset_s
+    scenario's seconds in ``simulate`` (``VirtualVehicle.platform_datetime``)."""
+    return (now or timezone.now()).timestamp() - vv.platform_offset_s
 
 
 def vv_waiting(

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from django.conf import settings
 
-from fleet.simulation import SensorField
+from fleet.simulation import PLATFORM_WORLD_SEED, SensorField
 from vvm_worker.celery_dispatch import CeleryDispatcher, CeleryNotifier
 from vvm_worker.clock import SystemClock
 from vvm_worker.dispatch import LocalHost
@@ -21,7 +21,7 @@ def platform_vvm(*, local: LocalHost | None = None) -> VVM:
     return VVM(
         clock=SystemClock(),
         dispatcher=CeleryDispatcher(local=local),
-        field=SensorField(0),
+        field=SensorField(PLATFORM_WORLD_SEED),
         lease_s=settings.CPCC_RV_LEASE_S,
         announcer=FeedAnnouncer(batched=local is not None, in_background=local is not None),
         notifier=CeleryNotifier(),

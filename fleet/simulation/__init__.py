@@ -17,10 +17,12 @@ from fleet.simulation.sensors import (
 )
 from fleet.simulation.tiles import render_tile
 from fleet.simulation.vehicle import Leg, SimVehicle, VehicleSpec
+from fleet.simulation.world import PLATFORM_WORLD_SEED
 
 __all__ = [
     "CAMERA_FORMATS",
     "CAMERA_VIEWS",
+    "PLATFORM_WORLD_SEED",
     "SCALAR_QUANTITIES",
     "SENSOR_KINDS",
     "CameraSettings",

@@ -20,6 +20,8 @@ import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
 
+# The seed of the world the platform's simulated sensors, cameras and map tiles all show.
+PLATFORM_WORLD_SEED = 0
 M_PER_DEG_LAT = 110_540.0
 M_PER_DEG_LNG_AT_EQUATOR = 111_320.0
 
