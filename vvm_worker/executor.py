@@ -118,8 +118,10 @@ class DatabaseStore:
         # A report that did not move the vehicle (a new plan, a phase): it waits for the next
         # write, which supersedes it, or for the host's next ``write_waiting`` (a map tick).
         self._waiting: VehicleState | None = None
-        # When the loop last said the vehicle reaches each VV's next task (see `estimated`).
+        # When the loop last said the vehicle reaches each VV's next task (see `estimated`),
+        # and, with ``ticks``, the estimates that wait for the map tick to be written.
         self._estimates: dict[Any, float] = {}
+        self._etas_waiting: dict[Any, float] = {}
 
     def changed(self) -> None:
         """The RV's tasks or status may have changed: read them again when next asked."""
@@ -253,22 +255,30 @@ class DatabaseStore:
     def estimated(self, etas: dict[Any, float]) -> None:
         """The loop's plan: when the vehicle expects to reach each VV's next task (by VV).
         Only the estimates that moved by more than ESTIMATE_SLACK_S are written: a plan that
-        keeps its target (most of them) writes nothing, a new target one VV's."""
+        keeps its target (most of them) writes nothing, a new target one VV's. With ``ticks``
+        they wait for the host's map tick (``write_waiting``): an estimate is read by people,
+        and the plans of a busy RV change it many times a second."""
         told = self._estimates
         changed = {
             vv: eta_s
             for vv, eta_s in etas.items()
             if vv not in told or abs(told[vv] - eta_s) > ESTIMATE_SLACK_S
         }
-        vvs_record_next_task_eta(etas=changed)
         self._estimates = {vv: changed.get(vv, told.get(vv, eta_s)) for vv, eta_s in etas.items()}
+        if self.ticks:
+            self._etas_waiting.update(changed)
+        else:
+            vvs_record_next_task_eta(etas=changed)
 
     def write_waiting(self) -> None:
         """Write the report that waits, if any (the host's map tick: a row is never more than
         a tick behind what its loop said). Where it stopped to serve a task waits for the
-        answer, which writes it."""
+        answer, which writes it. Then the estimates that wait (see ``estimated``)."""
         if self._waiting is not None:
             self._write(self._waiting, moved=False)
+        if self._etas_waiting:
+            etas, self._etas_waiting = self._etas_waiting, {}
+            vvs_record_next_task_eta(etas=etas)
 
     def seen_aboard(self, vvs: list[dict[str, Any]]) -> None:
         """The VVs aboard as the host read them for the map (see ``read_aboard``)."""

@@ -483,3 +483,28 @@ def test_the_map_hears_each_new_task_and_migration_with_its_row_id(
         Migration.objects.filter(vv=vv).values_list("pk", flat=True)
     )
     assert tasks and moves and all(e["id"] is not None for e in tasks + moves)
+
+
+def test_an_rv_workers_estimates_wait_for_the_map_tick_and_the_last_one_is_written(
+    vvm_factory, customer_a
+) -> None:
+    # A busy RV plans many times a second: what it expects is written at the host's map tick
+    # (its latest word for each VV), not by a statement of its own at every plan.
+    from vvm_worker.executor import DatabaseStore
+
+    vehicle = VehicleFactory(name="Heli One")
+    vvm = vvm_factory()
+    vv = vv_submit(customer=customer_a, name="eta", program=program(), vvm=vvm)
+    store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, ticks=True)
+    store.estimated({vv.pk: 100.0})
+    store.estimated({vv.pk: 140.0})
+    vv.refresh_from_db()
+    assert vv.next_task_eta_s is None
+    store.write_waiting()
+    vv.refresh_from_db()
+    assert vv.next_task_eta_s == 140.0
+    # Without ticks (simulate), each estimate that moves is written at once.
+    at_once = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm)
+    at_once.estimated({vv.pk: 200.0})
+    vv.refresh_from_db()
+    assert vv.next_task_eta_s == 200.0
