@@ -5,7 +5,10 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
-SCENARIO ?= examples/scenarios/paper-fig3.json
+# `make demo` runs the paper's Figure 3 and, next to it for a customer of their own, the
+# examples of VVs that message each other and look at their pictures
+# (examples/scenarios/messages-and-images.json); `make demo SCENARIO=FILE` runs FILE alone.
+SCENARIO ?=
 
 .PHONY: demo test lint check bench bench-simulate bench-planner bench-load bench-burst bench-idle screenshots simulate-fig2 simulate-fig3 vendor clean
 
@@ -18,7 +21,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(PY) manage.py migrate --noinput
-	$(PY) manage.py demo --scenario $(SCENARIO)
+	$(PY) manage.py demo $(if $(SCENARIO),--scenario $(SCENARIO))
 
 lint: $(STAMP)
 	$(PY) -m ruff check .

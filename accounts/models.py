@@ -21,6 +21,8 @@ DEFAULT_MAX_TASKS_PER_VV = 10_000
 DEFAULT_STORAGE_BYTES = 10 * 1024 * 1024
 DEFAULT_CPU_MS_PER_STEP = 2_000
 DEFAULT_HEAP_BYTES = 64 * 1024 * 1024
+DEFAULT_MAX_MESSAGES_PER_VV = 1_000
+DEFAULT_MAX_MESSAGE_BYTES = 64 * 1024
 
 
 class NotifyEvent(models.TextChoices):
@@ -42,6 +44,8 @@ class Customer(models.Model):
         "storage_bytes",
         "cpu_ms_per_step",
         "heap_bytes",
+        "max_messages_per_vv",
+        "max_message_bytes",
     )
 
     name = models.CharField(max_length=120, unique=True)
@@ -74,6 +78,15 @@ class Customer(models.Model):
         default=DEFAULT_HEAP_BYTES,
         validators=[MinValueValidator(1024 * 1024)],
         help_text="V8 heap of one VV, in bytes.",
+    )
+    max_messages_per_vv = models.PositiveIntegerField(
+        default=DEFAULT_MAX_MESSAGES_PER_VV,
+        help_text="Messages each VV may send to the customer's other VVs (VV.message.send).",
+    )
+    max_message_bytes = models.PositiveIntegerField(
+        default=DEFAULT_MAX_MESSAGE_BYTES,
+        validators=[MinValueValidator(2)],
+        help_text="Size of one message's value as JSON, in bytes (UTF-8).",
     )
     allowed_sensors = models.ManyToManyField(
         "fleet.SensorType",

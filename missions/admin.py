@@ -2,10 +2,11 @@ from collections.abc import Callable
 from typing import Any
 
 from django.contrib import admin
+from django.db.models import QuerySet
 from django.http import HttpRequest
 
 from cpcc_site.admin_display import PositionShown, moment, number_text
-from missions.models import LogEntry, Migration, StorageDocument, Task, VirtualVehicle
+from missions.models import LogEntry, Message, Migration, StorageDocument, Task, VirtualVehicle
 
 
 def _vv_time(
@@ -110,3 +111,49 @@ class LogEntryAdmin(MadeByThePlatform, admin.ModelAdmin):
 class MigrationAdmin(MadeByThePlatform, admin.ModelAdmin):
     list_display = ["vv", "from_name", "to_name", "at", "reason"]
     at = _vv_time("at_s", "at")
+
+
+@admin.register(Message)
+class MessageAdmin(admin.ModelAdmin):
+    """Messages between a customer's VVs and from its own system: sent and taken by the
+    platform only, so staff read them and change nothing (a recipient's journal holds what it
+    took)."""
+
+    list_display = ["id", "customer", "sender_shown", "recipient_name", "bytes", "sent", "received"]
+    list_filter = ["customer"]
+    search_fields = ["recipient__name", "sender_name"]
+    list_select_related = ["customer", "recipient"]
+    fields = [
+        "customer",
+        "sender",
+        "sender_name",
+        "recipient",
+        "value",
+        "bytes",
+        "sent",
+        "received",
+    ]
+    readonly_fields = fields
+    sent = _vv_time("sent_s", "sent", vv=lambda message: message.recipient)
+    received = _vv_time("received_s", "received", vv=lambda message: message.recipient)
+
+    def get_queryset(self, request: HttpRequest) -> QuerySet[Message]:
+        # The recipient's name and clock, not its program.
+        return super().get_queryset(request).defer("recipient__program", "recipient__catalog")
+
+    @admin.display(description="from", ordering="sender_name")
+    def sender_shown(self, message: Message) -> str:
+        return message.sender_name or "(the customer's system, over the API)"
+
+    @admin.display(description="to", ordering="recipient__name")
+    def recipient_name(self, message: Message) -> str:
+        return message.recipient.name
+
+    def has_add_permission(self, request: HttpRequest) -> bool:
+        return False
+
+    def has_change_permission(self, request: HttpRequest, obj: Any = None) -> bool:
+        return False
+
+    def has_delete_permission(self, request: HttpRequest, obj: Any = None) -> bool:
+        return False

@@ -1,17 +1,17 @@
 """The live map's feed: the changes announced as they happen, where they go in Redis, and who
 may see what.
 
-Changes (a VV's status or host, its tasks, its migrations) are appended to one Redis stream
-after their transaction commits; each RV worker appends its vehicle's state (position, VVs
-aboard, planned route) to a second stream twice a second and keeps the latest in a hash for
-snapshots. Every map socket reads both streams itself (blocking until something comes) and
-sends its browser one frame per batch with what that user may see (missions/consumers.py): no
-message is sent per change and per listener, and a frame leaves at most one batch interval
-after the change.
+Changes (a VV's status or host, its tasks, its migrations, the messages between its VVs) are
+appended to one Redis stream after their transaction commits; each RV worker appends its
+vehicle's state (position, VVs aboard, planned route) to a second stream twice a second and
+keeps the latest in a hash for snapshots. Every map socket reads both streams itself (blocking
+until something comes) and sends its browser one frame per batch with what that user may see
+(missions/consumers.py): no message is sent per change and per listener, and a frame leaves at
+most one batch interval after the change.
 
-A customer sees its own VVs, their tasks, paths and migrations, and the vehicles carrying them
-as anonymous carriers; never a vehicle's or a ground station's name, nor another customer's
-anything. Staff see everything.
+A customer sees its own VVs, their tasks, paths, migrations and messages to one another, and
+the vehicles carrying them as anonymous carriers; never a vehicle's or a ground station's name,
+nor another customer's anything. Staff see everything.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from __future__ import annotations
 import hashlib
 from typing import Any
 
-from missions.models import HostKind, Migration, Task, VirtualVehicle
+from missions.models import HostKind, Message, Migration, Task, VirtualVehicle
 
 EVENTS_STREAM = "cpcc:map:events"
 POSITIONS_STREAM = "cpcc:map:positions"
@@ -79,6 +79,38 @@ def migration_event(migration: Migration, customer_id: int) -> dict[str, Any]:
         "from_pos": _pair(migration.from_lat, migration.from_lng),
         "to_pos": _pair(migration.to_lat, migration.to_lng),
     }
+
+
+def message_event(message: Message) -> dict[str, Any] | None:
+    """A message from one VV to another (``VV.message.send``): the map draws it as a short-lived
+    line between the two. None for a message sent over the API (no sender VV: nothing to draw
+    from): the caller announces nothing for it.
+
+    The sender is ``vv`` (so a map following one VV shows what it sends), the recipient
+    ``to_vv``; their names are data (the page sets them as text). ``gs_pos`` / ``to_gs_pos``: the
+    ground station the VV waits on when the message is sent (stations are on every map), None
+    aboard a vehicle (the map finds it by the vehicle carrying it). The value is not in it: the
+    map shows that a message went, not what it said."""
+    if message.sender_id is None:
+        return None
+    return {
+        "kind": "message",
+        "customer": message.customer_id,
+        "vv": str(message.sender_id),
+        "id": message.pk,
+        "name": message.sender_name,
+        "to_vv": str(message.recipient_id),
+        "to_name": message.recipient.name,
+        "sent_s": message.sent_s,
+        "gs_pos": _station_pos(message.sender),
+        "to_gs_pos": _station_pos(message.recipient),
+    }
+
+
+def _station_pos(vv: VirtualVehicle | None) -> list[float] | None:
+    if vv is None or vv.host_rv_id or not vv.host_gs_id:
+        return None
+    return [vv.host_gs.lat, vv.host_gs.lng]
 
 
 def _pair(lat: float | None, lng: float | None) -> list[float] | None:

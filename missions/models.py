@@ -31,6 +31,7 @@ class WaitReason(models.TextChoices):
     NO_VEHICLE = "no_vehicle", "No vehicle in service covers its next task"
     QUEUE = "queue", "In the customer's queue"
     FLYING = "flying", "A vehicle flies to its task"
+    MESSAGE = "message", "Its program waits for a message (VV.message.receive)"
 
 
 ACTIVE_STATUSES = (VVStatus.RUNNING, VVStatus.MIGRATING)
@@ -125,6 +126,11 @@ class VirtualVehicle(models.Model):
     created = models.DateTimeField(auto_now_add=True)
     finished = models.DateTimeField(null=True, blank=True)
     updated = models.DateTimeField(auto_now=True)
+
+    # CPU time (seconds) the VV has used since it last waited for the outside world (a task,
+    # a message): its steps and the host's work for its calls that answer at once (images,
+    # sending a message). The quota ``cpu_ms_per_step`` bounds it.
+    call_cpu_s = models.FloatField(default=0.0)
 
     class Meta:
         ordering = ["submitted_s", "created"]
@@ -320,3 +326,37 @@ class TrackPoint(models.Model):
 
     def __str__(self) -> str:
         return f"{self.vv_id} at {self.t_s:.1f} s"
+
+
+class Message(models.Model):
+    """A message to a VV from another VV of the same customer (``VV.message.send``) or from
+    the customer's own system over the API (no sender VV). The recipient takes messages in
+    the order they were sent (by ``id``), each once (``VV.message.receive``); the answer that
+    hands one over is in the recipient's journal, and ``received_s`` marks it taken in the
+    same transaction."""
+
+    customer = models.ForeignKey(Customer, on_delete=models.CASCADE, related_name="messages")
+    sender = models.ForeignKey(
+        VirtualVehicle,
+        on_delete=models.SET_NULL,
+        null=True,
+        blank=True,
+        related_name="messages_out",
+        help_text="The VV that sent it; none: sent over the API.",
+    )
+    # The sender's name when it sent it ("" over the API): what the recipient reads as `from`.
+    sender_name = models.CharField(max_length=120, blank=True)
+    recipient = models.ForeignKey(
+        VirtualVehicle, on_delete=models.CASCADE, related_name="messages_in"
+    )
+    value = models.TextField(help_text="The value as JSON text.")
+    bytes = models.PositiveIntegerField()
+    sent_s = models.FloatField(help_text="Platform clock.")
+    received_s = models.FloatField(null=True, blank=True, help_text="Platform clock.")
+
+    class Meta:
+        ordering = ["id"]
+        indexes = [models.Index(fields=["recipient", "received_s", "id"])]
+
+    def __str__(self) -> str:
+        return f"message {self.pk} to {self.recipient_id}"

@@ -21,6 +21,7 @@ from missions.events import event_for, migration_event, task_event, vv_event
 from missions.models import (
     ENDED_STATUSES,
     LogEntry,
+    Message,
     Migration,
     StorageDocument,
     Task,
@@ -29,6 +30,7 @@ from missions.models import (
     VirtualVehicle,
 )
 from missions.readings import IMAGE_FILE, image_file, image_references
+from missions.waiting import with_message_wait
 
 M = TypeVar("M", bound=Model)
 
@@ -78,10 +80,12 @@ _LISTED = (
 
 def vvs_listed(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
     """The VVs with only the columns a list shows (the hosts' names, not the customer, the
-    program or the journal). Their task counts come for one page at a time
-    (``with_task_counts``): counted in the same query, a page would join every task of every
-    VV of the customer, and so would the count of its VVs."""
-    return vvs.select_related(None).select_related("host_gs", "host_rv").only(*_LISTED)
+    program or the journal; of the pending request what ``vv_waiting`` needs). Their task
+    counts come for one page at a time (``with_task_counts``): counted in the same query, a
+    page would join every task of every VV of the customer, and so would the count of its
+    VVs."""
+    listed = vvs.select_related(None).select_related("host_gs", "host_rv").only(*_LISTED)
+    return with_message_wait(listed)
 
 
 # The pages of a VV list (``vvs_listed``, newest first), compiled once: staff's and a
@@ -229,6 +233,32 @@ def vv_storage_pages_for_user(
     """``vv_storage_for_user`` as a list pages through it (each document's ``vv`` is the VV)."""
     vv = vv_get_for_user(user=user, vv_id=vv_id)
     return PreparedPages(_STORAGE_PAGES, (vv.pk,), each=lambda doc: setattr(doc, "vv", vv))
+
+
+# The pages of a VV's messages, in and out, newest first (one statement written once, its
+# keys the VV as recipient and as sender): only what a message shows, and of its recipient
+# (another VV of the customer's, for one that went out) the name and what its platform clock
+# needs, never its program or journal.
+_MESSAGE_FIELDS = (
+    "id", "sender_id", "sender_name", "recipient_id", "value", "bytes", "sent_s", "received_s",
+    "recipient__name", "recipient__start_ms", "recipient__submitted_s",
+)  # fmt: skip
+_MESSAGE_PAGES = PreparedRead(
+    lambda recipient_id, sender_id: (
+        Message.objects.filter(Q(recipient_id=recipient_id) | Q(sender_id=sender_id))
+        .select_related("recipient")
+        .only(*_MESSAGE_FIELDS)
+        .order_by("-id")
+    ),
+    samples=[("recipient", uuid.UUID(int=0)), ("sender", uuid.UUID(int=1))],
+)
+
+
+def vv_messages_pages_for_user(*, user: User, vv_id: uuid.UUID | str) -> PreparedPages[Message]:
+    """The messages the VV received or sent (a message it sent itself once), newest first, as
+    a list pages through them: each with its recipient's name (``message.recipient``)."""
+    vv = vv_get_for_user(user=user, vv_id=vv_id)
+    return PreparedPages(_MESSAGE_PAGES, (vv.pk, vv.pk))
 
 
 def vv_storage_get_for_user(*, user: User, vv_id: uuid.UUID | str, key: str) -> StorageDocument:

@@ -1,6 +1,6 @@
 """Customer pages: the dashboard of one's VVs, the program editor, a VV's page (log, tasks on a
-map and its replay, storage, chart, downloads), the live map, and the actions on a VV (cancel,
-restart, edit while queued).
+map and its replay, storage, chart, messages, downloads), the live map, and the actions on a VV
+(cancel, restart, edit while queued, send it a message).
 
 Pages are for a customer's users (their customer's VVs) and for staff (every VV); any other
 user is refused. They never name a vehicle or a ground station to a customer, and link camera
@@ -38,6 +38,7 @@ from missions.models import (
     ENDED_STATUSES,
     PROGRAM_MAX_CHARS,
     PROGRAM_TOO_LONG,
+    Message,
     Task,
     VirtualVehicle,
     VVStatus,
@@ -55,6 +56,7 @@ from missions.selectors import (
     vv_get_for_user,
     vv_list_for_user,
     vv_log_for_user,
+    vv_messages_pages_for_user,
     vv_storage_for_user,
     vv_tasks_for_user,
     with_task_counts,
@@ -74,6 +76,7 @@ from vvm_worker.services import (
     vv_restart_for_user,
     vv_update_program_for_user,
 )
+from vvm_worker.services.messages import MessageError, vv_message_send_for_user
 
 View = Callable[..., HttpResponse]
 
@@ -83,6 +86,10 @@ VVS_PER_PAGE = 50
 TASKS_SHOWN = 500
 STORAGE_SHOWN = 500
 LOG_SHOWN = 1_000
+# The page shows the last messages in and out (the API lists them all), each value up to this
+# many characters of its JSON.
+MESSAGES_SHOWN = 50
+MESSAGE_CHARS_SHOWN = 2_000
 # The dashboard's filter: its name, what it shows.
 FILTERS: dict[str, tuple[str, tuple[str, ...]]] = {
     "all": ("All", ()),
@@ -219,6 +226,41 @@ class TaskRow:
     readings: list[Formatted]
     requested: str
     done: str
+
+
+@dataclass(frozen=True)
+class MessageRow:
+    """One of a VV's messages as its page shows it: ``direction`` "in" or "out", the names at
+    its ends (``sender`` "" when it came over the API), its value as JSON text, its times
+    after the VV's submission."""
+
+    direction: str
+    sender: str
+    recipient: str
+    value: str
+    bytes: int
+    sent: str
+    received: str
+
+
+def message_rows(vv: VirtualVehicle, messages: Iterable[Message]) -> list[MessageRow]:
+    rows = []
+    for message in messages:
+        text = json.dumps(json.loads(message.value), ensure_ascii=False, indent=2)
+        if len(text) > MESSAGE_CHARS_SHOWN:
+            text = text[:MESSAGE_CHARS_SHOWN] + " …"
+        rows.append(
+            MessageRow(
+                direction="in" if message.recipient_id == vv.pk else "out",
+                sender=message.sender_name,
+                recipient=message.recipient.name,
+                value=text,
+                bytes=message.bytes,
+                sent=_clock(message.sent_s, vv.submitted_s),
+                received=_clock(message.received_s, vv.submitted_s),
+            )
+        )
+    return rows
 
 
 def chart_series(tasks: Iterable[Task]) -> list[dict[str, Any]]:
@@ -501,8 +543,64 @@ def vv_restart(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
 @customer_or_staff_required
 def vv_detail(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
     """A VV: its status and error, actions, tasks on a map (live while it runs, a replay once
-    it has ended), storage formatted by kind, a chart of its scalar readings, its log and
-    the downloads."""
+    it has ended), storage formatted by kind, a chart of its scalar readings, its messages,
+    its log and the downloads. A POST sends it a message (``value``: JSON text) from the
+    customer's own system, as ``POST /api/v1/vvs/{id}/messages/`` does, and comes back to
+    the page; a value that cannot be sent shows the page again with why."""
+    if request.method != "POST":
+        return _vv_page(request, vv_id)
+    text = request.POST.get("value", "")
+    try:
+        value = _posted_value(text)
+        message = vv_message_send_for_user(
+            user=request.user,  # type: ignore[arg-type]
+            vv_id=vv_id,
+            value=value,
+            vvm=platform_vvm(),
+        )
+    except VVNotFound:
+        raise Http404("No such virtual vehicle.") from None
+    except VVAlreadyEnded as exc:
+        messages.info(
+            request, f"“{exc.vv.name}” has ended ({exc.vv.status}): it takes no more messages."
+        )
+        return redirect("vv-detail", vv_id=vv_id)
+    except (NotJSON, MessageError) as exc:
+        return _vv_page(request, vv_id, send_text=text, send_error=str(exc), status=400)
+    messages.success(request, f"The message is sent to “{message.recipient.name}”.")
+    return redirect(reverse("vv-detail", args=[vv_id]) + "#messages")
+
+
+class NotJSON(ValueError):
+    """What the page's form sent is not a JSON value (the text says why)."""
+
+
+def _posted_value(text: str) -> Any:
+    """The JSON value of the text the form "Send a message" sent; NotJSON saying what is
+    wrong."""
+    if not text.strip():
+        raise NotJSON(
+            'Write the value to send as JSON: a number, "text" in double quotes, true, null, '
+            "[a list] or {an object}."
+        )
+    try:
+        return json_depth.loads(text)
+    except json_depth.TooDeep as exc:
+        raise NotJSON(str(exc)) from None
+    except ValueError as exc:
+        raise NotJSON(f"The value is not JSON: {exc}.") from None
+
+
+def _vv_page(
+    request: HttpRequest,
+    vv_id: uuid.UUID,
+    *,
+    send_text: str = "",
+    send_error: str = "",
+    status: int = 200,
+) -> HttpResponse:
+    """The VV's page; ``send_text`` and ``send_error``: a message that could not be sent, shown
+    in its form with why."""
     user = request.user
     staff = bool(user.is_staff)
     try:
@@ -515,6 +613,8 @@ def vv_detail(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
     log = vv_log_for_user(user=user, vv_id=vv.pk)  # type: ignore[arg-type]
     log_count = log.count()
     log_lines = list(log[max(0, log_count - LOG_SHOWN) :])
+    vv_messages = vv_messages_pages_for_user(user=user, vv_id=vv.pk)  # type: ignore[arg-type]
+    messages_count = vv_messages.count()
     start_s = vv.submitted_s
     context = {
         "vv": vv,
@@ -543,6 +643,11 @@ def vv_detail(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
         "chart": chart_series(tasks),
         "log": [(_clock(line.at_s, start_s), line) for line in log_lines],
         "log_count": log_count,
+        "vv_messages": message_rows(vv, vv_messages[:MESSAGES_SHOWN]),
+        "messages_count": messages_count,
+        "messages_api_url": reverse("vv-messages", kwargs={"id": str(vv.pk)}),
+        "send_text": send_text,
+        "send_error": send_error,
         "started": _clock(vv.started_s, start_s),
         "ended_after": _clock(vv.finished_s, start_s),
         "socket_path": f"/ws/map/?vv={vv.pk}",
@@ -551,7 +656,7 @@ def vv_detail(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
         "results_url": reverse("vv-results", kwargs={"id": str(vv.pk)}),
         "program_lines": vv.program.split("\n"),
     }
-    return render(request, "missions/vv_detail.html", context)
+    return render(request, "missions/vv_detail.html", context, status=status)
 
 
 @customer_or_staff_required

@@ -6,7 +6,9 @@
 - ``queue``: it waits in its customer's queue behind the customer's other VVs (its place is
   read when it is shown: it changes whenever one of them ends);
 - ``flying``: it is aboard an RV with an open task, which its RV's plan expects to reach at
-  ``next_task_eta_s`` (written by the RV's control loop when its plan changes).
+  ``next_task_eta_s`` (written by the RV's control loop when its plan changes);
+- ``message``: its program waits in ``VV.message.receive`` (its pending request, kind
+  "message", says until when: ``vvm_worker.services.calls``).
 """
 
 from __future__ import annotations
@@ -16,8 +18,9 @@ import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from django.db.models import Count, IntegerField, OuterRef, Q, Subquery
-from django.db.models.functions import Coalesce
+from django.db.models import Count, FloatField, IntegerField, OuterRef, Q, QuerySet, Subquery
+from django.db.models.fields.json import KT
+from django.db.models.functions import Cast, Coalesce
 from django.utils import timezone
 
 from missions.models import ACTIVE_STATUSES, VirtualVehicle, VVStatus, WaitReason
@@ -76,6 +79,45 @@ def flying_message(eta_s: float | None) -> str:
     return f"flying to your task, about {duration_text(eta_s)}"
 
 
+def message_wait_message(left_s: float | None) -> str:
+    if left_s is None:
+        return "waiting for a message"
+    return f"waiting for a message, at most {duration_text(max(0.0, left_s))} more"
+
+
+def with_message_wait(vvs: QuerySet[VirtualVehicle]) -> QuerySet[VirtualVehicle]:
+    """The VVs, each with what ``vv_waiting`` needs of a pending ``VV.message.receive``
+    (``pending_kind``, ``pending_until_s``, ``pending_timeout_s``), read from the row's
+    pending request without reading the request itself (a list reads only some columns, and
+    a batch of tasks makes a large one)."""
+    return vvs.annotate(
+        pending_kind=KT("pending__kind"),
+        pending_until_s=Cast(KT("pending__until_s"), FloatField()),
+        pending_timeout_s=Cast(KT("pending__timeout_s"), FloatField()),
+    )
+
+
+def _message_wait(vv: VirtualVehicle) -> tuple[bool, float | None, float | None]:
+    """Whether the VV waits in ``VV.message.receive``, until when (platform clock, None
+    before the host has looked for a message) and how long it said it would wait."""
+    if hasattr(vv, "pending_kind"):  # a list's row (with_message_wait)
+        kind, until_s, timeout_s = vv.pending_kind, vv.pending_until_s, vv.pending_timeout_s
+    else:
+        pending = vv.pending if isinstance(vv.pending, dict) else {}
+        kind, until_s, timeout_s = (
+            pending.get("kind"),
+            pending.get("until_s"),
+            pending.get("timeout_s"),
+        )
+    if kind != "message":
+        return False, None, None
+    return (
+        True,
+        None if until_s is None else float(until_s),
+        None if timeout_s is None else float(timeout_s),
+    )
+
+
 def platform_now_s(vv: VirtualVehicle, now: dt.datetime | None = None) -> float:
     """Now (or ``now``) on the VV's platform clock: the Unix epoch in a live system, the
     scenario's seconds in ``simulate`` (``VirtualVehicle.platform_datetime``)."""
@@ -98,6 +140,13 @@ def vv_waiting(
         if place is None:
             place = queue_places(vvs=[vv])[vv.pk]
         return Waiting(WaitReason.QUEUE, queue_message(place), since_s=vv.submitted_s)
+    receiving, until_s, timeout_s = _message_wait(vv)
+    if receiving:
+        if until_s is None:
+            return Waiting(WaitReason.MESSAGE, message_wait_message(None))
+        since_s = None if timeout_s is None else until_s - timeout_s
+        left_s = until_s - platform_now_s(vv, now)
+        return Waiting(WaitReason.MESSAGE, message_wait_message(left_s), since_s=since_s)
     if vv.waiting_reason:
         return Waiting(vv.waiting_reason, vv.waiting_message, since_s=vv.waiting_since_s)
     if vv.host_rv_id is None or tasks_open <= 0:

@@ -158,9 +158,13 @@ class RecordingDispatcher:
         self.arrived: list = []
         self.vehicles: list[int] = []
         self.slots: list[int] = []
+        self.wakes: list = []
 
     def vv_arrived(self, vv_id) -> None:
         self.arrived.append(vv_id)
+
+    def vv_wake_later(self, vv_id, delay_s: float) -> None:
+        self.wakes.append((vv_id, delay_s))
 
     def vehicle_changed(self, vehicle_id: int) -> None:
         self.vehicles.append(vehicle_id)

@@ -9,11 +9,15 @@ from datetime import timedelta
 
 import pytest
 from django.conf import settings
+from django.db import transaction
 from django.urls import reverse
 from django.utils import timezone
 
+from accounts.models import Customer
+from missions.models import Message
 from tests.factories import AREA_ONE, AREA_TWO, GroundStationFactory, UserFactory, VehicleFactory
 from vvm_worker.services import vv_submit
+from vvm_worker.services.messages import message_send
 
 MODELS = [
     ("accounts", "customer"),
@@ -28,6 +32,7 @@ MODELS = [
     ("missions", "storagedocument"),
     ("missions", "logentry"),
     ("missions", "migration"),
+    ("missions", "message"),
 ]
 
 
@@ -55,6 +60,7 @@ MADE_BY_THE_PLATFORM = {
     ("missions", "storagedocument"),
     ("missions", "logentry"),
     ("missions", "migration"),
+    ("missions", "message"),
 }
 
 
@@ -103,6 +109,8 @@ def test_the_queued_vv_quota_is_set_in_the_admin_with_the_other_quotas(
         "storage_bytes": 10_485_760,
         "cpu_ms_per_step": 2000,
         "heap_bytes": 67_108_864,
+        "max_messages_per_vv": 1000,
+        "max_message_bytes": 65_536,
         "allowed_api_calls": "[]",
         "users-TOTAL_FORMS": 0,
         "users-INITIAL_FORMS": 0,
@@ -112,6 +120,74 @@ def test_the_queued_vv_quota_is_set_in_the_admin_with_the_other_quotas(
     customer_a.refresh_from_db()
     customer_b.refresh_from_db()
     assert (customer_a.max_queued_vvs, customer_b.max_queued_vvs) == (12, 100)
+
+
+def test_the_message_quotas_are_set_in_the_admin_with_the_other_quotas(
+    client, staff, customer_a, customer_b
+) -> None:
+    client.force_login(staff)
+    url = reverse("admin:accounts_customer_change", args=[customer_a.pk])
+    page = client.get(url).text
+    quotas = page[page.index('class="fieldset-heading">Quotas</h2>') :]
+    assert 'name="max_messages_per_vv"' in quotas and 'name="max_message_bytes"' in quotas
+    form = {
+        "name": customer_a.name,
+        "slug": customer_a.slug,
+        **{name: getattr(customer_a, name) for name in Customer.QUOTA_FIELDS},
+        "max_messages_per_vv": 7,
+        "max_message_bytes": 512,
+        "allowed_api_calls": "[]",
+        "users-TOTAL_FORMS": 0,
+        "users-INITIAL_FORMS": 0,
+    }
+    response = client.post(url, form)
+    assert response.status_code == 302, response.content
+    customer_a.refresh_from_db()
+    customer_b.refresh_from_db()
+    assert (customer_a.max_messages_per_vv, customer_a.max_message_bytes) == (7, 512)
+    assert (customer_b.max_messages_per_vv, customer_b.max_message_bytes) == (1000, 65_536)
+    refused = client.post(url, {**form, "max_message_bytes": 1})
+    assert refused.status_code == 200 and "max_message_bytes" in refused.text
+    customer_a.refresh_from_db()
+    assert customer_a.max_message_bytes == 512
+
+
+def test_messages_are_shown_to_staff_read_only_and_found_by_recipient(
+    client, staff, populated, vvm_factory
+) -> None:
+    other = vv_submit(
+        customer=populated.customer, name="Other VV", program="var b = 1;", vvm=vvm_factory()
+    )
+    with transaction.atomic():
+        to_populated = message_send(
+            customer_id=populated.customer_id,
+            sender=other,
+            to="VV 1",
+            value_json='{"found": 3}',
+            vvm=vvm_factory(),
+        )
+        message_send(
+            customer_id=populated.customer_id,
+            sender=None,
+            to=other,
+            value_json='"over the API"',
+            vvm=vvm_factory(),
+        )
+    client.force_login(staff)
+    changelist = reverse("admin:missions_message_changelist")
+
+    listed = html.unescape(client.get(changelist).text)
+    assert "(the customer's system, over the API)" in listed and "Other VV" in listed
+    found = html.unescape(client.get(changelist, {"q": "VV 1"}).text)
+    assert "1 message" in found and f"/{to_populated.pk}/change/" in found
+
+    detail = client.get(reverse("admin:missions_message_change", args=[to_populated.pk]))
+    assert detail.status_code == 200
+    assert '{"found": 3}' in html.unescape(detail.text)
+    assert 'name="value"' not in detail.text, "nothing to edit"
+    delete = reverse("admin:missions_message_delete", args=[to_populated.pk])
+    assert client.post(delete, {"post": "yes"}).status_code == 403
+    assert Message.objects.count() == 2
 
 
 def test_customers_cannot_open_the_admin(client, user_a) -> None:

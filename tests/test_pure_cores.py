@@ -26,6 +26,7 @@ PURE = [
     "vvm_worker.notify",
     "vvm_worker.clock",
     "vvm_worker.control",
+    "vvm_worker.imaging",
     "fleet.catalog",
     "fleet.mavlink",
     "missions.readings",

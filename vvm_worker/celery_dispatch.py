@@ -49,25 +49,36 @@ class CeleryDispatcher:
     def vv_arrived(self, vv_id: uuid.UUID) -> None:
         transaction.on_commit(lambda: _safely(self._send_vv, vv_id))
 
+    def vv_wake_later(self, vv_id: uuid.UUID, delay_s: float) -> None:
+        # Always by message (a local host has no timer of its own), to the host the VV is on
+        # then; the worker holds it until it is due. Lost (a worker killed meanwhile), the
+        # ground station's sweep finds the VV once its time has passed.
+        delay = max(0.0, delay_s)
+        transaction.on_commit(lambda: _safely(lambda v: self._send_vv(v, countdown=delay), vv_id))
+
     def vehicle_changed(self, vehicle_id: int) -> None:
         transaction.on_commit(lambda: _safely(self._send_vehicle, vehicle_id))
 
     def customer_slot_freed(self, customer_id: int) -> None:
         transaction.on_commit(lambda: _safely(_send_admit, customer_id))
 
-    def _send_vv(self, vv_id: uuid.UUID) -> None:
+    def _send_vv(self, vv_id: uuid.UUID, countdown: float | None = None) -> None:
         hosts = _HOSTS.rows(vv_id)
         if not hosts:
             return
         ((gs_id, rv_id),) = hosts
         local = self.local
-        if local is not None and (
-            local.is_vehicle(rv_id) if rv_id is not None else gs_id and local.is_station(gs_id)
+        if (
+            countdown is None
+            and local is not None
+            and (
+                local.is_vehicle(rv_id) if rv_id is not None else gs_id and local.is_station(gs_id)
+            )
         ):
             local.advance_later(vv_id)
             return
         queue = rv_queue(rv_id) if rv_id is not None else gs_queue(gs_id) if gs_id else SHARED_QUEUE
-        app.send_task(VV_ADVANCE_TASK, args=[str(vv_id)], queue=queue)
+        app.send_task(VV_ADVANCE_TASK, args=[str(vv_id)], queue=queue, countdown=countdown)
 
     def _send_vehicle(self, vehicle_id: int) -> None:
         if self.local is not None and self.local.is_vehicle(vehicle_id):

@@ -19,6 +19,12 @@ class Dispatcher(Protocol):
         """The VV is on a new host (or must be looked at again by its host): advance it."""
         ...
 
+    def vv_wake_later(self, vv_id: uuid.UUID, delay_s: float) -> None:
+        """Advance the VV on its host ``delay_s`` seconds from now (platform clock): a VV that
+        waits for a message until then looks again (a message wakes it sooner by
+        ``vv_arrived``)."""
+        ...
+
     def vehicle_changed(self, vehicle_id: int) -> None:
         """The vehicle's open tasks or status changed: its control loop must re-plan."""
         ...

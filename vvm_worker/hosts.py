@@ -667,7 +667,9 @@ class GSHost:
         self._online = now_online
         # Messages are hints: pick up what a lost one would have started, and look again at
         # VVs that have waited here for an RV for a while.
-        waiting = stalled(host_gs_id=self.station_id, waiting_s=WAITING_LOOK_S)
+        waiting = stalled(
+            host_gs_id=self.station_id, waiting_s=WAITING_LOOK_S, now_s=vvm.clock.now_s()
+        )
         advance_each(waiting, vvm=vvm, ground_station=self.name)
         _admit_all(vvm)
 
@@ -701,16 +703,24 @@ def _admit_all(vvm: VVM) -> None:
             logger.exception("admission failed", extra={"customer": customer})
 
 
-def stalled(*, waiting_s: float | None = None, **host: Any) -> QuerySet[VirtualVehicle]:
+def stalled(
+    *, waiting_s: float | None = None, now_s: float | None = None, **host: Any
+) -> QuerySet[VirtualVehicle]:
     """VVs on a host that have not moved for a while although they could: answered but not
     resumed, or arrived but not taken up (their message was lost); with ``waiting_s``, also
-    those that have waited that long for an RV (routed again, they wait ``waiting_s`` more)."""
+    those that have waited that long for an RV (routed again, they wait ``waiting_s`` more)
+    and, with ``now_s`` (platform clock), those whose wait for a message timed out by then
+    (their timer was lost). A VV that waits for a message costs nothing before."""
     moving = Q(status=VVStatus.MIGRATING) | Q(status=VVStatus.RUNNING, pending__isnull=True)
     look = Q(updated__lt=db_time_ago(SWEEP_S)) & moving
+    receiving = Q(pending__kind="message")
     if waiting_s is not None:
-        look |= Q(
-            status=VVStatus.RUNNING, pending__isnull=False, updated__lt=db_time_ago(waiting_s)
+        look |= (
+            Q(status=VVStatus.RUNNING, pending__isnull=False, updated__lt=db_time_ago(waiting_s))
+            & ~receiving
         )
+    if now_s is not None:
+        look |= Q(status=VVStatus.RUNNING, pending__until_s__lt=now_s) & receiving
     return VirtualVehicle.objects.filter(look, **host)
 
 

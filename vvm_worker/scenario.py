@@ -141,6 +141,8 @@ class CustomerSpec:
     storage_bytes: int | None = None
     cpu_ms_per_step: int | None = None
     heap_bytes: int | None = None
+    max_messages_per_vv: int | None = None
+    max_message_bytes: int | None = None
 
 
 @dataclass(frozen=True)
@@ -303,7 +305,12 @@ _CUSTOMER_QUOTAS = (
     "storage_bytes",
     "cpu_ms_per_step",
     "heap_bytes",
+    "max_messages_per_vv",
+    "max_message_bytes",
 )
+# The least value of a quota where it is not 1 (as accounts.models.Customer validates them): a
+# customer's VVs may be allowed to send no message at all; a message may be kept to 2 bytes.
+_QUOTA_MINIMUM = {"max_messages_per_vv": 0, "max_message_bytes": 2}
 _CUSTOMER_OPTIONAL = ("privileged", *_CUSTOMER_QUOTAS)
 _VV_REQUIRED = ("customer", "name")
 _VV_OPTIONAL = ("program", "source", "submit_at_s", "copies")
@@ -610,7 +617,7 @@ class _Parser:
     def customer(self, value: Any, path: str) -> CustomerSpec:
         obj = _object(value, path, _CUSTOMER_REQUIRED, _CUSTOMER_OPTIONAL)
         quotas = {
-            key: _integer(obj[key], _join(path, key), minimum=1)
+            key: _integer(obj[key], _join(path, key), minimum=_QUOTA_MINIMUM.get(key, 1))
             for key in _CUSTOMER_QUOTAS
             if key in obj
         }

@@ -105,6 +105,12 @@ class _QueueDispatcher:
     def vv_arrived(self, vv_id: uuid.UUID) -> None:
         self.sim.queue.call_now(lambda: vv_advance(vv_id=vv_id, vvm=self.sim.vvm))
 
+    def vv_wake_later(self, vv_id: uuid.UUID, delay_s: float) -> None:
+        self.sim.queue.call_at(
+            self.sim.clock.t + max(0.0, delay_s),
+            lambda: vv_advance(vv_id=vv_id, vvm=self.sim.vvm),
+        )
+
     def vehicle_changed(self, vehicle_id: int) -> None:
         rig = self.sim.rigs.get(vehicle_id)
         if rig is not None:

@@ -33,6 +33,18 @@ class CustomerInSerializer(serializers.Serializer):
     storage_bytes = StrictIntegerField(min_value=0, required=False)
     cpu_ms_per_step = StrictIntegerField(min_value=1, required=False)
     heap_bytes = StrictIntegerField(min_value=1024 * 1024, required=False)
+    max_messages_per_vv = StrictIntegerField(
+        min_value=0,
+        max_value=2**31 - 1,
+        required=False,
+        help_text="Messages each VV may send (VV.message.send); 0: none.",
+    )
+    max_message_bytes = StrictIntegerField(
+        min_value=2,
+        max_value=2**31 - 1,
+        required=False,
+        help_text="Size of one message's value as JSON text, in UTF-8 bytes.",
+    )
     allowed_sensors = serializers.ListField(
         child=StrictCharField(),
         required=False,

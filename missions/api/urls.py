@@ -5,6 +5,7 @@ from rest_framework.routers import DefaultRouter
 
 from missions.api.downloads import VVReadingsCSVView, VVReadingsGeoJSONView
 from missions.api.dry_run import DryRunView
+from missions.api.messages import VVMessagesView
 from missions.api.views import (
     UUID_PATTERN,
     VirtualVehicleViewSet,
@@ -34,6 +35,7 @@ urlpatterns = [
     re_path(ONE_VV + r"images/(?P<file>[^/]+)$", VVImageView.as_view(), name="vv-image"),
     re_path(ONE_VV + r"tasks/$", VVTaskListView.as_view(), name="vv-tasks"),
     re_path(ONE_VV + r"log/$", VVLogView.as_view(), name="vv-log"),
+    re_path(ONE_VV + r"messages/$", VVMessagesView.as_view(), name="vv-messages"),
     re_path(ONE_VV + r"results\.zip$", VVResultsView.as_view(), name="vv-results"),
     re_path(ONE_VV + r"readings\.csv$", VVReadingsCSVView.as_view(), name="vv-readings-csv"),
     re_path(

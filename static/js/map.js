@@ -3,12 +3,15 @@
  * CPCCMap draws, on a Leaflet map with its canvas renderer: operation areas, ground stations,
  * vehicles (with their name and the VVs aboard for staff), planned vehicle routes (gray), the
  * paths of VVs while carried (green), the paths VVs intend to take (light blue), done tasks
- * (red dots), open tasks (blue dots) and migrations (red lines). It is fed snapshots and
- * frames, live from the socket (connect) or from a mission's history (replay).
+ * (red dots), open tasks (blue dots), migrations (red lines) and, live, each message one VV
+ * sends another (a magenta dashed line from the sender to the recipient where they are when it
+ * comes, gone after MESSAGE_LINE_MS). It is fed snapshots and frames, live from the socket
+ * (connect) or from a mission's history (replay).
  *
  * Its state is on the map element for whoever looks (tests, the page): data-seq (last frame),
  * data-connected, data-vehicles, data-tasks-open, data-tasks-done, data-vvs (every VV it
- * knows), data-vvs-shown (those with something in view), data-frames, data-tiles-loaded.
+ * knows), data-vvs-shown (those with something in view), data-frames, data-tiles-loaded,
+ * data-messages (message lines drawn so far), data-messages-shown (those on the map now).
  *
  * The background is the tile server of the CPCC_MAP_TILES setting, or else the platform's own
  * tiles of the simulated world (/tiles/{z}/{x}/{y}.png: what the cameras photograph). The map
@@ -36,8 +39,12 @@
     intended: '#7ec8f5',
     done: '#d62828',
     open: '#1f6fe5',
-    migration: '#d62828'
+    migration: '#d62828',
+    message: '#c026d3'
   };
+  var MESSAGE_LINE_MS = 6000; // a message's line is on the map this long...
+  var MESSAGE_FADE_MS = 2000; // ...fading out over the last of it
+  var MESSAGE_TICK_MS = 100;
   var LABELS_UP_TO = 60; // permanent vehicle labels only while they stay readable
   var PLATFORM_TILES = '/tiles/{z}/{x}/{y}.png'; // fleet/views.py: the simulated world
   var MAX_ZOOM = 21;
@@ -59,8 +66,8 @@
     });
     this.tiles = this._tileLayer(options);
     this.layers = {};
-    var order = ['areas', 'stations', 'routes', 'intended', 'carried', 'migrations', 'tasks',
-                 'vehicles'];
+    var order = ['areas', 'stations', 'routes', 'intended', 'carried', 'migrations', 'messages',
+                 'tasks', 'vehicles'];
     for (var i = 0; i < order.length; i++) {
       this.layers[order[i]] = L.layerGroup().addTo(this.map);
     }
@@ -71,6 +78,9 @@
     this.staff = false;
     this.seq = 0;
     this.frames = 0;
+    this.messageLines = []; // {line, at}: the messages' lines on the map, oldest first
+    this.messagesDrawn = 0;
+    this._fading = null;    // the timer that fades them while there are any
     this.time = null;     // replay: show the mission as it was at this time (seconds)
     this.window = null;   // live: show the history of only this many last seconds
     this.only = null;     // show this VV (its id) alone
@@ -138,8 +148,14 @@
     this.seq = frame.seq;
     this.frames += 1;
     var events = frame.events || [];
-    for (var i = 0; i < events.length; i++) this._event(events[i]);
+    var messages = [];
+    for (var i = 0; i < events.length; i++) {
+      if (events[i].kind === 'message') messages.push(events[i]);
+      else this._event(events[i]);
+    }
     this._vehicles(frame.vehicles || [], frame.gone || []);
+    // Where the VVs are once the frame's positions are in.
+    for (var m = 0; m < messages.length; m++) this._message(messages[m]);
     this._changed();
   };
 
@@ -168,6 +184,68 @@
       for (var i = 0; i < vv.migrations.length; i++) if (vv.migrations[i].id === e.id) return;
       vv.migrations.push(e);
     }
+  };
+
+  /* Where a VV is on the map now: the vehicle carrying it, else the ground station it waits
+   * on (gsPos, from the event); null when the map does not know the VV or cannot place it. */
+  CPCCMap.prototype._where = function (vvId, gsPos) {
+    if (!this.vvs[vvId]) return null;
+    for (var id in this.vehicles) {
+      var aboard = this.vehicles[id].vvs || [];
+      for (var k = 0; k < aboard.length; k++) {
+        if (aboard[k].id === vvId) return [this.vehicles[id].lat, this.vehicles[id].lng];
+      }
+    }
+    return gsPos || null;
+  };
+
+  /* A message from one VV to another, live: a dashed line between the two for
+   * MESSAGE_LINE_MS. Nothing when either is not on the map (or is not the VV shown alone), for
+   * a message to itself, or in a replay. */
+  CPCCMap.prototype._message = function (e) {
+    if (this.time !== null || e.vv === e.to_vv) return;
+    if (this.only && this.only !== e.vv && this.only !== e.to_vv) return;
+    var from = this._where(e.vv, e.gs_pos);
+    var to = this._where(e.to_vv, e.to_gs_pos);
+    if (!from || !to) return;
+    var line = L.polyline([from, to], {
+      renderer: this.renderer, color: COLOR.message, weight: 3, opacity: 0.9, dashArray: '8 6'
+    }).bindTooltip(text(e.name + ' → ' + e.to_name + ': a message'));
+    line.addTo(this.layers.messages);
+    this.messageLines.push({ line: line, at: Date.now() });
+    this.messagesDrawn += 1;
+    this._messageState();
+    var self = this;
+    if (this._fading === null) {
+      this._fading = setInterval(function () { self._fadeMessages(); }, MESSAGE_TICK_MS);
+    }
+  };
+
+  /* The messages' lines fade out as they age, and go. */
+  CPCCMap.prototype._fadeMessages = function () {
+    var now = Date.now();
+    var kept = [];
+    for (var i = 0; i < this.messageLines.length; i++) {
+      var shown = this.messageLines[i];
+      var left = MESSAGE_LINE_MS - (now - shown.at);
+      if (left <= 0) {
+        this.layers.messages.removeLayer(shown.line);
+        continue;
+      }
+      if (left < MESSAGE_FADE_MS) shown.line.setStyle({ opacity: 0.9 * left / MESSAGE_FADE_MS });
+      kept.push(shown);
+    }
+    this.messageLines = kept;
+    if (!kept.length) {
+      clearInterval(this._fading);
+      this._fading = null;
+    }
+    this._messageState();
+  };
+
+  CPCCMap.prototype._messageState = function () {
+    this.element.dataset.messages = String(this.messagesDrawn);
+    this.element.dataset.messagesShown = String(this.messageLines.length);
   };
 
   CPCCMap.prototype._vehicles = function (states, gone) {
@@ -394,6 +472,7 @@
     el.dataset.tasksDone = String(done);
     el.dataset.vvs = String(count);
     el.dataset.vvsShown = String(shown);
+    this._messageState();
     if (this.options.onDraw) this.options.onDraw(this);
   };
 

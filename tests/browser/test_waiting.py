@@ -36,6 +36,9 @@ class Told:
     def vv_arrived(self, vv_id: Any) -> None:
         pass
 
+    def vv_wake_later(self, vv_id: Any, delay_s: float) -> None:
+        pass
+
     def vehicle_changed(self, vehicle_id: int) -> None:
         pass
 

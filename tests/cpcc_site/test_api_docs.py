@@ -25,6 +25,7 @@ def test_the_schema_validates_without_warnings(tmp_path: Path) -> None:
         "/api/v1/vvs/{id}/storage/{key}/",
         "/api/v1/vvs/{id}/tasks/",
         "/api/v1/vvs/{id}/log/",
+        "/api/v1/vvs/{id}/messages/",
         "/api/v1/vvs/{id}/results.zip",
         "/api/v1/vvs/{id}/readings.csv",
         "/api/v1/vvs/{id}/readings.geojson",

@@ -52,7 +52,15 @@ from fleet.models import GroundStation, SensorType, Vehicle
 from missions.api.views import UUID_PATTERN
 from missions.consumers import MapConsumer
 from missions.events import EVENTS_STREAM, POSITIONS_STREAM, VEHICLES_HASH
-from missions.models import LogEntry, Migration, StorageDocument, Task, VirtualVehicle, VVStatus
+from missions.models import (
+    LogEntry,
+    Message,
+    Migration,
+    StorageDocument,
+    Task,
+    VirtualVehicle,
+    VVStatus,
+)
 from missions.readings import image_file, image_references
 from tests.api_fixtures import MISSION
 from tests.conftest import RecordingDispatcher
@@ -73,12 +81,14 @@ HOOK_URL = "http://127.0.0.1:9/taken-over"
 API_BODY = {
     "name": "taken over",
     "program": "var x = 1;",
+    "value": "taken over",
     "url": HOOK_URL,
     "events": ["vv.finished"],
 }
 FORM_BODY = {
     "name": "taken over",
     "program": "var x = 1;",
+    "value": '"taken over"',
     "copies": "1",
     "post": "yes",
     "url": HOOK_URL,
@@ -191,6 +201,10 @@ ROUTES: dict[str, Route] = {
     ),
     "api/v1/vvs/(?P<id>{uuid})/tasks/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/tasks/"),
     "api/v1/vvs/(?P<id>{uuid})/log/$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/log/"),
+    # The queued VV has not ended: a POST would send it a message.
+    "api/v1/vvs/(?P<id>{uuid})/messages/$": Route(
+        Kind.OBJECT, "/api/v1/vvs/{queued}/messages/", ("GET", "POST")
+    ),
     r"api/v1/vvs/(?P<id>{uuid})/results\.zip$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/results.zip"),
     r"api/v1/vvs/(?P<id>{uuid})/readings\.csv$": Route(
         Kind.OBJECT, "/api/v1/vvs/{vv}/readings.csv"
@@ -470,6 +484,7 @@ def _finish(side: Side, prefix: str, vvm: Any) -> None:
     start it), the user's named API token, the customer's webhook (made now, or the flights
     would notify it) with an attempt of its own, and what only its data holds."""
     from vvm_worker.services import vv_submit
+    from vvm_worker.services.messages import message_send
     from vvm_worker.services.notifications import webhook_create
     from vvm_worker.services.tokens import api_token_create
 
@@ -491,6 +506,14 @@ def _finish(side: Side, prefix: str, vvm: Any) -> None:
         image_file(ref) for t in side.flown.tasks.all() for ref in image_references(t.readings)
     }
     assert side.image in images and Migration.objects.filter(vv=side.flown).exists()
+    with transaction.atomic():  # from the customer's own system to its queued VV
+        message_send(
+            customer_id=side.customer.pk,
+            sender=None,
+            to=side.queued,
+            value_json=json.dumps(f"{prefix}-message-secret"),
+            vvm=vvm,
+        )
     side.api_token, _ = api_token_create(user=side.user, name=f"{prefix}-token-secret")
     # It hears of every event: the other customer's POSTs (a webhook, an e-mail choice) leave
     # that customer's row (the events it listens for) as it is.
@@ -518,6 +541,7 @@ def _finish(side: Side, prefix: str, vvm: Any) -> None:
         f"{prefix}-program-secret",
         f"{prefix}-storage-secret",
         f"{prefix}-log-secret",
+        f"{prefix}-message-secret",
         *sorted(images),
         side.token,  # the key of the token an administrator made (the pages show 6 characters)
         side.api_token.name,
@@ -663,6 +687,7 @@ def fingerprint(world: World, revoked: Side | None = None) -> dict[str, Any]:
         "deliveries": list(
             WebhookDelivery.objects.filter(webhook__customer=a.customer).order_by("pk").values()
         ),
+        "messages": list(Message.objects.filter(customer=a.customer).order_by("pk").values()),
         "vehicles": list(Vehicle.objects.order_by("pk").values()),
         "stations": list(GroundStation.objects.order_by("pk").values()),
         "sensors": list(SensorType.objects.order_by("pk").values()),
@@ -933,9 +958,18 @@ class TestHttp:
             assert client.get(f"/media/{reference}").status_code == 404
 
     def test_the_owners_actions_change_what_the_refusals_keep(self, world: World) -> None:
-        """The fingerprint sees what a hole would change: the owner's cancel, restart and edit
-        (the same requests B is refused above) change it."""
+        """The fingerprint sees what a hole would change: the owner's message, cancel, restart
+        and edit (the same requests B is refused above) change it."""
         a = session_client(world.a.user)
+        # A message to its VV that has not ended, over the API and from its page.
+        for client, template in (
+            (token_client(world.a), "/api/v1/vvs/{queued}/messages/"),
+            (a, "/vvs/{queued}/"),
+        ):
+            before = fingerprint(world)
+            response, _ = send(client, "POST", world.url(template))
+            assert response.status_code in (201, 302), template
+            assert fingerprint(world)["messages"] != before["messages"], template
         for template in ("/vvs/{queued}/cancel/", "/vvs/{vv}/restart/"):
             before = fingerprint(world)
             response, _ = send(a, "POST", world.url(template))

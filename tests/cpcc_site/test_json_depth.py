@@ -12,7 +12,7 @@ from django.urls import reverse
 from cpcc_site import json_depth
 from cpcc_site.json_depth import MAX_VALUE_DEPTH
 from missions.models import VirtualVehicle
-from vvm_worker.services import vvs
+from vvm_worker.services import values
 
 
 def nested(levels: int, inner: object = 1) -> object:
@@ -27,7 +27,7 @@ def deep_text(levels: int) -> str:
 
 
 def test_the_services_and_the_parsers_share_one_limit() -> None:
-    assert vvs.MAX_VALUE_DEPTH is MAX_VALUE_DEPTH == 100
+    assert values.MAX_VALUE_DEPTH is MAX_VALUE_DEPTH == 100
     assert json_depth.loads(json.dumps(nested(100))) == nested(100)
     for text in (json.dumps(nested(101)), deep_text(5_000), deep_text(1_000_000)):
         with pytest.raises(json_depth.TooDeep, match="nested more than 100 levels"):

@@ -127,13 +127,26 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
     output, port = run_demo(tmp_path, "--speed", "0")
     assert f"CPCC is running at http://127.0.0.1:{port}/" in output
     assert "customer: customer-a / demo-pass-123" in output
-    assert "VVs ended 3/3" in output
+    # Next to the paper's Figure 3, on the same fleet, the examples of messages and pictures
+    # for a customer of their own (examples/scenarios/messages-and-images.json).
+    assert "customer: customer-d / demo-pass-123" in output
+    assert "VVs ended 6/6" in output
     assert "with 1 ground-station and 2 vehicle worker(s)" in output
     assert "VV 1 (Customer A): finished" in output
+    for name in ("survey-west", "survey-east", "vegetation"):
+        assert f"{name} (Customer D): finished" in output
 
 
 def test_demo_flies_the_papers_figure_3_over_mavlink(tmp_path: Path) -> None:
-    output, _ = run_demo(tmp_path, "--speed", "40", "--mavlink", interrupts=2)
+    output, _ = run_demo(
+        tmp_path,
+        "--scenario",
+        "examples/scenarios/paper-fig3.json",  # the paper's alone
+        "--speed",
+        "40",
+        "--mavlink",
+        interrupts=2,
+    )
     assert "VVs ended 3/3" in output
     for n, customer in [(1, "A"), (2, "B"), (3, "C")]:
         assert f"VV {n} (Customer {customer}): finished" in output
@@ -183,3 +196,26 @@ def test_a_second_ctrl_c_right_after_the_first_hurries_the_stop_instead_of_break
     finally:
         for each, handler in handlers.items():
             signal.signal(each, handler)
+
+
+def test_the_demo_runs_the_examples_of_messages_and_pictures_only_next_to_its_default() -> None:
+    """``make demo`` runs the paper's Figure 3 and the examples next to it; a scenario chosen
+    with --scenario runs alone (its fleet as it is), unless --also adds another."""
+    from vvm_worker.management.commands.demo import DEFAULT_ALSO, DEFAULT_SCENARIO, _scenario_paths
+
+    fig2 = "examples/scenarios/paper-fig2.json"
+    assert _scenario_paths({"scenario": None, "also": None}) == [
+        str(DEFAULT_SCENARIO),
+        str(DEFAULT_ALSO),
+    ]
+    assert DEFAULT_ALSO == ROOT / "examples" / "scenarios" / "messages-and-images.json"
+    assert _scenario_paths({"scenario": fig2, "also": None}) == [fig2]
+    assert _scenario_paths({"scenario": fig2, "also": ["a.json", "b.json"]}) == [
+        fig2,
+        "a.json",
+        "b.json",
+    ]
+    assert _scenario_paths({"scenario": None, "also": ["a.json"]}) == [
+        str(DEFAULT_SCENARIO),
+        "a.json",
+    ]

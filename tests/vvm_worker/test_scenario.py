@@ -257,6 +257,47 @@ def test_wrong_types(change: tuple[str, Any], where: str) -> None:
     raises(variant(change), where)
 
 
+def test_message_quotas_are_parsed_and_left_out_ones_keep_the_default() -> None:
+    scenario = parse(
+        variant(("customers.0.max_messages_per_vv", 20), ("customers.0.max_message_bytes", 512))
+    )
+
+    first, second = scenario.customers
+    assert (first.max_messages_per_vv, first.max_message_bytes) == (20, 512)
+    assert (second.max_messages_per_vv, second.max_message_bytes) == (None, None)
+    # A customer's VVs may be allowed no message at all.
+    assert (
+        parse(variant(("customers.0.max_messages_per_vv", 0))).customers[0].max_messages_per_vv == 0
+    )
+
+
+@pytest.mark.parametrize(
+    ("change", "where"),
+    [
+        (
+            ("customers.0.max_messages_per_vv", -1),
+            r"^customers\[0\]\.max_messages_per_vv: must be at least 0, got -1",
+        ),
+        (
+            ("customers.0.max_messages_per_vv", 2.5),
+            r"^customers\[0\]\.max_messages_per_vv: must be a whole number",
+        ),
+        (
+            ("customers.0.max_message_bytes", 1),
+            r"^customers\[0\]\.max_message_bytes: must be at least 2, got 1",
+        ),
+        (
+            ("customers.1.max_message_bytes", "64k"),
+            r"^customers\[1\]\.max_message_bytes: must be a number, got a string",
+        ),
+    ],
+)
+def test_bad_message_quotas_are_refused_with_where_and_why(
+    change: tuple[str, Any], where: str
+) -> None:
+    raises(variant(change), where)
+
+
 def test_a_document_that_is_not_an_object() -> None:
     raises([VALID], "^must be an object, got an array")
 

@@ -12,13 +12,13 @@ import pytest
 from django.db import InterfaceError
 from django.utils import timezone
 
+from cpcc_site.json_depth import MAX_VALUE_DEPTH
 from missions.models import LogEntry, StorageDocument, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.factories import VehicleFactory
 from vvm_worker import hosts
 from vvm_worker.runtime import Effect
 from vvm_worker.runtime.v8 import V8Closed
 from vvm_worker.services import vv_advance, vv_submit
-from vvm_worker.services.vvs import MAX_VALUE_DEPTH
 
 ONE_TASK = """
 VV.storage.store('before', 1);

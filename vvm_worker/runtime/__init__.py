@@ -6,7 +6,14 @@ Pure Python over mini-racer; no Django import (tests check this).
 from vvm_worker.runtime.context import VVContext
 from vvm_worker.runtime.engine import Runtime, run_step
 from vvm_worker.runtime.instrument import ReservedNameError, instrument
-from vvm_worker.runtime.journal import answer_part, answer_reject, answer_task
+from vvm_worker.runtime.journal import (
+    answer_call,
+    answer_call_error,
+    answer_message,
+    answer_part,
+    answer_reject,
+    answer_task,
+)
 from vvm_worker.runtime.syntax import SyntaxProblem, check_syntax
 from vvm_worker.runtime.types import (
     VVM_API_CALLS,
@@ -36,6 +43,9 @@ __all__ = [
     "TaskRequest",
     "VVContext",
     "VVError",
+    "answer_call",
+    "answer_call_error",
+    "answer_message",
     "answer_part",
     "answer_reject",
     "answer_task",

@@ -179,6 +179,8 @@ class VVContext:
                 "maxTasks": limits.max_tasks,
                 "storageBytes": limits.storage_bytes,
                 "heapBytes": limits.heap_bytes,
+                "maxMessages": limits.max_messages,
+                "messageBytes": limits.message_bytes,
                 "allowedCalls": sorted(limits.allowed_calls)
                 if limits.allowed_calls is not None
                 else None,
@@ -186,12 +188,14 @@ class VVContext:
         }
         run_json = json.dumps(run, separators=(",", ":"))
         arguments = (run_json, entries) if texts else (run_json,)
-        # A step that resumes where the program waits runs only new work: its CPU quota. One
-        # that replays also re-runs what the program did before, which has its own allowance.
-        replay = limits.cpu_s + 2.0 * step.replay_s + _REPLAY_SLACK_S
-        replay_timeout = replay if len(step.journal) else limits.cpu_s
+        # A step that resumes where the program waits runs only new work: its CPU quota, less
+        # what the VV used since it last waited for the outside world. One that replays also
+        # re-runs what the program did before, which has its own allowance.
+        allowance = step.cpu_allowance_s
+        replay = allowance + 2.0 * step.replay_s + _REPLAY_SLACK_S
+        replay_timeout = replay if len(step.journal) else allowance
         # A context that never ran a step has nowhere to resume: it replays.
-        resume_timeout = replay if catches_up else limits.cpu_s
+        resume_timeout = replay if catches_up else allowance
         raw, thrown, killed_by, duration = v8.call(
             lambda: self._run(
                 arguments,

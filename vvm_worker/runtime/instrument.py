@@ -21,10 +21,13 @@ for these hooks: a program may not contain it, nor an identifier that reads as i
 ``\\uXXXX`` and ``\\u{X...}`` escapes are decoded (ReservedNameError, with the place).
 
 A program is also made *suspendable* when it can be (``instrument_program``): compiled as a
-generator function, with each call of ``VV.task.execute`` / ``VV.task.executeAll`` in its own
-body waiting by ``yield*``:
+generator function, with each waiting VVM-API call (``VV.task.execute``,
+``VV.task.executeAll``, ``VV.message.send``, ``VV.message.receive``, ``VV.image.stats``,
+``VV.image.fraction``, ``VV.image.crop``, ``VV.image.resize``) in its own body waiting by
+``yield*``:
 
     VV.task.execute(ARGS)     ->  (yield* __cpcc_execute(ARGS))
+    VV.image.crop(ARGS)       ->  (yield* __cpcc_crop(ARGS))
 
 and so is each such call in a *helper*, a function declared at the program's top level that is
 only ever called (never used as a value, never rebound, no ``arguments``) from the program's
@@ -242,7 +245,17 @@ _NESTED = frozenset(
         "class",
     }
 )
-_SUSPENDING = {"execute": b"__cpcc_execute", "executeAll": b"__cpcc_executeAll"}
+# The waiting calls, ``VV.NAMESPACE.NAME``, and the hooks of prelude.js that replace them.
+_SUSPENDING = {
+    ("task", "execute"): b"__cpcc_execute",
+    ("task", "executeAll"): b"__cpcc_executeAll",
+    ("message", "send"): b"__cpcc_send",
+    ("message", "receive"): b"__cpcc_receive",
+    ("image", "stats"): b"__cpcc_stats",
+    ("image", "fraction"): b"__cpcc_fraction",
+    ("image", "crop"): b"__cpcc_crop",
+    ("image", "resize"): b"__cpcc_resize",
+}
 # The names that bind or refer to a variable (property names are not variables).
 _NAMES = frozenset(
     {
@@ -284,14 +297,27 @@ def _member(node: Node | None, name: str) -> Node | None:
 
 
 def _waiting_hook(callee: Node) -> bytes | None:
-    """The hook replacing ``callee`` when it is ``VV.task.execute`` or ``VV.task.executeAll``
-    written on one line (replacing text across lines would move the lines after it)."""
-    for name, hook in _SUSPENDING.items():
-        vv = _member(_member(callee, name), "task")
+    """The hook replacing ``callee`` when it is one of the waiting calls (``VV.task.execute``,
+    ``VV.message.send``, ``VV.image.crop``...) written on one line (replacing text across
+    lines would move the lines after it)."""
+    for (namespace, name), hook in _SUSPENDING.items():
+        vv = _member(_member(callee, name), namespace)
         if vv is not None and vv.type == "identifier" and js_name(vv.text) == "VV":
             text = (callee.text or b"").decode("utf-8")
             return None if any(b in text for b in _LINE_BREAKS) else hook
     return None
+
+
+def _yield_text(callee: Node, hook: bytes | None) -> bytes:
+    """What replaces ``callee``: ``(yield* HOOK`` for a waiting call, ``(yield* f`` for a
+    helper's. V8 places a call ``VV.image.crop(...)`` at its name, ``crop``: the hook's name
+    is spaced to start at the same column, so that the place V8 reports in the hook's name
+    (``Instrumented.user_column``) is the place it reports in the user's text."""
+    prop = callee.child_by_field_name("property") if hook is not None else None
+    if hook is None or prop is None:
+        return b"(yield* " + (callee.text or b"")
+    before = (callee.text or b"")[: prop.start_byte - callee.start_byte].decode("utf-8")
+    return b"(yield*" + b" " * max(1, len(before) - len("(yield*")) + hook
 
 
 def _last_token(node: Node) -> Node:
@@ -376,7 +402,7 @@ def _call_sites(root: Node) -> list[_Insert] | None:
     """The inserts turning the program's waiting calls into ``yield*``, or None when the
     program cannot be made a generator unnoticed (see the module docstring).
 
-    The calls of execute/executeAll in the program's own body become ``yield*`` calls of the
+    The waiting calls (``_SUSPENDING``) in the program's own body become ``yield*`` calls of the
     hooks. So do those in the body of a *helper*, a function declared at the top level that is
     only ever called (never used as a value nor given another binding, and not using
     ``arguments``) and is not recursive, which then becomes a generator, and so do the calls of
@@ -486,7 +512,7 @@ def _call_sites(root: Node) -> list[_Insert] | None:
         inserts.append(
             _Insert(
                 callee.start_byte,
-                b"(yield* " + (target or callee.text),
+                _yield_text(callee, target),
                 replace_to=callee.end_byte,
             )
         )

@@ -41,6 +41,7 @@
   const isArray = Array.isArray;
   const objectKeys = Object.keys;
   const numberIsFinite = Number.isFinite;
+  const numberIsSafeInteger = Number.isSafeInteger;
   const mathImul = Math.imul;
   const stringOf = String;
   const RealDate = Date;
@@ -263,7 +264,7 @@
   push(roots, getPrototypeOf(global));
   harden(roots);
 
-  const RUN_GLOBALS = ['VV', 'TaskRejectedError', 'logInfo', 'getStdOut'];
+  const RUN_GLOBALS = ['VV', 'TaskRejectedError', 'MessageError', 'ImageError', 'logInfo', 'getStdOut'];
   let baseline = null; // the global object's own keys once this file has run
   const baselineProto = getPrototypeOf(global);
 
@@ -338,6 +339,7 @@
       this.r = e.r;
       this.i = e.i;
       this.message = e.message;
+      this.name = e.name; // of the error an "err" answer throws
       this.text = e.data === undefined ? undefined : jsonStringify(e.data);
       this.readings = undefined; // parsed from `text`, once a second run reads them
       this.reads = 0;
@@ -437,6 +439,16 @@
   const TASK_ANSWERS = freeze(['done', 'reject']);
   const FIRST_PART_ANSWERS = freeze(['part', 'reject']);
   const PART_ANSWERS = freeze(['part']);
+  const CALL_ANSWERS = freeze(['ret', 'err']);
+  const MESSAGE_ANSWERS = freeze(['msg']);
+  const MAX_TIMEOUT_S = 86400;
+  // Longer than any VV's name (or id) or picture reference: refused before they reach a journal.
+  const MAX_NAME = 128;
+  const MAX_PICTURE_REF = 256;
+  const MAX_RESIZE = 4096;
+  const CHANNELS = freeze(['r', 'g', 'b']);
+  // What crop and resize copy from the picture they are given into the one they return.
+  const PICTURE_SOURCE_KEYS = freeze(['sensor', 'time', 'position']);
   const MAX_ALT_M = 20000;
   const MAX_KEY = 128;
   const MAX_LINE = 4000;
@@ -496,6 +508,52 @@
     if (typeof value === 'string') return jsonStringify(value);
     if (value === null || typeof value !== 'object') return stringOf(value);
     return isArray(value) ? 'an array' : 'an object';
+  }
+
+  // The JSON text of `value` as VV.storage.store keeps it and VV.message.send sends it (it is
+  // `verb`: 'stored' or 'sent'); else a TypeError or RangeError saying why, after `where`, or
+  // after `where("KEY", value)` when a storage key is given (written only for an error: a
+  // replay stores thousands of values).
+  function storableText(value, verb, where, key) {
+    let text;
+    try {
+      text = jsonStringify(value);
+    } catch (e) {
+      throw new TypeError(callPlace(where, key) + ': the value cannot be ' + verb + ' as JSON: ' + (e && e.message));
+    }
+    if (text === undefined) {
+      throw new TypeError(callPlace(where, key) + ': the value must be JSON (not undefined or a function)');
+    }
+    if (reflectApply(regExpTest, UNSTORABLE_ESCAPE, [text])) {
+      throw new RangeError(callPlace(where, key) + ': the value holds a string with a lone surrogate (half of a UTF-16 pair) or the character U+0000, which cannot be ' + verb);
+    }
+    if (jsonDepth(text) > MAX_DEPTH) {
+      throw new RangeError(callPlace(where, key) + ': the value nests arrays and objects more than ' + MAX_DEPTH + ' levels deep');
+    }
+    return text;
+  }
+
+  function callPlace(where, key) {
+    return key === undefined ? where : where + '(' + jsonStringify(key) + ', value)';
+  }
+
+  // A string the platform can keep as text (valid Unicode, no U+0000).
+  function plainString(s) {
+    return reflectApply(stringIsWellFormed, s, []) && reflectApply(stringIndexOf, s, ['\u0000']) < 0;
+  }
+
+  // `hi` undefined: no upper bound (the host compares with the picture's size).
+  function checkInteger(what, value, lo, hi) {
+    if (typeof value !== 'number' || !numberIsSafeInteger(value)) {
+      throw new TypeError(what + ' must be an integer, got ' + describe(value));
+    }
+    if (hi === undefined && value < lo) {
+      throw new RangeError(what + ' must be ' + lo + ' or more, got ' + value);
+    }
+    if (value < lo || value > hi) {
+      throw new RangeError(what + ' ' + value + ' is outside ' + lo + '..' + hi);
+    }
+    return value;
   }
 
   function checkNumber(what, value, lo, hi) {
@@ -558,6 +616,21 @@
       defineProperty(this, 'name', { value: 'VVMError', writable: true, configurable: true });
     }
   }
+  // What a VV.message call throws when the message cannot be sent (no such VV, a quota).
+  class MessageError extends RealError {
+    constructor(message) {
+      super(message);
+      defineProperty(this, 'name', { value: 'MessageError', writable: true, configurable: true });
+    }
+  }
+  // What a VV.image call throws for a picture the host cannot use (not received, a region
+  // outside it, unreadable).
+  class ImageError extends RealError {
+    constructor(message) {
+      super(message);
+      defineProperty(this, 'name', { value: 'ImageError', writable: true, configurable: true });
+    }
+  }
 
   class LatLngAlt {
     constructor(lat, lng, alt) {
@@ -575,7 +648,7 @@
       super(lat, lng, 0);
     }
   }
-  harden([TaskRejectedError, VVMError, LatLngAlt, LatLng]);
+  harden([TaskRejectedError, VVMError, MessageError, ImageError, LatLngAlt, LatLng]);
 
   function sdcEntry(e) {
     return freeze({
@@ -606,6 +679,7 @@
     let resumed = false; // this step resumed the program where it waited (no replay)
     let requestSeq = 0;
     let tasksRequested = 0;
+    let messagesSent = 0;
     let storageChars = 0; // UTF-8 bytes of the keys and JSON texts stored
     let allocated = 0; // bytes of ArrayBuffers and typed arrays made by this run
     const storage = new RealMap();
@@ -796,6 +870,177 @@
       return settle(executeAllSteps(tasks, callback));
     }
 
+    // A call the host answers at once (VV.message.send, VV.image.*), waiting as `execute`
+    // does: `args` as checked here are what the host gets (PendingRequest.args) and, with
+    // `op`, the request the journal's answer must be for. Its answer is the call's value (a
+    // copy of its own) or the error the host found, thrown as MessageError or ImageError.
+    function* callSteps(op, args) {
+      const q = requestSeq++;
+      const request = { op: op, args: args };
+      let at = null;
+      while (cursor >= journal.length) {
+        if (at === null) at = callSite();
+        pending = { kind: 'call', q: q, r: jsonStringify(request), tasks: [], op: op, args: args, at: at };
+        suspended = true;
+        yield PARK;
+      }
+      const entry = expect(q, request, CALL_ANSWERS);
+      if (entry.k === 'err') {
+        if (entry.name === 'ImageError') throw new ImageError(entry.message);
+        if (entry.name === 'MessageError') throw new MessageError(entry.message);
+        throw new VVMError(op + ': ' + entry.message);
+      }
+      return entry.freshData();
+    }
+
+    function* sendSteps(to, value) {
+      allowed('message.send');
+      const where = 'VV.message.send(to, value)';
+      if (typeof to !== 'string' || to.length === 0) {
+        throw new TypeError(where + ': to must be the name or the id of a VV (a non-empty string), got ' + describe(to));
+      }
+      const text = storableText(value, 'sent', where);
+      // No VV has such a name (the host would say the same, in the same words).
+      if (to.length > MAX_NAME || !plainString(to)) {
+        throw new MessageError(where + ': no VV ' + jsonStringify(to) + ' of yours to send to');
+      }
+      const bytes = utf8Bytes(text);
+      if (bytes > limits.messageBytes) {
+        throw new MessageError(where + ': the value is ' + bytes + ' bytes of JSON, more than the ' +
+          limits.messageBytes + ' allowed (quota: message bytes)');
+      }
+      if (messagesSent >= limits.maxMessages) {
+        throw new MessageError(where + ': this VV has sent ' + messagesSent + ' messages, as many as it may (quota: messages per VV)');
+      }
+      const sent = yield* callSteps('message.send', { to: to, value: text });
+      messagesSent++;
+      return sent;
+    }
+
+    // A message, or null when none came within `timeoutS` seconds: the host answers when one
+    // is there or the time is up.
+    function* receiveSteps(timeoutS) {
+      allowed('message.receive');
+      const timeout = checkNumber('VV.message.receive(timeoutS): timeoutS', timeoutS, 0, MAX_TIMEOUT_S);
+      const q = requestSeq++;
+      const request = { op: 'message.receive', timeoutS: timeout };
+      let at = null;
+      while (cursor >= journal.length) {
+        if (at === null) at = callSite();
+        pending = { kind: 'message', q: q, r: jsonStringify(request), tasks: [], timeout_s: timeout, at: at };
+        suspended = true;
+        yield PARK;
+      }
+      return expect(q, request, MESSAGE_ANSWERS).freshData();
+    }
+
+    // The picture's image reference; the host refuses one the VV never received.
+    function pictureRef(picture, where) {
+      const image = picture !== null && typeof picture === 'object' ? picture.image : undefined;
+      if (typeof image !== 'string' || image.length === 0 || image.length > MAX_PICTURE_REF || !plainString(image)) {
+        throw new TypeError(where + ': picture must be a picture (a camera reading, or what VV.image.crop or VV.image.resize returned), got ' + describe(picture));
+      }
+      return image;
+    }
+
+    // What of the picture crop and resize copy into theirs: its sensor, time and position.
+    function pictureSource(picture, where) {
+      const source = {};
+      for (let i = 0; i < PICTURE_SOURCE_KEYS.length; i++) {
+        const key = PICTURE_SOURCE_KEYS[i];
+        const value = picture[key];
+        if (value !== undefined) source[key] = jsonParse(storableText(value, 'copied', where + ': picture.' + key));
+      }
+      return source;
+    }
+
+    function checkRegion(region, where) {
+      if (region === null || typeof region !== 'object' || isArray(region)) {
+        throw new TypeError(where + ': region must be an object {x, y, width, height}, got ' + describe(region));
+      }
+      return {
+        x: checkInteger(where + ': region.x', region.x, 0),
+        y: checkInteger(where + ': region.y', region.y, 0),
+        width: checkInteger(where + ': region.width', region.width, 1),
+        height: checkInteger(where + ': region.height', region.height, 1),
+      };
+    }
+
+    function checkRanges(ranges, where) {
+      if (ranges === null || typeof ranges !== 'object' || isArray(ranges)) {
+        throw new TypeError(where + ': ranges must be an object such as {r: [min, max], g: [min, max], b: [min, max]}, got ' + describe(ranges));
+      }
+      const keys = objectKeys(ranges);
+      if (keys.length === 0) throw new TypeError(where + ': ranges must give at least one of r, g, b');
+      for (let i = 0; i < keys.length; i++) {
+        if (CHANNELS.indexOf(keys[i]) < 0) {
+          throw new TypeError(where + ': ranges.' + keys[i] + ' is not a channel (ranges may give r, g and b)');
+        }
+      }
+      const checked = {};
+      for (let i = 0; i < CHANNELS.length; i++) {
+        const c = CHANNELS[i];
+        if (keys.indexOf(c) < 0) continue;
+        const range = ranges[c];
+        if (!isArray(range) || range.length !== 2) {
+          throw new TypeError(where + ': ranges.' + c + ' must be [min, max], got ' + describe(range));
+        }
+        const lo = checkInteger(where + ': ranges.' + c + '[0]', range[0], 0, 255);
+        const hi = checkInteger(where + ': ranges.' + c + '[1]', range[1], 0, 255);
+        if (lo > hi) {
+          throw new RangeError(where + ': ranges.' + c + ' is [' + lo + ', ' + hi + ']: its min is above its max');
+        }
+        checked[c] = [lo, hi];
+      }
+      return checked;
+    }
+
+    function optional(value) {
+      return value === undefined || value === null;
+    }
+
+    function* statsSteps(picture, region) {
+      allowed('image.stats');
+      const image = pictureRef(picture, 'VV.image.stats(picture)');
+      const area = optional(region) ? null : checkRegion(region, 'VV.image.stats(picture, region)');
+      return yield* callSteps('image.stats', { picture: image, region: area });
+    }
+
+    function* fractionSteps(picture, ranges, region) {
+      allowed('image.fraction');
+      const where = optional(region) ? 'VV.image.fraction(picture, ranges)' : 'VV.image.fraction(picture, ranges, region)';
+      const image = pictureRef(picture, where);
+      const checked = checkRanges(ranges, where);
+      const area = optional(region) ? null : checkRegion(region, where);
+      return yield* callSteps('image.fraction', { picture: image, ranges: checked, region: area });
+    }
+
+    function* cropSteps(picture, region) {
+      allowed('image.crop');
+      const where = 'VV.image.crop(picture, region)';
+      const image = pictureRef(picture, where);
+      const area = checkRegion(region, where);
+      return yield* callSteps('image.crop', { picture: image, region: area, source: pictureSource(picture, where) });
+    }
+
+    function* resizeSteps(picture, width, height) {
+      allowed('image.resize');
+      const where = 'VV.image.resize(picture, width, height)';
+      const image = pictureRef(picture, where);
+      const w = checkInteger(where + ': width', width, 1, MAX_RESIZE);
+      const h = checkInteger(where + ': height', height, 1, MAX_RESIZE);
+      return yield* callSteps('image.resize', { picture: image, width: w, height: h, source: pictureSource(picture, where) });
+    }
+
+    const waiting = freeze({
+      'message.send': sendSteps,
+      'message.receive': receiveSteps,
+      'image.stats': statsSteps,
+      'image.fraction': fractionSteps,
+      'image.crop': cropSteps,
+      'image.resize': resizeSteps,
+    });
+
     function checkKey(key, where) {
       if (typeof key !== 'string' || key.length === 0 || key.length > MAX_KEY) {
         throw new TypeError(where + ': the key must be a string of 1 to ' + MAX_KEY + ' characters, got ' + describe(key));
@@ -811,21 +1056,7 @@
     function store(key, value) {
       allowed('storage.store');
       checkKey(key, 'VV.storage.store(key, value)');
-      let text;
-      try {
-        text = jsonStringify(value);
-      } catch (e) {
-        throw new TypeError('VV.storage.store(' + jsonStringify(key) + ', value): the value cannot be stored as JSON: ' + (e && e.message));
-      }
-      if (text === undefined) {
-        throw new TypeError('VV.storage.store(' + jsonStringify(key) + ', value): the value must be JSON (not undefined or a function)');
-      }
-      if (reflectApply(regExpTest, UNSTORABLE_ESCAPE, [text])) {
-        throw new RangeError('VV.storage.store(' + jsonStringify(key) + ', value): the value holds a string with a lone surrogate (half of a UTF-16 pair) or the character U+0000, which cannot be stored');
-      }
-      if (jsonDepth(text) > MAX_DEPTH) {
-        throw new RangeError('VV.storage.store(' + jsonStringify(key) + ', value): the value nests arrays and objects more than ' + MAX_DEPTH + ' levels deep');
-      }
+      const text = storableText(value, 'stored', 'VV.storage.store', key);
       const old = reflectApply(mapGet, storage, [key]);
       const bytes = utf8Bytes(key) + utf8Bytes(text);
       const used = storageChars - (old === undefined ? 0 : utf8Bytes(key) + utf8Bytes(old)) + bytes;
@@ -932,14 +1163,26 @@
       types: freeze({ LatLngAlt: LatLngAlt, LatLng: LatLng }),
       task: freeze({ execute: execute, executeAll: executeAll }),
       storage: freeze({ store: store, load: load, list: list, remove: remove }),
+      message: freeze({
+        send: function send(to, value) { return settle(sendSteps(to, value)); },
+        receive: function receive(timeoutS) { return settle(receiveSteps(timeoutS)); },
+      }),
+      image: freeze({
+        stats: function stats(picture, region) { return settle(statsSteps(picture, region)); },
+        fraction: function fraction(picture, ranges, region) { return settle(fractionSteps(picture, ranges, region)); },
+        crop: function crop(picture, region) { return settle(cropSteps(picture, region)); },
+        resize: function resize(picture, width, height) { return settle(resizeSteps(picture, width, height)); },
+      }),
       log: function log(...args) { allowed('log'); logLine(args); },
-      errors: freeze({ TaskRejectedError: TaskRejectedError, VVMError: VVMError }),
+      errors: freeze({ TaskRejectedError: TaskRejectedError, VVMError: VVMError, MessageError: MessageError, ImageError: ImageError }),
     });
     const stdOut = freeze({ println: function println(msg) { allowed('log'); logLine([msg]); } });
 
     state.globals = {
       VV: VV,
       TaskRejectedError: TaskRejectedError,
+      MessageError: MessageError,
+      ImageError: ImageError,
       logInfo: function logInfo(msg) { allowed('log'); logLine([msg]); },
       getStdOut: function getStdOut() { return stdOut; },
     };
@@ -952,6 +1195,7 @@
     };
     state.executeSteps = executeSteps;
     state.executeAllSteps = executeAllSteps;
+    state.waiting = waiting;
     state.rethrow = function (e) { if (e === SUSPEND || suspended) throw SUSPEND; };
     state.isSuspended = function () { return suspended; };
     state.storage = storage;
@@ -1058,6 +1302,12 @@
   // The call sites instrument.py turned into `yield*`: the same calls, waiting by yielding.
   constant('__cpcc_execute', hook(function* execute(task, callback) { return yield* run.executeSteps(task, callback); }));
   constant('__cpcc_executeAll', hook(function* executeAll(tasks, callback) { return yield* run.executeAllSteps(tasks, callback); }));
+  constant('__cpcc_send', hook(function* send(to, value) { return yield* run.waiting['message.send'](to, value); }));
+  constant('__cpcc_receive', hook(function* receive(timeoutS) { return yield* run.waiting['message.receive'](timeoutS); }));
+  constant('__cpcc_stats', hook(function* stats(picture, region) { return yield* run.waiting['image.stats'](picture, region); }));
+  constant('__cpcc_fraction', hook(function* fraction(picture, ranges, region) { return yield* run.waiting['image.fraction'](picture, ranges, region); }));
+  constant('__cpcc_crop', hook(function* crop(picture, region) { return yield* run.waiting['image.crop'](picture, region); }));
+  constant('__cpcc_resize', hook(function* resize(picture, width, height) { return yield* run.waiting['image.resize'](picture, width, height); }));
 
   const hostApi = {
     // The VV's SDC entries: part of its checkpoint, the same for every run.

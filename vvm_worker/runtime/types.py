@@ -30,7 +30,13 @@ class ErrorKind(enum.StrEnum):
 # The VVM-API calls a customer's VVs may be limited to (the names prelude.js checks with
 # allowed(...)).
 VVM_API_CALLS = (
+    "image.crop",
+    "image.fraction",
+    "image.resize",
+    "image.stats",
     "log",
+    "message.receive",
+    "message.send",
     "sensor.get",
     "sensor.list",
     "storage.list",
@@ -51,9 +57,18 @@ class Limits:
     storage_bytes: int = 10 * 1024 * 1024
     max_tasks: int = 10_000
     allowed_calls: frozenset[str] | None = None  # None: every VVM-API call
+    max_messages: int = 1000  # messages a VV may send (VV.message.send)
+    message_bytes: int = 65536  # UTF-8 bytes of one message's JSON text
 
     def __post_init__(self) -> None:
-        if self.cpu_s <= 0 or self.heap_bytes <= 0 or self.storage_bytes < 0 or self.max_tasks < 0:
+        if (
+            self.cpu_s <= 0
+            or self.heap_bytes <= 0
+            or self.storage_bytes < 0
+            or self.max_tasks < 0
+            or self.max_messages < 0
+            or self.message_bytes < 0
+        ):
             raise ValueError(f"invalid limits: {self!r}")
 
 
@@ -68,6 +83,10 @@ class StepInput:
     running the program from its first line to where it waits takes (``StepResult.replay_time``
     of the last step): a step that has to replay gets that long again, twice, on top of its
     CPU quota; a step that resumes where the program waits gets the quota alone.
+    ``cpu_spent_s`` is the CPU the VV already used since it last waited for the outside world
+    (its steps in between and the host's work for its image calls and messages): it is taken
+    off the quota (``cpu_allowance_s``). It is not part of what a warm context compares to
+    decide whether it may resume.
     """
 
     vv_id: str
@@ -80,6 +99,13 @@ class StepInput:
     effects_applied: int = 0
     limits: Limits = field(default_factory=Limits)
     replay_s: float = 0.0
+    cpu_spent_s: float = 0.0
+
+    @property
+    def cpu_allowance_s(self) -> float:
+        """The CPU time the step's new work may take: the quota less what the VV already used
+        since it last waited for the outside world, never below 1 ms."""
+        return max(self.limits.cpu_s - self.cpu_spent_s, 0.001)
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,12 +134,16 @@ class TaskRequest:
 class PendingRequest:
     """The VVM-API call the program is blocked in.
 
-    ``kind`` is "task" (``VV.task.execute``) or "batch" (``VV.task.executeAll``); ``q`` the
+    ``kind`` is "task" (``VV.task.execute``), "batch" (``VV.task.executeAll``), "call" (a
+    call the host answers at once: ``op`` is "message.send", "image.stats", "image.fraction",
+    "image.crop" or "image.resize" and ``args`` its arguments as the prelude checked them) or
+    "message" (``VV.message.receive``, waiting at most ``timeout_s`` seconds); ``q`` the
     request's ordinal, which its journal answers carry; ``fingerprint`` the request as the
     program made it, kept in the journal to detect a non-deterministic program on replay (None
-    when a batch already has answers); ``open`` the batch indexes still without an answer;
-    ``line`` and ``column`` where in the program the call is made, when the step that made
-    the request reports it (the row keeps neither: ``to_json``).
+    when a batch already has answers); ``tasks`` the tasks asked for (none for "call" and
+    "message"); ``open`` the batch indexes still without an answer; ``line`` and ``column``
+    where in the program the call is made, when the step that made the request reports it
+    (the row keeps neither: ``to_json``).
     """
 
     kind: str
@@ -121,6 +151,10 @@ class PendingRequest:
     fingerprint: str | None
     tasks: tuple[TaskRequest, ...]
     open: tuple[int, ...]
+    op: str | None = None
+    # A dict cannot be hashed: equal requests still hash alike without it.
+    args: dict[str, Any] | None = field(default=None, hash=False)
+    timeout_s: float | None = None
     # Where it was asked for says nothing of what was asked: not compared.
     line: int | None = field(default=None, compare=False)
     column: int | None = field(default=None, compare=False)
@@ -128,16 +162,30 @@ class PendingRequest:
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PendingRequest:
         """The request as the prelude reports it and the VV's row keeps it (``to_json``)."""
-        tasks = tuple(TaskRequest.from_json(t) for t in data["tasks"])
+        tasks = tuple(TaskRequest.from_json(t) for t in data.get("tasks", ()))
+        op = data.get("op")
+        args = data.get("args")
+        timeout_s = data.get("timeout_s")
         return cls(
             kind=str(data["kind"]),
             q=int(data["q"]),
             fingerprint=data.get("r"),
             tasks=tasks,
             open=tuple(int(i) for i in data.get("open", range(len(tasks)))),
+            op=None if op is None else str(op),
+            args=None if args is None else dict(args),
+            timeout_s=None if timeout_s is None else float(timeout_s),
         )
 
     def to_json(self) -> dict[str, Any]:
+        # A task's or a batch's JSON stays as it was before calls and messages existed.
+        extra: dict[str, Any] = {}
+        if self.op is not None:
+            extra["op"] = self.op
+        if self.args is not None:
+            extra["args"] = self.args
+        if self.timeout_s is not None:
+            extra["timeout_s"] = self.timeout_s
         return {
             "kind": self.kind,
             "q": self.q,
@@ -151,6 +199,7 @@ class PendingRequest:
                 for t in self.tasks
             ],
             "open": list(self.open),
+            **extra,
         }
 
 

@@ -141,6 +141,14 @@ class VVM:
         return self.hosts_share_runtime or (vehicle_id is not None and vehicle_id in self.local_rvs)
 
 
+class VVAlreadyEnded(RuntimeError):
+    """The VV had already ended: there is nothing to cancel, and no message reaches it."""
+
+    def __init__(self, vv: VirtualVehicle) -> None:
+        super().__init__(f"{vv.name} has already ended ({vv.status})")
+        self.vv = vv
+
+
 class ProgramRejected(ValueError):
     """A program that cannot be accepted (a syntax error), with where the problem is."""
 

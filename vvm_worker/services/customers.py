@@ -27,6 +27,8 @@ class CustomerConfig(TypedDict, total=False):
     storage_bytes: int
     cpu_ms_per_step: int
     heap_bytes: int
+    max_messages_per_vv: int
+    max_message_bytes: int
     allowed_api_calls: list[str]
 
 
@@ -48,6 +50,8 @@ def customer_limits(*, customer: Customer) -> Limits:
         storage_bytes=customer.storage_bytes,
         max_tasks=customer.max_tasks_per_vv,
         allowed_calls=frozenset(calls) if calls else None,
+        max_messages=customer.max_messages_per_vv,
+        message_bytes=customer.max_message_bytes,
     )
 
 

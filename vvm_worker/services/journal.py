@@ -125,6 +125,9 @@ def journal_append(vv: VirtualVehicle, entry: dict[str, Any], vvm: VVM) -> None:
     transaction.on_commit(lambda: _remember(str(vv.pk), seq, text))
     vv.journal_length += 1
     vv.journal_bytes += len(json.dumps(entry, separators=(",", ":")))
+    if entry.get("k") not in ("ret", "err"):
+        # It waited for the outside world (a task, a message): its CPU quota starts again.
+        vv.call_cpu_s = 0.0
     if vv.journal_length == settings.CPCC_JOURNAL_WARN_ENTRIES:
         LogEntry.objects.create(
             vv=vv,

@@ -13,13 +13,12 @@ from typing import Any
 
 from django.core.exceptions import ValidationError
 from django.db import connection, transaction
-from django.db.models import F
+from django.db.models import F, JSONField, Value
 from django.utils import timezone
 
 from accounts.models import Customer, NotifyEvent, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
-from cpcc_site.json_depth import MAX_VALUE_DEPTH  # how deeply a stored value may nest
 from cpcc_site.prepared import PreparedRead, deferred, insert_rows, pipelined, save_fields
 from fleet.models import GroundStation, Vehicle
 from missions.events import task_event, vv_event
@@ -53,12 +52,14 @@ from vvm_worker.runtime.v8 import V8Closed
 from vvm_worker.services.base import (
     VVM,
     ProgramRejected,
+    VVAlreadyEnded,
     ground_station_for,
     ground_stations_loaded,
     logger,
     pending_json,
     pending_of,
 )
+from vvm_worker.services.calls import vv_answer_call, vv_answer_receive
 from vvm_worker.services.customers import customer_limits
 from vvm_worker.services.fleet import vehicle_record_state
 from vvm_worker.services.journal import JournalView, journal_append, journal_full
@@ -69,18 +70,11 @@ from vvm_worker.services.routing import (
     vv_release_tasks,
     vv_route,
 )
+from vvm_worker.services.values import Unstorable, check_text, json_value
 
 
 class NotACustomer(PermissionError):
     """The user belongs to no customer, so it cannot own VVs."""
-
-
-class VVAlreadyEnded(RuntimeError):
-    """The VV had already ended, so there is nothing to cancel."""
-
-    def __init__(self, vv: VirtualVehicle) -> None:
-        super().__init__(f"{vv.name} has already ended ({vv.status})")
-        self.vv = vv
 
 
 class VVNotEnded(RuntimeError):
@@ -121,10 +115,7 @@ MAX_STEPS_PER_ADVANCE = 50
 MAX_COPIES = 50
 _KEY_CHARS = StorageDocument._meta.get_field("key").max_length or 0
 _SHOWN_KEY_CHARS = 40  # of a key quoted in an error
-
-
-class _Unstorable(ValueError):
-    """An effect of a step that the database cannot store, with what is wrong and where."""
+_JSON_NULL = Value(None, JSONField())
 
 
 class _StepBroke(Exception):
@@ -305,8 +296,14 @@ def _run_step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
         effects_applied=vv.effects_applied,
         limits=customer_limits(customer=vv.customer),
         replay_s=vv.last_step_s,
+        cpu_spent_s=vv.call_cpu_s,
     )
     result = vvm.runtime.step(step)
+    # Its CPU since it last waited for the outside world (see ``VirtualVehicle.call_cpu_s``):
+    # a replay's own share is the platform's, not the program's.
+    vv.call_cpu_s += (
+        max(0.0, result.duration_s - vv.last_step_s) if result.replayed else result.duration_s
+    )
     refused = _apply_effects(vv, result, vvm)
     if refused is not None:
         logger.warning("vv step refused: %s", refused, extra=_about(vv))
@@ -328,7 +325,7 @@ def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> VVError 
     """
     try:
         final, lines = _storable(vv, result.effects, vvm)
-    except _Unstorable as exc:
+    except Unstorable as exc:
         message = f"the platform could not apply this step: {exc} (nothing of the step was applied)"
         return VVError(ErrorKind.PLATFORM, message)
     stored = [doc for doc in final.values() if doc is not None]
@@ -354,7 +351,7 @@ def _storable(
     vv: VirtualVehicle, effects: tuple[Effect, ...], vvm: VVM
 ) -> tuple[dict[str, StorageDocument | None], list[LogEntry]]:
     """A step's effects as rows: the last write of each key (None: removed) and the log lines.
-    Raises _Unstorable for the first effect that the database cannot store."""
+    Raises Unstorable for the first effect that the database cannot store."""
     final: dict[str, StorageDocument | None] = {}
     lines = []
     for effect in effects:
@@ -362,67 +359,26 @@ def _storable(
         if effect.op in ("store", "remove") and effect.key is not None:
             key = effect.key
             where = f"storage key {_quoted(key)}"
-            _check_text(key, where=where)
+            check_text(key, where=where)
             if len(key) > _KEY_CHARS:
-                raise _Unstorable(f"{where} is longer than {_KEY_CHARS} characters")
+                raise Unstorable(f"{where} is longer than {_KEY_CHARS} characters")
             text = effect.value_json if effect.op == "store" else None
             if text is None:
                 final[key] = None
                 continue
+            value = json_value(text, where=f"the value stored under {where}")
             final[key] = StorageDocument(
                 vv=vv,
                 key=key,
-                value=_json_value(text, where=f"the value stored under {where}"),
+                # JSON's null, not SQL's NULL (which the column refuses).
+                value=_JSON_NULL if value is None else value,
                 size_bytes=len(key.encode()) + len(text.encode()),  # in UTF-8, as stored
                 updated_s=at_s,
             )
         elif effect.op == "log" and effect.message is not None:
-            _check_text(effect.message, where=f"log line {effect.seq}")
+            check_text(effect.message, where=f"log line {effect.seq}")
             lines.append(LogEntry(vv=vv, seq=effect.seq, at_s=at_s, message=effect.message))
     return final, lines
-
-
-def _check_text(text: str, *, where: str) -> None:
-    """Raise _Unstorable for a string that no database column takes: PostgreSQL stores no
-    U+0000 (in text or in a JSON value), and no UTF-8 encodes a lone UTF-16 surrogate."""
-    nul = text.find("\x00")
-    if nul >= 0:
-        raise _Unstorable(f"{where} has the character U+0000 (character {nul + 1})")
-    try:
-        text.encode()
-    except UnicodeEncodeError as exc:
-        raise _Unstorable(
-            f"{where} has a lone UTF-16 surrogate (character {exc.start + 1})"
-        ) from None
-
-
-def _json_value(text: str, *, where: str) -> Any:
-    """The value of a JSON text, checked for what the database cannot store; _Unstorable if
-    it is not JSON, nests deeper than MAX_VALUE_DEPTH or holds a string _check_text refuses.
-    The check walks the value with a list, not by recursion, however deep it is."""
-    try:
-        value = json.loads(text)
-    except RecursionError:  # deeper than the parser's recursion goes
-        raise _Unstorable(f"{where} nests more than {MAX_VALUE_DEPTH} levels deep") from None
-    except ValueError as exc:
-        raise _Unstorable(f"{where} is not valid JSON ({exc})") from None
-    # The walk runs for every value a step stores: only when the text could hide what it looks
-    # for (a string with U+0000 or a surrogate comes from a \u escape or a non-ASCII text; more
-    # levels than the limit take more opening brackets).
-    escapes = "\\u" in text or not text.isascii()
-    if not escapes and text.count("[") + text.count("{") <= MAX_VALUE_DEPTH:
-        return value
-    todo: list[tuple[Any, int]] = [(value, 0)]
-    while todo:
-        item, depth = todo.pop()
-        if isinstance(item, str):
-            _check_text(item, where=f"a string in {where}")
-        elif isinstance(item, list | dict):
-            if depth >= MAX_VALUE_DEPTH:
-                raise _Unstorable(f"{where} nests more than {MAX_VALUE_DEPTH} levels deep")
-            children = item if isinstance(item, list) else [*item, *item.values()]
-            todo.extend((child, depth + 1) for child in children)
-    return value
 
 
 def _quoted(key: str) -> str:
@@ -528,6 +484,7 @@ _ADVANCED_FIELDS = (
     "error_column",
     "finished_s",
     "finished",
+    "call_cpu_s",
 )
 
 
@@ -556,24 +513,60 @@ def _advance_locked(vv: VirtualVehicle, vvm: VVM, *, before: tuple[Any, ...] | N
         vv.status = VVStatus.RUNNING
     for _ in range(MAX_STEPS_PER_ADVANCE):
         tasks = None
-        if vv.pending is None:
+        stepped = vv.pending is None
+        if stepped:
             result = _step(vv, vvm)
             if result.outcome is not Outcome.SUSPENDED:
                 _end(vv, result, vvm)
                 break
-            pending = pending_of(vv)
-            assert pending is not None
+        pending = result.pending if stepped else pending_of(vv)
+        assert pending is not None
+        if pending.kind == "call":  # answered here and now; the program goes on
+            over = _host_call(vv, pending, vvm)
+            if over is not None:
+                _end(vv, over, vvm)
+                break
+            continue
+        if pending.kind == "message":
+            if _host_receive(vv, pending, vvm):
+                continue
+            break  # it waits for a message (or its timeout) on a ground station
+        if stepped:
             tasks = _new_tasks(vv, pending, vvm)
         again = vv_route(vv=vv, vvm=vvm, open_tasks=tasks)
         _save_tasks(vv, tasks, vvm)
         if not again:
             break
     else:
-        # A program that keeps asking for tasks nobody can serve: let the host's other
-        # work go first, then carry on (the tasks-per-VV quota bounds it).
+        # A program that keeps asking for tasks nobody can serve, or makes call after call:
+        # let the host's other work go first, then carry on (the tasks-per-VV quota and the
+        # CPU quota bound it).
         vvm.dispatcher.vv_arrived(vv.pk)
     _save_changed(vv, before)
     vvm.announce(lambda: vv_event(vv))
+
+
+def _host_call(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> StepResult | None:
+    """``vv_answer_call``; a failure that is not the program's (a platform bug) breaks the
+    step, as in ``_step``."""
+    try:
+        return vv_answer_call(
+            vv=vv, pending=pending, limits=customer_limits(customer=vv.customer), vvm=vvm
+        )
+    except Exception as exc:
+        if isinstance(exc, V8Closed) or database.is_outage(exc):
+            raise
+        raise _StepBroke(exc) from exc
+
+
+def _host_receive(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> bool:
+    """``vv_answer_receive``; failures as in ``_host_call``."""
+    try:
+        return vv_answer_receive(vv=vv, pending=pending, vvm=vvm)
+    except Exception as exc:
+        if database.is_outage(exc):
+            raise
+        raise _StepBroke(exc) from exc
 
 
 # Every service holds a VV's row FOR NO KEY UPDATE (no_key): it never changes the row's key,

@@ -6,9 +6,15 @@ import re
 from pathlib import Path
 
 import accounts.api.views
-from accounts.models import DEFAULT_MAX_PARALLEL_VVS, DEFAULT_MAX_QUEUED_VVS, Customer
+from accounts.models import (
+    DEFAULT_MAX_MESSAGE_BYTES,
+    DEFAULT_MAX_MESSAGES_PER_VV,
+    DEFAULT_MAX_PARALLEL_VVS,
+    DEFAULT_MAX_QUEUED_VVS,
+    Customer,
+)
 from vvm_worker.runtime import VVM_API_CALLS
-from vvm_worker.services import vv_submit
+from vvm_worker.services import customer_limits, vv_submit
 
 PRELUDE = Path(__file__).resolve().parents[3] / "vvm_worker" / "runtime" / "prelude.js"
 
@@ -135,3 +141,26 @@ def test_staff_see_and_set_the_queued_vv_quota_customers_cannot(
     customer_a.refresh_from_db()
     customer_b.refresh_from_db()
     assert (customer_a.max_queued_vvs, customer_b.max_queued_vvs) == (7, DEFAULT_MAX_QUEUED_VVS)
+
+
+def test_staff_set_the_message_quotas_and_the_runtime_enforces_them(
+    api_staff, api_a, customer_a
+) -> None:
+    url = f"/api/v1/customers/{customer_a.pk}/"
+    shown = api_staff.get(url).json()
+    assert (shown["max_messages_per_vv"], shown["max_message_bytes"]) == (
+        DEFAULT_MAX_MESSAGES_PER_VV,
+        DEFAULT_MAX_MESSAGE_BYTES,
+    )
+    changed = api_staff.patch(
+        url, {"max_messages_per_vv": 0, "max_message_bytes": 300}, format="json"
+    )
+    assert changed.status_code == 200, changed.content
+    assert (changed.json()["max_messages_per_vv"], changed.json()["max_message_bytes"]) == (0, 300)
+    refused = api_staff.patch(url, {"max_message_bytes": 1}, format="json")
+    assert refused.status_code == 400 and "max_message_bytes" in refused.json()
+    assert api_staff.patch(url, {"max_messages_per_vv": -1}, format="json").status_code == 400
+    assert api_a.patch(url, {"max_message_bytes": 10**6}, format="json").status_code == 403
+    customer_a.refresh_from_db()
+    limits = customer_limits(customer=customer_a)
+    assert (limits.max_messages, limits.message_bytes) == (0, 300)

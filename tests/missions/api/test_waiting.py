@@ -172,3 +172,72 @@ def test_a_vv_on_an_rv_flying_to_its_task_says_when_it_gets_there_by_the_rvs_pla
         assert vv.status == VVStatus.FINISHED
         assert vv.tasks.get().done_s == pytest.approx(etas[vv.name], abs=0.5)
         assert waiting_of(api_a, vv) is None
+
+
+RECEIVER = """
+var got = VV.message.receive(%s);
+VV.storage.store('got', got === null ? 'nothing' : got.value);
+"""
+
+
+def _receiving(vv: VirtualVehicle) -> bool:
+    return (VirtualVehicle.objects.get(pk=vv.pk).pending or {}).get("kind") == "message"
+
+
+def test_a_vv_waiting_for_a_message_says_so_and_at_most_how_long_it_still_waits(
+    platform, ground_station, customer_a, user_a, api_a, client
+) -> None:
+    # The simulated clock on wall time: the API's "now" is the platform's.
+    platform.clock.t = time.time() - SIM_EPOCH_S
+    vv = vv_submit(customer=customer_a, name="Listener", program=RECEIVER % 600, vvm=platform.vvm)
+    platform.drain(until=lambda: _receiving(vv))
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.RUNNING and vv.host_gs is not None
+
+    waiting = waiting_of(api_a, vv)
+    assert waiting["reason"] == "message" and waiting["next_task_eta_s"] is None
+    match = re.fullmatch(r"waiting for a message, at most (\d+) min more", waiting["message"])
+    assert match and 9 <= int(match[1]) <= 10, waiting["message"]
+    started = vv.platform_datetime(vv.pending["until_s"] - 600)
+    assert waiting["since"] == started.isoformat().replace("+00:00", "Z")
+    # A list says the same (read from the rows of a page), and so does the VV's page.
+    (listed,) = api_a.get("/api/v1/vvs/").json()["results"]
+    assert listed["waiting"] == waiting
+    client.force_login(user_a)
+    assert waiting["message"] in client.get(f"/vvs/{vv.pk}/").content.decode()
+
+    # A message from the customer's own system: it takes it and goes on to its end.
+    sent = api_a.post(f"/api/v1/vvs/{vv.pk}/messages/", {"value": [1, 2]}, format="json")
+    assert sent.status_code == 201, sent.content
+    platform.drain()
+    vv.refresh_from_db()
+    assert vv.status == VVStatus.FINISHED, vv.error
+    assert vv.storage.get(key="got").value == [1, 2]
+    assert waiting_of(api_a, vv) is None
+    (shown,) = api_a.get(f"/api/v1/vvs/{vv.pk}/messages/").json()["results"]
+    assert shown["from"] is None and shown["received_at"] is not None
+
+
+def test_a_message_wait_near_its_timeout_counts_seconds_and_one_not_timed_yet_says_no_time(
+    customer_a, ground_station, vvm_factory, api_a
+) -> None:
+    vv = vv_submit(customer=customer_a, name="L", program="var a = 1;", vvm=vvm_factory())
+    now_s = time.time() - vv.platform_offset_s
+    receive = {"kind": "message", "q": 3, "tasks": [], "open": [], "timeout_s": 60.0}
+
+    def waits(**more: float) -> dict:
+        VirtualVehicle.objects.filter(pk=vv.pk).update(
+            status=VVStatus.RUNNING, pending={**receive, **more}
+        )
+        return waiting_of(api_a, vv)
+
+    # Before the host has looked for a message, its wait has no end yet.
+    assert waits() == {
+        "reason": "message",
+        "message": "waiting for a message",
+        "since": None,
+        "next_task_eta_s": None,
+    }
+    soon = waits(until_s=now_s + 40.4)["message"]
+    assert re.fullmatch(r"waiting for a message, at most (40|39) s more", soon)
+    assert waits(until_s=now_s - 5)["message"] == "waiting for a message, at most 0 s more"

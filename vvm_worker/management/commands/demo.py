@@ -7,6 +7,11 @@ server of simulated vehicles; with ``--mavlink``, each with its simulated autopi
 ``mavsim`` process of its own). Fleet events of the scenario are applied at their
 (accelerated) time; a vehicle added by one gets an RV worker of its own. Everything keeps
 running after the scenario ends.
+
+Without ``--scenario`` it runs the paper's Figure 3 and, next to it on the same fleet for a
+customer of their own, the examples of VVs that message each other and look at their pictures
+(``examples/scenarios/messages-and-images.json``); ``--also`` adds other scenarios to the one
+chosen.
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ from fleet.models import Driver, Vehicle
 from fleet.sources import autopilot_source
 from missions.models import ENDED_STATUSES, Task, TaskStatus, VirtualVehicle
 from vvm_worker.platform import platform_vvm
-from vvm_worker.scenario import FleetEvent, Scenario, ScenarioError, load_scenario
+from vvm_worker.scenario import FleetEvent, ScenarioError, load_scenario
 from vvm_worker.services import user_set_login, vehicle_update
 from vvm_worker.services.scenarios import (
     demo_reset,
@@ -42,6 +47,8 @@ from vvm_worker.services.scenarios import (
 )
 
 DEFAULT_SCENARIO = settings.BASE_DIR / "examples" / "scenarios" / "paper-fig3.json"
+# What runs next to the default scenario (and only then): its own customer, the same fleet.
+DEFAULT_ALSO = settings.BASE_DIR / "examples" / "scenarios" / "messages-and-images.json"
 START_TIMEOUT_S = 60.0
 # How long the stop waits for the processes (a worker lets its task in progress end first).
 STOP_S = 30.0
@@ -149,6 +156,15 @@ class Processes:
         return problems
 
 
+def _scenario_paths(options: dict[str, Any]) -> list[str]:
+    """The scenario files to run: ``--scenario`` (the paper's Figure 3 by default) and then
+    ``--also``'s, which without either option are the examples of messages and pictures."""
+    also = options["also"]
+    if also is None:
+        also = [str(DEFAULT_ALSO)] if options["scenario"] is None else []
+    return [options["scenario"] or str(DEFAULT_SCENARIO), *also]
+
+
 def _wait_for_port(host: str, port: int, processes: Processes) -> None:
     deadline = time.monotonic() + START_TIMEOUT_S
     while time.monotonic() < deadline:
@@ -163,7 +179,22 @@ class Command(BaseCommand):
     help = "Run the whole local system (web, Redis, a worker per GS, one for the RVs) until Ctrl-C."
 
     def add_arguments(self, parser: CommandParser) -> None:
-        parser.add_argument("--scenario", default=str(DEFAULT_SCENARIO), help="scenario file")
+        parser.add_argument(
+            "--scenario",
+            default=None,
+            help="scenario file (default: the paper's Figure 3, with the examples of messages "
+            "and pictures next to it)",
+        )
+        parser.add_argument(
+            "--also",
+            action="append",
+            default=None,
+            metavar="FILE",
+            help="another scenario to run next to --scenario: its ground stations, vehicles "
+            "(a vehicle of the same name is updated), customers, VVs and fleet events are added "
+            "(repeatable; by default messages-and-images.json when --scenario is not given, "
+            "none when it is)",
+        )
         parser.add_argument(
             "--speed",
             type=float,
@@ -185,7 +216,7 @@ class Command(BaseCommand):
             raise CommandError("--mavlink needs --speed > 0: a MAVLink copter cannot fly instantly")
         self.mavlink = options["mavlink"]
         try:
-            scenario = load_scenario(options["scenario"])
+            scenarios = [load_scenario(path) for path in _scenario_paths(options)]
         except ScenarioError as exc:
             raise CommandError(f"scenario error: {exc}") from None
         call_command("migrate", verbosity=0, interactive=False)
@@ -210,10 +241,15 @@ class Command(BaseCommand):
             admin_password = settings.CPCC_ADMIN_PASSWORD or _demo_password("admin")
             user_set_login(username="admin", password=admin_password, staff=True)
             demo_reset(reason="cancelled: demo restarted")
-            loaded = scenario_apply(
-                scenario=scenario,
-                password=settings.CPCC_SCENARIO_PASSWORD or _demo_password("customer"),
-            )
+            password = settings.CPCC_SCENARIO_PASSWORD or _demo_password("customer")
+            loaded = [
+                scenario_apply(scenario=scenario, password=password) for scenario in scenarios
+            ]
+            # One worker per ground station and vehicle, however many scenarios name it.
+            ground_stations = {
+                name: gs for each in loaded for name, gs in each.ground_stations.items()
+            }
+            vehicles = {name: vehicle for each in loaded for name, vehicle in each.vehicles.items()}
             processes.start(
                 "web",
                 "-m",
@@ -225,21 +261,28 @@ class Command(BaseCommand):
                 "cpcc_site.asgi:application",
             )
             _wait_for_port(options["host"], options["port"], processes)
-            for name in loaded.ground_stations:
+            for name in ground_stations:
                 processes.start(f"gsworker {name}", manage, "gsworker", name)
-            rv_workers = self._start_vehicles(list(loaded.vehicles.values()), processes, manage)
-            vvs = scenario_submit_all(scenario=scenario, loaded=loaded, vvm=platform_vvm())
+            rv_workers = self._start_vehicles(list(vehicles.values()), processes, manage)
+            vvs = [
+                vv
+                for scenario, its in zip(scenarios, loaded, strict=True)
+                for vv in scenario_submit_all(scenario=scenario, loaded=its, vvm=platform_vvm())
+            ]
             url = f"http://{options['host']}:{options['port']}/"
             self.stdout.write(self.style.SUCCESS(f"CPCC is running at {url}"))
             self.stdout.write(f"  admin: admin / {admin_password}  ({url}admin/)")
-            for username, password in loaded.logins:
-                self.stdout.write(f"  customer: {username} / {password or '(unchanged)'}")
+            for username, login_password in (login for each in loaded for login in each.logins):
+                self.stdout.write(f"  customer: {username} / {login_password or '(unchanged)'}")
+            names = " and ".join(repr(scenario.name) for scenario in scenarios)
             self.stdout.write(
-                f"Running {scenario.name!r} at speed {speed:g} with {len(loaded.ground_stations)} "
-                f"ground-station and {len(loaded.vehicles)} vehicle worker(s), the vehicles' in "
+                f"Running {names} at speed {speed:g} with {len(ground_stations)} "
+                f"ground-station and {len(vehicles)} vehicle worker(s), the vehicles' in "
                 f"{rv_workers} process(es). Ctrl-C stops everything."
             )
-            self._follow(scenario, [vv.pk for vv in vvs], speed, processes, manage)
+            # The fleet events of every scenario, in the order of their times.
+            events = sorted((e for s in scenarios for e in s.events), key=lambda e: e.at_s)
+            self._follow(events, [vv.pk for vv in vvs], speed, processes, manage)
             self.stdout.write(
                 self.style.SUCCESS("The scenario has ended; everything keeps running.")
             )
@@ -255,11 +298,17 @@ class Command(BaseCommand):
                 redis.stop()
 
     def _follow(
-        self, scenario: Scenario, vv_ids: list[Any], speed: float, processes: Processes, manage: str
+        self,
+        events: list[FleetEvent],
+        vv_ids: list[Any],
+        speed: float,
+        processes: Processes,
+        manage: str,
     ) -> None:
-        """Print progress until this run's VVs have ended, applying fleet events on time."""
+        """Print progress until this run's VVs have ended, applying fleet events (in the order
+        of their times) on time."""
         started = time.monotonic()
-        events = list(scenario.events)
+        events = list(events)
         last = None
         while True:
             processes.check()

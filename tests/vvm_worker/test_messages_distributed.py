@@ -1,0 +1,107 @@
+"""Messages between VVs on the distributed platform (worker processes of their own, tests/live.py,
+a real Redis, instant flights): two VVs on RVs in different cells, each RV its own worker
+process, exchange ten messages each way; with each RV worker SIGKILLed in the middle of the
+exchange, every message is still received exactly once, in order."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from missions.models import ENDED_STATUSES, Message, VirtualVehicle, VVStatus
+from tests.factories import (
+    AREA_ONE,
+    AREA_TWO,
+    CustomerFactory,
+    GroundStationFactory,
+    VehicleFactory,
+)
+from tests.live import Workers, wait_for
+from tests.vvm_worker.test_messages import ROUNDS, exchange
+from vvm_worker.platform import platform_vvm
+from vvm_worker.services import vv_submit
+
+pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
+
+
+@pytest.fixture
+def workers(broker_url: str, tmp_path: Path, transactional_db: None) -> Iterator[Workers]:
+    pool = Workers(tmp_path, broker_url, speed=0)
+    try:
+        yield pool
+    finally:
+        pool.stop_all()
+
+
+def both_ended(vvs: list[VirtualVehicle]) -> bool:
+    ids = [vv.pk for vv in vvs]
+    return VirtualVehicle.objects.filter(pk__in=ids, status__in=ENDED_STATUSES).count() == len(ids)
+
+
+def received(vvs: list[VirtualVehicle]) -> int:
+    return Message.objects.filter(recipient__in=vvs, received_s__isnull=False).count()
+
+
+def start_exchange(workers: Workers) -> list[VirtualVehicle]:
+    GroundStationFactory(name="GS Base")
+    VehicleFactory(name="Heli One", area=AREA_ONE)
+    VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.8675)
+    customer = CustomerFactory(name="Customer A")
+    vvm = platform_vvm()
+    vvs = [
+        vv_submit(
+            customer=customer,
+            name="west",
+            program=exchange(peer="east", lat=48.1111, lng=12.8610),
+            vvm=vvm,
+        ),
+        vv_submit(
+            customer=customer,
+            name="east",
+            program=exchange(peer="west", lat=48.1116, lng=12.8667),
+            vvm=vvm,
+        ),
+    ]
+    workers.start("gsworker", "GS Base")
+    workers.start("rvworker", "Heli One")
+    workers.start("rvworker", "Heli Two")
+    return vvs
+
+
+def assert_exchanged(vvs: list[VirtualVehicle]) -> None:
+    for vv, peer in zip(vvs, ("east", "west"), strict=True):
+        vv.refresh_from_db()
+        assert vv.status == VVStatus.FINISHED, vv.error
+        assert vv.storage.get(key="got").value == [[peer, i, 36] for i in range(ROUNDS)]
+        assert Message.objects.filter(sender=vv).count() == ROUNDS  # each sent once
+        assert not Message.objects.filter(recipient=vv, received_s__isnull=True).exists()
+        assert {t.vehicle.name for t in vv.tasks.all()} == {
+            "west": {"Heli One"},
+            "east": {"Heli Two"},
+        }[vv.name]
+
+
+def test_two_vvs_in_different_cells_exchange_ten_messages_each_way(workers) -> None:
+    vvs = start_exchange(workers)
+    wait_for(lambda: both_ended(vvs), timeout=120, what="both VVs to end", details=workers.logs)
+    assert_exchanged(vvs)
+
+
+def test_with_each_rv_worker_killed_mid_exchange_every_message_is_received_once_in_order(
+    workers,
+) -> None:
+    vvs = start_exchange(workers)
+    for name, after in (("Heli One", 4), ("Heli Two", 10)):
+        wait_for(
+            lambda after=after: received(vvs) >= after,
+            timeout=60,
+            what=f"{after} messages received",
+            details=workers.logs,
+        )
+        assert not both_ended(vvs), "the exchange ended before the kill"
+        workers.kill(name)
+        workers.start("rvworker", name)
+    wait_for(lambda: both_ended(vvs), timeout=180, what="both VVs to end", details=workers.logs)
+    assert_exchanged(vvs)

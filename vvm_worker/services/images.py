@@ -1,0 +1,128 @@
+"""The host's side of ``VV.image.*``: find the picture a VV names, check the VV received it,
+and answer the call with ``vvm_worker.imaging`` (a new picture is kept under MEDIA_ROOT).
+
+The caller (a VV's step, ``vvs``) charges the CPU time around ``image_call`` to the VV and
+turns ``ImageCallError`` into the program's ``ImageError``.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping
+from typing import Any
+
+from django.core.files.storage import default_storage
+from django.db.models import TextField
+from django.db.models.functions import Cast
+
+from missions.models import JournalEntry, VirtualVehicle
+from vvm_worker import imaging
+from vvm_worker.sensing import save_image
+
+# The platform's reference to a picture it keeps (``sensing.save_image``): the folder is the
+# first two digits of the name, so nothing else under MEDIA_ROOT can be named.
+REFERENCE = re.compile(r"readings/([0-9a-f]{2})/\1[0-9a-f]{30}\.(?:png|jpg)")
+
+# The source picture's fields a new picture carries on (the reading it came from).
+SOURCE_FIELDS = ("sensor", "time", "position")
+
+
+class ImageCallError(ValueError):
+    """An image call the host cannot answer; the message starts with the call as the program
+    wrote it and is the program's ImageError."""
+
+
+def image_call(*, vv: VirtualVehicle, op: str, args: Mapping[str, Any]) -> dict[str, Any] | float:
+    """Answer the VV's image call ``op`` ("image.stats", "image.fraction", "image.crop" or
+    "image.resize") with the pending request's ``args``.
+
+    Returns what the program gets: stats' object, fraction's number, or for crop and resize
+    the new picture ``{sensor, kind, time, position, image, width, height, format}`` (``sensor``,
+    ``time`` and ``position`` copied from ``args["source"]`` when it has them).
+    Raises ImageCallError for a picture the VV has not received (or that does not exist), one
+    that cannot be read, or an argument the picture does not fit.
+    """
+    call = _call_text(op, args)
+    try:
+        data = _picture_bytes(vv, args.get("picture"))
+        if data is None:
+            raise ImageCallError(f"{call}: not a picture this VV has received")
+        if op == "image.stats":
+            return imaging.stats(data, _optional_region(args))
+        if op == "image.fraction":
+            return imaging.fraction(data, _given(args, "ranges"), _optional_region(args))
+        if op == "image.crop":
+            picture = imaging.crop(data, imaging.Region.from_json(args.get("region")))
+        else:
+            picture = imaging.resize(data, _given(args, "width"), _given(args, "height"))
+    except imaging.ImagingError as error:
+        raise ImageCallError(f"{call}: {error}") from None
+    return _new_picture(picture, args.get("source"))
+
+
+def _given(args: Mapping[str, Any], name: str) -> Any:
+    """An argument as the request holds it (None when missing): imaging checks it."""
+    return args.get(name)
+
+
+def _optional_region(args: Mapping[str, Any]) -> imaging.Region | None:
+    """stats' and fraction's region: null for the whole picture."""
+    value = args.get("region")
+    return None if value is None else imaging.Region.from_json(value)
+
+
+def _call_text(op: str, args: Mapping[str, Any]) -> str:
+    """The call as the program wrote it, the start of every error message."""
+    if op == "image.stats":
+        arguments = "picture" if args.get("region") is None else "picture, region"
+    elif op == "image.fraction":
+        arguments = "picture, ranges" if args.get("region") is None else "picture, ranges, region"
+    elif op == "image.crop":
+        arguments = "picture, region"
+    elif op == "image.resize":
+        arguments = "picture, width, height"
+    else:
+        raise ImageCallError(f"VV.{op}: not an image call")
+    return f"VV.{op}({arguments})"
+
+
+def _picture_bytes(vv: VirtualVehicle, reference: object) -> bytes | None:
+    """The picture's bytes, or None unless it is one the platform keeps and the VV's journal
+    holds (a reading, a new picture or a message it received): a VV uses no other picture."""
+    if not isinstance(reference, str) or not REFERENCE.fullmatch(reference):
+        return None
+    quoted = json.dumps(reference)  # the whole JSON string, not a part of a longer one
+    texts = (
+        JournalEntry.objects.filter(vv_id=vv.pk)
+        .annotate(text=Cast("entry", output_field=TextField()))
+        .filter(text__contains=quoted)
+        .values_list("text", flat=True)
+    )
+    # SQLite's LIKE ignores case: the exact text is checked here.
+    if not any(quoted in text for text in texts.iterator()):
+        return None
+    try:
+        with default_storage.open(reference, "rb") as file:
+            return bytes(file.read())
+    except OSError:  # kept in the journal, but gone from MEDIA_ROOT
+        return None
+
+
+def _new_picture(picture: imaging.Picture, source: object) -> dict[str, Any]:
+    """The picture object crop and resize return, in a camera reading's field order."""
+    copied = source if isinstance(source, Mapping) else {}
+    result: dict[str, Any] = {}
+    if "sensor" in copied:
+        result["sensor"] = copied["sensor"]
+    result["kind"] = "camera"
+    for name in SOURCE_FIELDS[1:]:
+        if name in copied:
+            result[name] = copied[name]
+    result.update(
+        image=save_image(picture.data, "png"),
+        width=picture.width,
+        height=picture.height,
+        format="png",
+    )
+    return result
