@@ -100,7 +100,7 @@ def _picture_bytes(vv: VirtualVehicle, reference: object) -> bytes | None:
         .values_list("text", flat=True)
     )
     # SQLite's LIKE ignores case: the exact text is checked here.
-    if not any(quoted in text for text in texts.iterator()):
+    if not any(quoted in text for text in texts):  # (no server-side cursor: pipelined)
         return None
     try:
         with default_storage.open(reference, "rb") as file:
