@@ -36,7 +36,8 @@ def test_land_now_then_return_home_reach_the_autopilot(
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
     wait_for(
-        lambda: not sim.on_ground and distance_m(sim.position(), heli.depot) > 60,
+        # (over the ground: a copter climbing above its depot is not away from home)
+        lambda: not sim.on_ground and ground_distance_m(sim.position(), heli.depot) > 60,
         timeout=120,
         what="the copter on its way to VV 1's task",
         details=workers.logs,
