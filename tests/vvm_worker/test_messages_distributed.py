@@ -5,9 +5,6 @@ exchange, every message is still received exactly once, in order."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from pathlib import Path
-
 import pytest
 
 from missions.models import ENDED_STATUSES, Message, VirtualVehicle, VVStatus
@@ -19,20 +16,12 @@ from tests.factories import (
     VehicleFactory,
 )
 from tests.live import Workers, wait_for
+from tests.vvm_worker.test_distributed_faults import workers  # noqa: F401 - instant flights
 from tests.vvm_worker.test_messages import ROUNDS, exchange
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_submit
 
 pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
-
-
-@pytest.fixture
-def workers(broker_url: str, tmp_path: Path, transactional_db: None) -> Iterator[Workers]:
-    pool = Workers(tmp_path, broker_url, speed=0)
-    try:
-        yield pool
-    finally:
-        pool.stop_all()
 
 
 def both_ended(vvs: list[VirtualVehicle]) -> bool:
@@ -44,7 +33,7 @@ def received(vvs: list[VirtualVehicle]) -> int:
     return Message.objects.filter(recipient__in=vvs, received_s__isnull=False).count()
 
 
-def start_exchange(workers: Workers) -> list[VirtualVehicle]:
+def start_exchange(pool: Workers) -> list[VirtualVehicle]:
     GroundStationFactory(name="GS Base")
     VehicleFactory(name="Heli One", area=AREA_ONE)
     VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.8675)
@@ -64,9 +53,9 @@ def start_exchange(workers: Workers) -> list[VirtualVehicle]:
             vvm=vvm,
         ),
     ]
-    workers.start("gsworker", "GS Base")
-    workers.start("rvworker", "Heli One")
-    workers.start("rvworker", "Heli Two")
+    pool.start("gsworker", "GS Base")
+    pool.start("rvworker", "Heli One")
+    pool.start("rvworker", "Heli Two")
     return vvs
 
 
@@ -83,14 +72,16 @@ def assert_exchanged(vvs: list[VirtualVehicle]) -> None:
         }[vv.name]
 
 
-def test_two_vvs_in_different_cells_exchange_ten_messages_each_way(workers) -> None:
+def test_two_vvs_in_different_cells_exchange_ten_messages_each_way(
+    workers,  # noqa: F811 - the fixture
+) -> None:
     vvs = start_exchange(workers)
     wait_for(lambda: both_ended(vvs), timeout=120, what="both VVs to end", details=workers.logs)
     assert_exchanged(vvs)
 
 
 def test_with_each_rv_worker_killed_mid_exchange_every_message_is_received_once_in_order(
-    workers,
+    workers,  # noqa: F811 - the fixture
 ) -> None:
     vvs = start_exchange(workers)
     for name, after in (("Heli One", 4), ("Heli Two", 10)):

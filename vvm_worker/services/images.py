@@ -51,19 +51,14 @@ def image_call(*, vv: VirtualVehicle, op: str, args: Mapping[str, Any]) -> dict[
         if op == "image.stats":
             return imaging.stats(data, _optional_region(args))
         if op == "image.fraction":
-            return imaging.fraction(data, _given(args, "ranges"), _optional_region(args))
+            return imaging.fraction(data, args.get("ranges"), _optional_region(args))
         if op == "image.crop":
             picture = imaging.crop(data, imaging.Region.from_json(args.get("region")))
         else:
-            picture = imaging.resize(data, _given(args, "width"), _given(args, "height"))
+            picture = imaging.resize(data, args.get("width"), args.get("height"))
     except imaging.ImagingError as error:
         raise ImageCallError(f"{call}: {error}") from None
     return _new_picture(picture, args.get("source"))
-
-
-def _given(args: Mapping[str, Any], name: str) -> Any:
-    """An argument as the request holds it (None when missing): imaging checks it."""
-    return args.get(name)
 
 
 def _optional_region(args: Mapping[str, Any]) -> imaging.Region | None:
