@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed-stamp
 # (examples/scenarios/messages-and-images.json); `make demo SCENARIO=FILE` runs FILE alone.
 SCENARIO ?=
 
-.PHONY: demo test lint check bench bench-simulate bench-planner bench-load bench-burst bench-idle screenshots simulate-fig2 simulate-fig3 vendor clean
+.PHONY: demo test lint check bench bench-simulate bench-service-levels bench-planner bench-load bench-burst bench-idle screenshots simulate-fig2 simulate-fig3 vendor clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
@@ -59,6 +59,11 @@ bench: $(STAMP)
 # ~15 minutes; BENCH_SIMULATE="--large" adds 1,000 RVs and 100,000 tasks, hours).
 bench-simulate: $(STAMP)
 	$(PY) -m bench.simulate $(BENCH_SIMULATE)
+
+# A premium class (p95 30 s) on a busy 2x2 fleet that a standard customer floods, with the
+# service classes and without (bench/service_levels.py, ~2 minutes; JSON in var/bench/).
+bench-service-levels: $(STAMP)
+	$(PY) -m bench.service_levels $(BENCH_SERVICE_LEVELS)
 
 # The route planners on the demo5 protocol, overlapping areas, a survey and replanning times:
 # tables for docs/benchmarks.md and docs/planner-latency.png (bench/planner.py, ~15 minutes).

@@ -2,11 +2,14 @@ from typing import Any
 
 from django.contrib import admin
 from django.contrib.auth.admin import UserAdmin as BaseUserAdmin
+from django.db.models import Count, QuerySet
 from django.http import HttpRequest
 
-from accounts.models import ApiToken, Customer, User, Webhook
+from accounts.admin_reports import ServiceLevelsReportMixin
+from accounts.models import ApiToken, Customer, ServiceClass, User, Webhook
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import CustomerConfig, customer_create, customer_update
+from vvm_worker.services.customers import service_class_save
 from vvm_worker.services.notifications import webhook_delete
 from vvm_worker.services.tokens import api_token_revoke
 
@@ -23,14 +26,22 @@ class CustomerAdmin(admin.ModelAdmin):
     """Customers with their quotas and users; saved through the services, so more parallel
     VVs start queued ones at once."""
 
-    list_display = ["name", "slug", "privileged", "max_parallel_vvs", "max_tasks_per_vv"]
-    list_filter = ["privileged"]
+    list_display = [
+        "name",
+        "slug",
+        "privileged",
+        "service_class",
+        "max_parallel_vvs",
+        "max_tasks_per_vv",
+    ]
+    list_filter = ["privileged", "service_class"]
+    list_select_related = ["service_class"]
     search_fields = ["name", "slug"]
     prepopulated_fields = {"slug": ["name"]}
     filter_horizontal = ["allowed_sensors"]
     inlines = [CustomerUserInline]
     fieldsets = [
-        (None, {"fields": ["name", "slug", "privileged"]}),
+        (None, {"fields": ["name", "slug", "privileged", "service_class"]}),
         (
             "Quotas",
             {"fields": [*Customer.QUOTA_FIELDS, "allowed_sensors", "allowed_api_calls"]},
@@ -61,6 +72,30 @@ class CustomerAdmin(admin.ModelAdmin):
         # The service saved the allowed SDC entries; the users inline is saved here.
         for formset in formsets:
             self.save_formset(request, form, formset, change=change)
+
+
+@admin.register(ServiceClass)
+class ServiceClassAdmin(ServiceLevelsReportMixin, admin.ModelAdmin):
+    """Service classes: a p95 target and a weight, and how many customers are in each; saved
+    through the service. A class keeps its name (a new name is a new class)."""
+
+    list_display = ["name", "p95_s", "weight", "customer_count"]
+    search_fields = ["name"]
+    fields = ["name", "p95_s", "weight"]
+
+    def get_queryset(self, request: HttpRequest) -> QuerySet[ServiceClass]:
+        return super().get_queryset(request).annotate(customer_count=Count("customers"))
+
+    @admin.display(description="customers", ordering="customer_count")
+    def customer_count(self, obj: Any) -> int:
+        return int(obj.customer_count)
+
+    def get_readonly_fields(self, request: HttpRequest, obj: Any = None) -> list[str]:
+        return ["name"] if obj is not None else []
+
+    def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
+        saved = service_class_save(name=obj.name, p95_s=obj.p95_s, weight=obj.weight)
+        obj.pk = saved.pk
 
 
 @admin.register(User)

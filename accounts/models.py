@@ -33,6 +33,36 @@ class NotifyEvent(models.TextChoices):
     TASK_DONE = "task.done", "a task was done"
 
 
+class ServiceClass(models.Model):
+    """A service level staff promise customers: a target for the time from a task's request to
+    its reading (95th percentile) and a weight the planners give the class's requests. A
+    customer without a class has no target and weight 1."""
+
+    name = models.CharField(max_length=60, unique=True)
+    p95_s = models.FloatField(
+        validators=[MinValueValidator(0.1)],
+        help_text="Target: 95 % of the tasks are read within this many seconds of the request.",
+    )
+    weight = models.FloatField(
+        default=1.0,
+        validators=[MinValueValidator(0.01)],
+        help_text="How much one of its requests weighs in the planners' objective (1: like a "
+        "customer without a class).",
+    )
+
+    class Meta:
+        ordering = ["name"]
+        constraints = [
+            models.CheckConstraint(condition=models.Q(p95_s__gt=0), name="service_p95_positive"),
+            models.CheckConstraint(
+                condition=models.Q(weight__gt=0), name="service_weight_positive"
+            ),
+        ]
+
+    def __str__(self) -> str:
+        return self.name
+
+
 class Customer(models.Model):
     """A tenant of the platform: owns VVs, has quotas, never sees another customer's data."""
 
@@ -100,6 +130,14 @@ class Customer(models.Model):
         blank=True,
         help_text='VVM-API calls this customer\'s VVs may use, e.g. ["task.execute", '
         '"storage.store"]; empty means all.',
+    )
+    service_class = models.ForeignKey(
+        ServiceClass,
+        null=True,
+        blank=True,
+        on_delete=models.PROTECT,
+        related_name="customers",
+        help_text="The service level promised: a p95 target and a weight; empty: none.",
     )
     created = models.DateTimeField(auto_now_add=True)
     # The events someone of the customer listens for (a webhook, or a user's e-mail): the

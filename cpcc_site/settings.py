@@ -368,7 +368,11 @@ SPECTACULAR_SETTINGS = {
     "SWAGGER_UI_FAVICON_HREF": "SIDECAR",
     "REDOC_DIST": "SIDECAR",
     # One name for a choice set that several fields use (webhooks' events and deliveries').
-    "ENUM_NAME_OVERRIDES": {"NotifyEventEnum": "accounts.models.NotifyEvent"},
+    "ENUM_NAME_OVERRIDES": {
+        "NotifyEventEnum": "accounts.models.NotifyEvent",
+        "SensorKindEnum": "fleet.models.SensorKind",
+        "VehicleKindEnum": "fleet.models.VehicleKind",
+    },
     "POSTPROCESSING_HOOKS": [
         "drf_spectacular.hooks.postprocess_schema_enums",
         "cpcc_site.api.add_error_responses",

@@ -1,6 +1,7 @@
 from datetime import datetime
 from typing import Any
 
+from django import forms
 from django.conf import settings
 from django.contrib import admin, messages
 from django.core.exceptions import PermissionDenied
@@ -26,9 +27,15 @@ from fleet.models import (
     SensorType,
     Vehicle,
     VehicleCommand,
+    VehicleKind,
     VehicleStatus,
 )
-from fleet.selectors import ground_station_list, vehicle_list
+from fleet.selectors import (
+    ground_station_list,
+    sensor_carriers,
+    sensors_not_carried,
+    vehicle_list,
+)
 from fleet.widgets import AreaWidget, map_media
 from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
@@ -185,6 +192,8 @@ def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]
     return {
         "id": vehicle.pk,
         "name": vehicle.name,
+        "kind": vehicle.kind,
+        "kind_label": vehicle.get_kind_display(),
         "url": reverse("admin:fleet_vehicle_change", args=[vehicle.pk]),
         "act_url": reverse("admin:fleet_vehicle_act", args=[vehicle.pk]),
         "driver": vehicle.get_driver_display(),
@@ -216,11 +225,47 @@ def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]
 _NOT_FOR_THE_MAP = ("actions", "command", "status_changed", "health_changed")
 
 
+class SensorTypeForm(forms.ModelForm):
+    """An SDC entry, with the vehicle kinds that can carry it as checkboxes; it may not leave
+    out the kind of an RV that carries it."""
+
+    kinds = forms.MultipleChoiceField(
+        choices=VehicleKind.choices,
+        widget=forms.CheckboxSelectMultiple,
+        required=False,
+        help_text="The vehicle kinds that can carry it; none ticked: every kind.",
+    )
+
+    class Meta:
+        model = SensorType
+        fields = ["name", "kind", "unit", "params", "privileged", "description", "kinds"]
+
+    def clean_kinds(self) -> list[str]:
+        kinds = [kind for kind in VehicleKind.values if kind in self.cleaned_data["kinds"]]
+        if kinds and self.instance.pk is not None:
+            left_out = [
+                f"{v.name} ({v.kind})"
+                for v in sensor_carriers(sensor=self.instance)
+                if v.kind not in kinds
+            ]
+            if left_out:
+                raise forms.ValidationError(
+                    f"carried by {', '.join(left_out)}: tick their kind too, or take the sensor "
+                    "off them first"
+                )
+        return kinds
+
+
 @admin.register(SensorType)
 class SensorTypeAdmin(admin.ModelAdmin):
-    list_display = ["name", "kind", "unit", "privileged"]
+    form = SensorTypeForm
+    list_display = ["name", "kind", "unit", "privileged", "kinds_shown"]
     list_filter = ["kind", "privileged"]
     search_fields = ["name"]
+
+    @admin.display(description="carried by")
+    def kinds_shown(self, sensor: SensorType) -> str:
+        return ", ".join(sensor.kinds) or "every kind"
 
 
 @admin.register(GroundStation)
@@ -302,13 +347,33 @@ class RallyPointAdmin(PositionShown, _AirspaceAdmin):
         rally_point_delete(point=obj, vvm=platform_vvm())
 
 
+class VehicleForm(forms.ModelForm):
+    """An RV's configuration; its kind's limits are the model's (``Vehicle.clean``), and a
+    sensor its kind cannot carry is an error naming the sensor."""
+
+    class Meta:
+        model = Vehicle
+        fields = ["kind", "sensors"]  # the admin gives it its fieldsets' fields
+
+    def clean(self) -> dict[str, Any]:
+        cleaned: dict[str, Any] = super().clean() or {}
+        kind, sensors = cleaned.get("kind"), cleaned.get("sensors")
+        if kind and sensors is not None:
+            problem = sensors_not_carried(kind=kind, sensors=sensors)
+            if problem is not None:
+                raise forms.ValidationError(problem)
+        return cleaned
+
+
 @admin.register(Vehicle)
 class VehicleAdmin(PositionShown, admin.ModelAdmin):
-    """RVs: their limits and sensors; status changes go through the actions, which move the
-    VVs aboard an RV that leaves service to RVs that can serve them."""
+    """RVs: their kind, limits and sensors; status changes go through the actions, which move
+    the VVs aboard an RV that leaves service to RVs that can serve them."""
 
+    form = VehicleForm
     list_display = [
         "name",
+        "kind",
         "status",
         "driver",
         "max_speed_shown",
@@ -316,7 +381,7 @@ class VehicleAdmin(PositionShown, admin.ModelAdmin):
         "tasks_done",
         "worker_seen",
     ]
-    list_filter = ["status", "driver"]
+    list_filter = ["status", "kind", "driver"]
     search_fields = ["name"]
     filter_horizontal = ["sensors"]
     readonly_fields = [
@@ -345,6 +410,7 @@ class VehicleAdmin(PositionShown, admin.ModelAdmin):
             {
                 "fields": [
                     "name",
+                    "kind",
                     ("status", "status_reason", "status_changed"),
                     "driver",
                     "driver_url",
@@ -360,6 +426,7 @@ class VehicleAdmin(PositionShown, admin.ModelAdmin):
                     "area",
                     ("min_altitude_m", "max_altitude_m"),
                     ("max_speed_mps", "climb_rate_mps"),
+                    ("dive_rate_mps", "turn_rate_dps"),
                     "battery_s",
                     "sensors",
                     "sensor_sources",
@@ -421,7 +488,8 @@ class VehicleAdmin(PositionShown, admin.ModelAdmin):
             **self.admin_site.each_context(request),
             "title": "Fleet overview",
             "opts": self.opts,
-            "media": map_media(js=("js/admin/fleet-overview.js",)),
+            # The vehicles' symbols are the live map's (CPCCMap.kindMarker).
+            "media": map_media(js=("js/map.js", "js/admin/fleet-overview.js")),
             "vehicles": vehicles,
             "stations": stations,
             "map_data": {

@@ -12,6 +12,7 @@ from django.db import models
 from shapely.geometry import Point, Polygon
 
 from fleet.geo import Position
+from fleet.kinds import AERIAL, GROUND, KINDS, SURFACE, UNDERWATER, limit_problems
 from fleet.sources import SensorSource, SourceError, parse_sources
 
 LAT = [MinValueValidator(-90.0), MaxValueValidator(90.0)]
@@ -57,6 +58,12 @@ class SensorType(models.Model):
         default=False, help_text="Only privileged customers' VVs may use it."
     )
     description = models.CharField(max_length=200, blank=True)
+    kinds = models.JSONField(
+        default=list,
+        blank=True,
+        help_text='Vehicle kinds that can carry it, e.g. ["underwater", "surface"]; empty: every '
+        "kind.",
+    )
 
     class Meta:
         ordering = ["name"]
@@ -68,6 +75,17 @@ class SensorType(models.Model):
 
     def as_catalog_entry(self) -> dict[str, object]:
         return {"name": self.name, "kind": self.kind, "unit": self.unit, "params": self.params}
+
+    def carried_by(self, kind: str) -> bool:
+        """Whether a vehicle of the kind can carry it (an entry naming no kinds: every kind)."""
+        return not self.kinds or kind in self.kinds
+
+    def clean(self) -> None:
+        super().clean()
+        if self.kinds is None:
+            self.kinds = []
+        if not isinstance(self.kinds, list) or any(k not in KINDS for k in self.kinds):
+            raise ValidationError({"kinds": f"a list of vehicle kinds: {', '.join(KINDS)}"})
 
 
 class GroundStation(models.Model):
@@ -100,6 +118,15 @@ class VehicleStatus(models.TextChoices):
     REMOVED = "removed", "Removed"
 
 
+class VehicleKind(models.TextChoices):
+    """How the vehicle moves (``fleet.kinds``): altitude below 0 is depth."""
+
+    AERIAL = AERIAL, "Aerial (copter)"
+    GROUND = GROUND, "Ground (rover)"
+    SURFACE = SURFACE, "Surface (boat)"
+    UNDERWATER = UNDERWATER, "Underwater (sub)"
+
+
 class Driver(models.TextChoices):
     SIM = "sim", "Simulated"
     MAVLINK = "mavlink", "MAVLink autopilot"
@@ -117,6 +144,7 @@ class Vehicle(models.Model):
     """A real vehicle (RV): where it may fly, how, which sensors it carries, and its state."""
 
     name = models.CharField(max_length=80, unique=True)
+    kind = models.CharField(max_length=10, choices=VehicleKind.choices, default=VehicleKind.AERIAL)
     status = models.CharField(
         max_length=12, choices=VehicleStatus.choices, default=VehicleStatus.ACTIVE
     )
@@ -140,10 +168,28 @@ class Vehicle(models.Model):
     depot_lng = models.FloatField(validators=LNG)
     depot_alt = models.FloatField(default=0.0)
     area = models.JSONField(help_text="Operation area: a closed ring of [lat, lng] points.")
-    min_altitude_m = models.FloatField(default=0.0, validators=[MinValueValidator(0.0)])
-    max_altitude_m = models.FloatField(validators=[MinValueValidator(0.0)])
+    # Metres above home; below 0 is depth (underwater vehicles). Its kind bounds the range.
+    min_altitude_m = models.FloatField(default=0.0)
+    max_altitude_m = models.FloatField()
     max_speed_mps = models.FloatField(validators=[MinValueValidator(0.1)])
-    climb_rate_mps = models.FloatField(default=3.0, validators=[MinValueValidator(0.1)])
+    climb_rate_mps = models.FloatField(
+        default=3.0,
+        validators=[MinValueValidator(0.1)],
+        help_text="Climb and descent rate; for an underwater vehicle, how fast it rises.",
+    )
+    dive_rate_mps = models.FloatField(
+        null=True,
+        blank=True,
+        validators=[MinValueValidator(0.1)],
+        help_text="Underwater vehicles: how fast it dives; empty: its climb rate.",
+    )
+    turn_rate_dps = models.FloatField(
+        null=True,
+        blank=True,
+        validators=[MinValueValidator(1.0)],
+        help_text="Ground and surface vehicles: how fast it turns, degrees a second; empty: "
+        "its kind's default.",
+    )
     battery_s = models.FloatField(null=True, blank=True, help_text="Flight endurance, seconds.")
     sensors = models.ManyToManyField(SensorType, related_name="vehicles", blank=True)
     sensor_sources = models.JSONField(
@@ -205,6 +251,20 @@ class Vehicle(models.Model):
     def clean(self) -> None:
         super().clean()
         check_ring(self.area, "area")
+        if None not in (self.min_altitude_m, self.max_altitude_m, self.max_speed_mps):
+            problems = limit_problems(
+                self.kind,
+                min_altitude_m=self.min_altitude_m,
+                max_altitude_m=self.max_altitude_m,
+                max_speed_mps=self.max_speed_mps,
+                depot_alt_m=self.depot_alt or 0.0,
+            )
+            if self.dive_rate_mps is not None and self.kind != UNDERWATER:
+                problems["dive_rate_mps"] = "only an underwater vehicle dives"
+            if self.turn_rate_dps is not None and self.kind not in (GROUND, SURFACE):
+                problems["turn_rate_dps"] = "only ground and surface vehicles turn in place"
+            if problems:
+                raise ValidationError(problems)
         if self.sensor_sources is None:  # an empty field in a form: no sources named
             self.sensor_sources = {}
         try:

@@ -35,6 +35,25 @@ def sensors_by_name(*, names: Iterable[str]) -> list[SensorType]:
     return [found[n] for n in wanted]
 
 
+def sensors_not_carried(*, kind: str, sensors: Iterable[SensorType]) -> str | None:
+    """What a vehicle of the kind cannot carry among these SDC entries, in words naming
+    each (``SensorType.kinds``), or None when it can carry them all."""
+    refused = [
+        f"{s.name!r} (carried by {', '.join(s.kinds)} vehicles only)"
+        for s in sensors
+        if not s.carried_by(kind)
+    ]
+    if not refused:
+        return None
+    article = "an" if kind[:1] in "aeiou" else "a"
+    return f"{article} {kind} vehicle cannot carry " + ", ".join(refused)
+
+
+def sensor_carriers(*, sensor: SensorType) -> QuerySet[Vehicle]:
+    """The RVs in the fleet (not removed) that carry the SDC entry, by name."""
+    return sensor.vehicles.exclude(status=VehicleStatus.REMOVED).order_by("name")
+
+
 def vehicle_list(*, status: str | None = None) -> QuerySet[Vehicle]:
     """Every RV, removed ones included (or those in one status), with its sensors."""
     vehicles = Vehicle.objects.prefetch_related("sensors").order_by("name")

@@ -4,7 +4,8 @@ may see what.
 Changes (a VV's status or host, its tasks, its migrations, the messages between its VVs) are
 appended to one Redis stream after their transaction commits; each RV worker appends its
 vehicle's state (position, VVs aboard, planned route) to a second stream twice a second and
-keeps the latest in a hash for snapshots. Every map socket reads both streams itself (blocking
+keeps the latest in a hash for snapshots (a vehicle's state names its ``kind``: aerial, ground,
+surface or underwater; altitude below 0 is depth). Every map socket reads both streams itself (blocking
 until something comes) and sends its browser one frame per batch with what that user may see
 (missions/consumers.py): no message is sent per change and per listener, and a frame leaves at
 most one batch interval after the change.
@@ -19,6 +20,7 @@ from __future__ import annotations
 import hashlib
 from typing import Any
 
+from fleet.kinds import DEFAULT_KIND
 from missions.models import HostKind, Message, Migration, Task, VirtualVehicle
 
 EVENTS_STREAM = "cpcc:map:events"
@@ -140,7 +142,9 @@ def vehicle_for(
 ) -> dict[str, Any] | None:
     """A vehicle's live state as this user may see it: everything for staff; for a customer,
     only a vehicle carrying one of its VVs, anonymous, with only its VVs aboard and no route
-    (the route would show other customers' tasks)."""
+    (the route would show other customers' tasks). Its ``kind`` (fleet.kinds; a state without
+    one is aerial's) is shown to both: the map draws a carrier as a copter, rover, boat or sub,
+    which says how it moves, not whose it is or who else it carries."""
     if staff:
         return state
     mine = [vv for vv in state.get("vvs", ()) if vv.get("customer") == customer_id]
@@ -151,6 +155,7 @@ def vehicle_for(
         "lat": state["lat"],
         "lng": state["lng"],
         "alt": state["alt"],
+        "kind": state.get("kind", DEFAULT_KIND),
         "phase": state.get("phase"),
         "t": state.get("t"),
         "vvs": mine,

@@ -5,6 +5,9 @@
   station and keeps the reason on its row, ``vvm_worker.services.waiting``);
 - ``queue``: it waits in its customer's queue behind the customer's other VVs (its place is
   read when it is shown: it changes whenever one of them ends);
+- ``service_level``: it is queued and admission holds it because the fleet misses its
+  customer's service class's target (admission keeps the reason on its row,
+  ``vvm_worker.services.vvs``);
 - ``flying``: it is aboard an RV with an open task, which its RV's plan expects to reach at
   ``next_task_eta_s`` (written by the RV's control loop when its plan changes);
 - ``message``: its program waits in ``VV.message.receive`` (its pending request, kind
@@ -137,6 +140,8 @@ def vv_waiting(
     if vv.is_ended:
         return None
     if vv.status == VVStatus.QUEUED:
+        if vv.waiting_reason == WaitReason.SERVICE_LEVEL:
+            return Waiting(vv.waiting_reason, vv.waiting_message, since_s=vv.waiting_since_s)
         if place is None:
             place = queue_places(vvs=[vv])[vv.pk]
         return Waiting(WaitReason.QUEUE, queue_message(place), since_s=vv.submitted_s)

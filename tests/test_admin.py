@@ -271,6 +271,7 @@ def test_admin_actions_take_an_rv_out_of_service_and_back(
 def _vehicle_form(vehicle, **changes) -> dict:
     data = {
         "name": vehicle.name,
+        "kind": vehicle.kind,
         "driver": vehicle.driver,
         "driver_url": vehicle.driver_url,
         "depot_lat": vehicle.depot_lat,

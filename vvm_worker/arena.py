@@ -45,7 +45,8 @@ TOLERANCE_M = 4.0
 
 @dataclass(frozen=True)
 class ArenaVehicle:
-    """One RV: its depot, operation area ((lat, lng) ring), limits and speeds."""
+    """One RV: its depot, operation area ((lat, lng) ring), limits, speeds and kind
+    (`fleet.simulation.VehicleSpec` says what `kind`, `dive_rate_mps`, `turn_rate_dps` do)."""
 
     name: str
     depot: Position
@@ -54,6 +55,9 @@ class ArenaVehicle:
     climb_rate_mps: float = 3.0
     min_altitude_m: float = 0.0
     max_altitude_m: float = 60.0
+    kind: str = "aerial"
+    dive_rate_mps: float | None = None
+    turn_rate_dps: float | None = None
 
 
 @dataclass(frozen=True)
@@ -131,7 +135,13 @@ class _Rig:
     def __init__(self, arena: Arena, spec: ArenaVehicle, planner: Planner) -> None:
         self.spec = spec
         self.driver = SimVehicle(
-            Kinematics(max_speed_mps=spec.max_speed_mps, climb_rate_mps=spec.climb_rate_mps),
+            Kinematics(
+                max_speed_mps=spec.max_speed_mps,
+                climb_rate_mps=spec.climb_rate_mps,
+                kind=spec.kind,
+                dive_rate_mps=spec.dive_rate_mps,
+                turn_rate_dps=spec.turn_rate_dps,
+            ),
             spec.depot,
         )
         self.polygon = Polygon([(lng, lat) for lat, lng in spec.area])
@@ -160,6 +170,8 @@ class _Rig:
             position=self.driver.position_at(now),
             max_speed_mps=self.spec.max_speed_mps,
             climb_rate_mps=self.spec.climb_rate_mps,
+            kind=self.spec.kind,
+            dive_rate_mps=self.spec.dive_rate_mps,
             open_tasks=len(open_tasks),
             route=(
                 tuple(t.position for t in self.loop.route if t.id in open_tasks)
@@ -196,7 +208,10 @@ class Arena:
             _Rig(
                 self,
                 v,
-                make_planner(planner, travel_time=TravelTime(v.max_speed_mps, v.climb_rate_mps)),
+                make_planner(
+                    planner,
+                    travel_time=TravelTime(v.max_speed_mps, v.climb_rate_mps, v.dive_rate_mps),
+                ),
             )
             for v in vehicles
         ]

@@ -70,7 +70,8 @@ NO_WAY = "no way around the no-fly zones reaches the task's position"
 @dataclass(frozen=True)
 class LoopTask:
     """An open task of the RV as the loop sees it. ``vv`` and ``group`` are the store's: the
-    VV that asked for it and the request it belongs to (an executeAll batch is one)."""
+    VV that asked for it and the request it belongs to (an executeAll batch is one);
+    ``weight``: its customer's service class weight (1 without a class)."""
 
     id: int
     position: Position
@@ -79,9 +80,12 @@ class LoopTask:
     sensors: tuple[str, ...] = ()
     vv: Any = None
     group: str | None = None
+    weight: float = 1.0
 
     def as_plan_task(self) -> PlanTask:
-        return PlanTask(self.id, self.position, self.requested_s, group=self.group)
+        return PlanTask(
+            self.id, self.position, self.requested_s, group=self.group, weight=self.weight
+        )
 
 
 @dataclass(frozen=True)

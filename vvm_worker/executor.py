@@ -23,6 +23,7 @@ from cpcc_site.prepared import PreparedRead
 from fleet.airspace import Airspace
 from fleet.driving import Driver, Sample, SensorFailure, SensorRead
 from fleet.geo import Position, within_m
+from fleet.kinds import limits_of
 from fleet.models import Driver as DriverKind
 from fleet.models import SensorType, Vehicle, VehicleStatus
 from fleet.plugins import SensorPlugin, plugin_class
@@ -58,18 +59,20 @@ _SDC_TTL_S = 10.0
 # An estimate of when an RV reaches a VV's task is written again when it moves by more.
 ESTIMATE_SLACK_S = 1.0
 _TASK_FIELDS = ("id", "lat", "lng", "alt", "tolerance_m", "requested_s", "sensors", "vv_id", "q")
+# The weight the planner gives a task: its customer's service class's, read with the task.
+_WEIGHT = "vv__customer__service_class__weight"
 # An RV's open tasks, oldest request first (read again whenever they may have changed).
 _OPEN_TASKS = PreparedRead(
     lambda vehicle_id: (
         Task.objects.filter(vehicle_id=vehicle_id, status=TaskStatus.OPEN)
         .order_by("requested_s", "id")
-        .values_list(*_TASK_FIELDS)
+        .values_list(*_TASK_FIELDS, _WEIGHT)
     ),
     samples=[("vehicle", -7_654_321)],
 )
 
 
-def _loop_task(task: Task) -> LoopTask:
+def _loop_task(task: Task, weight: float) -> LoopTask:
     return LoopTask(
         id=task.pk,
         position=Position(task.lat, task.lng, task.alt),
@@ -79,6 +82,7 @@ def _loop_task(task: Task) -> LoopTask:
         vv=task.vv_id,
         # The tasks of one request (an executeAll batch) share a group.
         group=f"{task.vv_id}:{task.q}",
+        weight=weight,
     )
 
 
@@ -106,6 +110,7 @@ class DatabaseStore:
         self.settled_log: list[tuple[DatabaseStore, _Waiting]] | None = None
         self._tasks: list[LoopTask] | None = None
         self._added: list[Task] = []  # put on the list since (see `add`)
+        self._weights: dict[Any, float] = {}  # each VV's service class weight, as last read
         self._status: str | None = None
         self.status_reason = ""  # why the status is what it is, as read with it
         # An operator's command that waits for the RV, as read with the status: (command,
@@ -138,7 +143,9 @@ class DatabaseStore:
     def open_tasks(self) -> Sequence[LoopTask]:
         if self._tasks is not None and any(t.pk is not None for t in self._added):
             # (One not saved yet is kept for later; the transaction saves it.)
-            added = [_loop_task(t) for t in self._added if t.pk is not None]
+            saved = [t for t in self._added if t.pk is not None]
+            weights = self._class_weights({t.vv_id for t in saved})
+            added = [_loop_task(t, weights.get(t.vv_id, 1.0)) for t in saved]
             self._added = [t for t in self._added if t.pk is None]
             have = {t.id for t in self._tasks}
             self._tasks = sorted(
@@ -155,12 +162,25 @@ class DatabaseStore:
                     sensors=tuple(sensors),
                     vv=vv_id,
                     group=f"{vv_id}:{q}",
+                    weight=1.0 if weight is None else weight,
                 )
-                for pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q in (
+                for pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q, weight in (
                     _OPEN_TASKS.rows(self.vehicle_id)
                 )
             ]
+            self._weights.update((t.vv, t.weight) for t in self._tasks)
         return self._tasks
+
+    def _class_weights(self, vv_ids: set[Any]) -> dict[Any, float]:
+        """The service class weight of each of these VVs' customers (1 without a class): those
+        not known yet in one query."""
+        unknown = vv_ids - self._weights.keys()
+        if unknown:
+            for vv_id, weight in VirtualVehicle.objects.filter(pk__in=unknown).values_list(
+                "pk", "customer__service_class__weight"
+            ):
+                self._weights[vv_id] = 1.0 if weight is None else weight
+        return self._weights
 
     def status(self) -> str:
         if self._status is None:
@@ -581,11 +601,15 @@ def time_scale(vehicle: Vehicle, speed: float) -> float:
 
 def kinematics(vehicle: Vehicle, *, scale: float = 1.0) -> KinematicSpec:
     """The vehicle's kinematics, ``scale`` times faster (time acceleration of a simulated
-    vehicle: distances stay right, flights and the battery's endurance shorten)."""
+    vehicle: distances stay right, flights, turns and the battery's endurance shorten)."""
+    turn_rate_dps = vehicle.turn_rate_dps or limits_of(vehicle.kind).turn_rate_dps
     return KinematicSpec(
         max_speed_mps=vehicle.max_speed_mps * scale,
         climb_rate_mps=vehicle.climb_rate_mps * scale,
         battery_s=None if vehicle.battery_s is None else vehicle.battery_s / scale,
+        kind=vehicle.kind,
+        dive_rate_mps=None if vehicle.dive_rate_mps is None else vehicle.dive_rate_mps * scale,
+        turn_rate_dps=None if turn_rate_dps is None else turn_rate_dps * scale,
     )
 
 
@@ -618,7 +642,7 @@ def build_rig(
     def planner_for(airspace: Airspace) -> Planner:
         return make_planner(
             planner,
-            travel_time=TravelTime(spec.max_speed_mps, spec.climb_rate_mps),
+            travel_time=TravelTime(spec.max_speed_mps, spec.climb_rate_mps, spec.dive_rate_mps),
             time_limit_s=plan_time_limit_s,
             airspace=airspace,
         )

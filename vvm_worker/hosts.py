@@ -342,6 +342,7 @@ class HostedRV:
     ) -> None:
         self.vehicle_id = vehicle.pk
         self.name = vehicle.name
+        self.kind = vehicle.kind
         self.host = host
         vvm, scheduler = host.vvm, host.scheduler
         scale = time_scale(vehicle, speed)
@@ -363,6 +364,7 @@ class HostedRV:
                 on_link_lost=self._link_lost_later,
                 name=vehicle.name,
                 gcs_failsafe_s=settings.CPCC_GCS_FAILSAFE_S,
+                kind=vehicle.kind,
             )
             driver.connect(timeout_s=settings.CPCC_MAVLINK_CONNECT_S)
         self.rig = build_rig(
@@ -489,7 +491,13 @@ class HostedRV:
         self._told = (state, now + BEACON_KEYFRAME_S)
         clock = self.host.clock
         publish_vehicle(
-            state | {"id": self.vehicle_id, "name": self.name, "t": clock.epoch_ms(now) / 1000}
+            state
+            | {
+                "id": self.vehicle_id,
+                "name": self.name,
+                "kind": self.kind,
+                "t": clock.epoch_ms(now) / 1000,
+            }
         )
 
     def _for_operators(self, now: float, health: dict[str, Any]) -> dict[str, Any]:

@@ -12,6 +12,7 @@ from shapely.geometry import Point, Polygon
 
 from fleet.airspace import ExclusionZone
 from fleet.geo import Position
+from fleet.kinds import AERIAL, DEFAULT_KIND, UNDERWATER
 from vvm_worker.planning import TravelTime, insertion_cost
 from vvm_worker.runtime.types import TaskRequest
 
@@ -23,7 +24,9 @@ QUEUE_PENALTY_S = 30.0
 
 @dataclass(frozen=True)
 class VehicleCaps:
-    """What the mapper needs to know about one RV."""
+    """What the mapper needs to know about one RV. Its altitude band (metres above home; below
+    0 is depth) already keeps within its kind's limits (`fleet.kinds`): a task at 0 m suits
+    an aerial, ground or surface vehicle, one below 0 only an underwater one."""
 
     id: int
     name: str
@@ -40,6 +43,8 @@ class VehicleCaps:
     route: tuple[Position, ...] = ()
     # The provider's no-fly zones, the same for every RV.
     no_fly: tuple[ExclusionZone, ...] = ()
+    kind: str = DEFAULT_KIND
+    dive_rate_mps: float | None = None  # how fast it goes down (None: its climb rate)
 
     def covers(self, task: TaskRequest) -> bool:
         return bool(self.area.covers(Point(task.lng, task.lat)))
@@ -58,7 +63,9 @@ class VehicleCaps:
         fit it in (`planning.insertion_cost` with the RV's travel times)."""
         target = Position(task.lat, task.lng, task.alt)
         unknown = max(0, self.open_tasks - len(self.route))
-        travel = TravelTime(self.max_speed_mps, self.climb_rate_mps)
+        travel = TravelTime(
+            self.max_speed_mps, self.climb_rate_mps, dive_rate_mps=self.dive_rate_mps
+        )
         return insertion_cost(travel, self.position, self.route, target) + (
             QUEUE_PENALTY_S * unknown
         )
@@ -107,12 +114,7 @@ def _why_not(task: TaskRequest, fleet: Sequence[VehicleCaps]) -> str:
         return f"no vehicle can serve the task at {where}: it is outside every operation area"
     in_range = [v for v in covering if v.min_altitude_m <= task.alt <= v.max_altitude_m]
     if not in_range:
-        lo = min(v.min_altitude_m for v in covering)
-        hi = max(v.max_altitude_m for v in covering)
-        return (
-            f"no vehicle can serve the task at {where}: the altitude is outside what the "
-            f"vehicles there can fly ({lo:g} to {hi:g} m)"
-        )
+        return f"no vehicle can serve the task at {where}: " + _out_of_reach(task, covering)
     carried = frozenset().union(*(v.sensors for v in in_range))
     missing = sorted(set(task.sensors) - carried)
     if not missing:
@@ -121,3 +123,21 @@ def _why_not(task: TaskRequest, fleet: Sequence[VehicleCaps]) -> str:
     return f"no vehicle can serve the task at {where}: none there carries " + ", ".join(
         repr(s) for s in missing
     )
+
+
+def _out_of_reach(task: TaskRequest, covering: Sequence[VehicleCaps]) -> str:
+    """Why no vehicle whose area covers the task reaches its altitude, in the customer's
+    words: how deep or high it is and what kind of vehicle would be needed, naming none."""
+    if task.alt < 0:
+        subs = [v for v in covering if v.kind == UNDERWATER]
+        depth = f"the task is {-task.alt:g} m below the surface"
+        if not subs:
+            return f"{depth}: no underwater vehicle covers it"
+        deepest = min(v.min_altitude_m for v in subs)
+        return f"{depth}: the underwater vehicles there dive to {-deepest:g} m at most"
+    flying = [v for v in covering if v.kind == AERIAL] if task.alt > 0 else covering
+    if not flying:
+        return f"the task is {task.alt:g} m above the ground: no aerial vehicle covers it"
+    lo = min(v.min_altitude_m for v in flying)
+    hi = max(v.max_altitude_m for v in flying)
+    return f"the altitude is outside what the vehicles there can fly ({lo:g} to {hi:g} m)"

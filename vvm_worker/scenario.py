@@ -6,7 +6,8 @@ they submit, optional SDC additions and optional fleet events. `load_scenario` r
 first problem found as a `ScenarioError` that names the place (`vehicles[1].area`) and, when
 known, the file. Nothing here touches the database: sensor names given to vehicles are only
 checked to be non-empty strings, because the catalog they refer to is the database's SDC plus
-the scenario's own `sensors`, which the loader knows.
+the scenario's own `sensors`, which the loader knows (it also checks that a vehicle's kind can
+carry each of its sensors).
 """
 
 from __future__ import annotations
@@ -23,6 +24,16 @@ from shapely.geometry import Polygon
 from shapely.validation import explain_validity
 
 from fleet.geo import Position
+from fleet.kinds import (
+    AERIAL,
+    DEFAULT_KIND,
+    GROUND,
+    KINDS,
+    SURFACE,
+    UNDERWATER,
+    limit_problems,
+)
+from vvm_worker.service_levels import ServiceClassSpec
 
 __all__ = [
     "CustomerSpec",
@@ -117,6 +128,10 @@ class VehicleSpec:
     battery_s: float | None = None
     climb_rate_mps: float | None = None
     driver_url: str | None = None
+    # How it moves (fleet.kinds); below 0 m is depth, which only an underwater vehicle reaches.
+    kind: str = DEFAULT_KIND
+    dive_rate_mps: float | None = None  # underwater: how fast it dives (None: its climb rate)
+    turn_rate_dps: float | None = None  # ground and surface: how fast it turns (None: default)
 
 
 @dataclass(frozen=True)
@@ -143,6 +158,7 @@ class CustomerSpec:
     heap_bytes: int | None = None
     max_messages_per_vv: int | None = None
     max_message_bytes: int | None = None
+    service_class: ServiceClassSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -167,6 +183,7 @@ class SensorSpecEntry:
     params: Mapping[str, Any] = field(hash=False)
     privileged: bool = False
     description: str | None = None
+    kinds: tuple[str, ...] = ()  # the vehicle kinds that can carry it (empty: every kind)
 
 
 @dataclass(frozen=True)
@@ -288,16 +305,20 @@ _TOP_OPTIONAL = ("name", "description", "sensors", "events", "no_fly_zones")
 _ZONE_REQUIRED = ("name", "area")
 _ZONE_OPTIONAL = ("min_altitude_m", "max_altitude_m")
 _GS_REQUIRED = ("name", "position")
-_VEHICLE_REQUIRED = (
-    "name",
-    "depot",
-    "area",
+# The altitudes are required of an aerial vehicle, and min_altitude_m of an underwater one
+# (`_Parser.altitudes`); a ground or surface vehicle stays at 0 m.
+_VEHICLE_REQUIRED = ("name", "depot", "area", "max_speed_mps", "sensors")
+_VEHICLE_OPTIONAL = (
+    "driver",
+    "battery_s",
+    "climb_rate_mps",
+    "driver_url",
     "min_altitude_m",
     "max_altitude_m",
-    "max_speed_mps",
-    "sensors",
+    "kind",
+    "dive_rate_mps",
+    "turn_rate_dps",
 )
-_VEHICLE_OPTIONAL = ("driver", "battery_s", "climb_rate_mps", "driver_url")
 _CUSTOMER_REQUIRED = ("name", "max_parallel_vvs")
 _CUSTOMER_QUOTAS = (
     "max_queued_vvs",
@@ -311,11 +332,17 @@ _CUSTOMER_QUOTAS = (
 # The least value of a quota where it is not 1 (as accounts.models.Customer validates them): a
 # customer's VVs may be allowed to send no message at all; a message may be kept to 2 bytes.
 _QUOTA_MINIMUM = {"max_messages_per_vv": 0, "max_message_bytes": 2}
-_CUSTOMER_OPTIONAL = ("privileged", *_CUSTOMER_QUOTAS)
+_CUSTOMER_OPTIONAL = ("privileged", "service_class", *_CUSTOMER_QUOTAS)
+_SERVICE_CLASS_REQUIRED = ("name", "p95_s")
+_SERVICE_CLASS_OPTIONAL = ("weight",)
 _VV_REQUIRED = ("customer", "name")
 _VV_OPTIONAL = ("program", "source", "submit_at_s", "copies")
 _SENSOR_REQUIRED = ("name", "kind", "unit")
-_SENSOR_OPTIONAL = ("params", "privileged", "description")
+_ALTITUDES_REQUIRED = {
+    AERIAL: ("min_altitude_m", "max_altitude_m"),
+    UNDERWATER: ("min_altitude_m",),
+}
+_SENSOR_OPTIONAL = ("params", "privileged", "description", "kinds")
 _EVENT_REQUIRED = ("at_s",)
 _EVENT_OPTIONAL = ("vehicle", "action", "add_vehicle")
 
@@ -419,6 +446,13 @@ def _integer(value: Any, path: str, *, minimum: int) -> int:
     return int(value)
 
 
+def _vehicle_kind(value: Any, path: str) -> str:
+    kind = _string(value, path)
+    if kind not in KINDS:
+        raise ScenarioError(path, f"unknown vehicle kind {kind!r} (one of: {', '.join(KINDS)})")
+    return kind
+
+
 def _position(value: Any, path: str) -> Position:
     items = _list(value, path)
     if len(items) != 3:
@@ -471,6 +505,26 @@ def _check_unique(names: Iterable[tuple[str, str]], what: str) -> None:
         first_at[name] = path
 
 
+def _check_service_classes(customers: Sequence[CustomerSpec]) -> None:
+    """Customers that name the same service class must give it the same target and weight:
+    raise at the second that differs, naming both customers."""
+    first: dict[str, int] = {}
+    for i, customer in enumerate(customers):
+        spec = customer.service_class
+        if spec is None:
+            continue
+        k = first.setdefault(spec.name, i)
+        seen = customers[k].service_class
+        if seen is not None and seen != spec:
+            raise ScenarioError(
+                f"customers[{i}].service_class",
+                f"service class {spec.name!r} is p95_s {spec.p95_s:g}, weight {spec.weight:g} "
+                f"for customer {customer.name!r} but p95_s {seen.p95_s:g}, weight "
+                f"{seen.weight:g} for customer {customers[k].name!r} (customers[{k}]): "
+                "a class has one target and one weight",
+            )
+
+
 class _Parser:
     """One validation pass over a scenario document; raises at the first problem."""
 
@@ -506,6 +560,7 @@ class _Parser:
         _check_unique(
             ((c.name, f"customers[{i}].name") for i, c in enumerate(customers)), "customer"
         )
+        _check_service_classes(customers)
         sensors = tuple(
             self.sensor(item, f"sensors[{i}]")
             for i, item in enumerate(_list(doc.get("sensors", []), "sensors"))
@@ -547,17 +602,24 @@ class _Parser:
     def vehicle(self, value: Any, path: str) -> VehicleSpec:
         obj = _object(value, path, _VEHICLE_REQUIRED, _VEHICLE_OPTIONAL)
         name = _string(obj["name"], _join(path, "name"))
+        kind = _vehicle_kind(obj.get("kind", DEFAULT_KIND), _join(path, "kind"))
         depot = _position(obj["depot"], _join(path, "depot"))
         area = _area(obj["area"], _join(path, "area"))
-        min_alt = _non_negative(obj["min_altitude_m"], _join(path, "min_altitude_m"))
-        max_alt = _non_negative(obj["max_altitude_m"], _join(path, "max_altitude_m"))
-        if min_alt > max_alt:
-            raise ScenarioError(
-                _join(path, "min_altitude_m"),
-                f"min_altitude_m ({obj['min_altitude_m']!r}) is above "
-                f"max_altitude_m ({obj['max_altitude_m']!r})",
-            )
+        min_alt, max_alt = self.altitudes(obj, path, kind)
         max_speed = _positive(obj["max_speed_mps"], _join(path, "max_speed_mps"))
+        problems = limit_problems(
+            kind,
+            min_altitude_m=min_alt,
+            max_altitude_m=max_alt,
+            max_speed_mps=max_speed,
+            depot_alt_m=depot.alt,
+        )
+        for key, problem in problems.items():  # the first one, like every other check
+            if key == "depot_alt":
+                raise ScenarioError(_join(path, "depot.alt"), f"{problem}, got {depot.alt:g}")
+            raise ScenarioError(_join(path, key), f"{problem}, got {obj.get(key, 0)!r}")
+        dive_rate = self.kind_rate(obj, path, "dive_rate_mps", kind, (UNDERWATER,))
+        turn_rate = self.kind_rate(obj, path, "turn_rate_dps", kind, (GROUND, SURFACE))
         sensors_path = _join(path, "sensors")
         sensors = tuple(
             _string(item, f"{sensors_path}[{i}]")
@@ -594,7 +656,51 @@ class _Parser:
             battery_s=battery_s,
             climb_rate_mps=climb_rate,
             driver_url=driver_url,
+            kind=kind,
+            dive_rate_mps=dive_rate,
+            turn_rate_dps=turn_rate,
         )
+
+    def altitudes(self, obj: Mapping[str, Any], path: str, kind: str) -> tuple[float, float]:
+        """A vehicle's (min_altitude_m, max_altitude_m): both required of an aerial vehicle;
+        a ground or surface vehicle's default to 0; an underwater vehicle needs how deep it
+        goes (min_altitude_m below 0), its max_altitude_m defaults to 0 (the surface)."""
+        for key in _ALTITUDES_REQUIRED.get(kind, ()):
+            if key not in obj:
+                what = f"missing required key {key!r}"
+                if kind == UNDERWATER:
+                    what += " (how deep it goes: below 0 is depth)"
+                raise ScenarioError(path, what)
+        # Only an underwater vehicle goes below 0 m; the others keep today's message.
+        read = _number if kind == UNDERWATER else _non_negative
+        min_alt = read(obj.get("min_altitude_m", 0.0), _join(path, "min_altitude_m"))
+        max_alt = read(obj.get("max_altitude_m", 0.0), _join(path, "max_altitude_m"))
+        if min_alt > max_alt:
+            raise ScenarioError(
+                _join(path, "min_altitude_m"),
+                f"min_altitude_m ({obj['min_altitude_m']!r}) is above "
+                f"max_altitude_m ({obj.get('max_altitude_m', 0)!r})",
+            )
+        if kind == UNDERWATER and min_alt >= 0:
+            raise ScenarioError(
+                _join(path, "min_altitude_m"),
+                "an underwater vehicle dives: min_altitude_m is how deep it goes and must be "
+                f"below 0 (e.g. -50), got {obj['min_altitude_m']!r}",
+            )
+        return min_alt, max_alt
+
+    def kind_rate(
+        self, obj: Mapping[str, Any], path: str, key: str, kind: str, kinds: tuple[str, ...]
+    ) -> float | None:
+        """A rate only some kinds have (a dive rate, a turn rate), or None when not given."""
+        if key not in obj:
+            return None
+        if kind not in kinds:
+            raise ScenarioError(
+                _join(path, key),
+                f"only {' and '.join(kinds)} vehicles have a {key}; this one is {kind}",
+            )
+        return _positive(obj[key], _join(path, key))
 
     def no_fly_zone(self, value: Any, path: str) -> NoFlyZoneSpec:
         obj = _object(value, path, _ZONE_REQUIRED, _ZONE_OPTIONAL)
@@ -627,7 +733,23 @@ class _Parser:
                 obj["max_parallel_vvs"], _join(path, "max_parallel_vvs"), minimum=1
             ),
             privileged=_bool(obj.get("privileged", False), _join(path, "privileged")),
+            service_class=(
+                self.service_class(obj["service_class"], _join(path, "service_class"))
+                if "service_class" in obj
+                else None
+            ),
             **quotas,
+        )
+
+    def service_class(self, value: Any, path: str) -> ServiceClassSpec:
+        obj = _object(value, path, _SERVICE_CLASS_REQUIRED, _SERVICE_CLASS_OPTIONAL)
+        name = _string(obj["name"], _join(path, "name"))
+        if len(name) > 60:
+            raise ScenarioError(_join(path, "name"), f"at most 60 characters, got {len(name)}")
+        return ServiceClassSpec(
+            name=name,
+            p95_s=_positive(obj["p95_s"], _join(path, "p95_s")),
+            weight=_positive(obj.get("weight", 1.0), _join(path, "weight")),
         )
 
     def sensor(self, value: Any, path: str) -> SensorSpecEntry:
@@ -656,6 +778,13 @@ class _Parser:
             params=MappingProxyType(json.loads(json.dumps(params))),
             privileged=_bool(obj.get("privileged", False), _join(path, "privileged")),
             description=description,
+            kinds=self.sensor_kinds(obj.get("kinds", []), _join(path, "kinds")),
+        )
+
+    def sensor_kinds(self, value: Any, path: str) -> tuple[str, ...]:
+        """The vehicle kinds that can carry an SDC entry (an empty list: every kind)."""
+        return tuple(
+            _vehicle_kind(item, f"{path}[{i}]") for i, item in enumerate(_list(value, path))
         )
 
     def vvs(self, items: list[Any], customers: set[str]) -> tuple[VVSpec, ...]:

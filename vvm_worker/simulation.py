@@ -50,6 +50,7 @@ from vvm_worker.services.scenarios import (
     scenario_event_apply,
     scenario_submit_vv,
 )
+from vvm_worker.services.service_levels import service_levels_classed, service_levels_report
 
 logger = logging.getLogger("cpcc.simulation")
 
@@ -337,13 +338,27 @@ class Simulation:
             for t in v["tasks"]
             if t["status"] == TaskStatus.DONE and t["done_s"] is not None
         ]
-        return {
+        summary: dict[str, Any] = {
             "makespan_s": max(finished) if finished else 0.0,
             "planner": self.planner_name,
             "vvs": vvs,
             "vehicles": vehicles,
             "migrations": migrations,
             "latency": latency_summary(waits),
+        }
+        # Only with classes, so that a scenario without any sums up as it always did.
+        if service_levels_classed(vv_ids=self.vv_ids):
+            summary["service_levels"] = self.service_levels()
+        return summary
+
+    def service_levels(self) -> dict[str, list[dict[str, object]]]:
+        """How each class's target was kept in this run: the report of the platform
+        (``service_levels_report``) over this run's VVs, per customer and per class."""
+        return {
+            "customers": [s.as_dict() for s in service_levels_report(vv_ids=self.vv_ids)],
+            "classes": [
+                s.as_dict() for s in service_levels_report(vv_ids=self.vv_ids, by_customer=False)
+            ],
         }
 
 

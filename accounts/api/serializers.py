@@ -6,10 +6,11 @@ from typing import Any
 
 from rest_framework import serializers
 
-from accounts.models import Customer
+from accounts.models import Customer, ServiceClass
 from cpcc_site.api import (
     StrictBooleanField,
     StrictCharField,
+    StrictFloatField,
     StrictIntegerField,
     StrictSlugField,
 )
@@ -56,6 +57,17 @@ class CustomerInSerializer(serializers.Serializer):
         required=False,
         help_text="VVM-API calls its VVs may use; empty: all.",
     )
+    service_class = serializers.SlugRelatedField(
+        slug_field="name",
+        queryset=ServiceClass.objects.all(),
+        allow_null=True,
+        required=False,
+        help_text="The name of its service class (/api/v1/service-classes/); null: none.",
+        error_messages={
+            "does_not_exist": "no service class named {value!r}: create it first "
+            "(POST /api/v1/service-classes/).",
+        },
+    )
 
     def config(self) -> CustomerConfig:
         """The validated input as model fields."""
@@ -70,14 +82,53 @@ class CustomerInSerializer(serializers.Serializer):
         return None if names is None else list(names)
 
 
+class ServiceClassInSerializer(serializers.Serializer):
+    """A service class: a p95 target for the time from a task's request to its reading, and
+    the weight the planners give its requests."""
+
+    name = StrictCharField(max_length=60)
+    p95_s = StrictFloatField(
+        min_value=0.1, help_text="Target: 95 % of the tasks are read within this many seconds."
+    )
+    weight = StrictFloatField(
+        min_value=0.01,
+        required=False,
+        default=1.0,
+        help_text="How much one of its requests weighs (1: like a customer without a class).",
+    )
+
+
+class ServiceClassOutSerializer(serializers.ModelSerializer):
+    """A service class as a customer's ``service_class`` shows it."""
+
+    class Meta:
+        model = ServiceClass
+        fields = ["name", "p95_s", "weight"]
+
+
+class ServiceClassListSerializer(serializers.ModelSerializer):
+    """A service class with how many customers are in it."""
+
+    customers = StrictIntegerField(
+        source="customer_count", read_only=True, default=0, help_text="Customers in it."
+    )
+
+    class Meta:
+        model = ServiceClass
+        fields = ["id", "name", "p95_s", "weight", "customers"]
+
+
 class CustomerOutSerializer(serializers.ModelSerializer):
-    """A customer: its quotas, what its VVs may use, its users."""
+    """A customer: its quotas, what its VVs may use, its users, its service class."""
 
     allowed_sensors = serializers.SlugRelatedField(slug_field="name", many=True, read_only=True)
     allowed_api_calls = serializers.ListField(child=StrictCharField())
     users = serializers.SlugRelatedField(slug_field="username", many=True, read_only=True)
     vvs_active = StrictIntegerField(
         read_only=True, default=0, help_text="Its VVs that have not ended."
+    )
+    service_class = ServiceClassOutSerializer(
+        read_only=True, allow_null=True, help_text="Its service class; null: none."
     )
 
     class Meta:
@@ -92,5 +143,6 @@ class CustomerOutSerializer(serializers.ModelSerializer):
             "allowed_api_calls",
             "users",
             "vvs_active",
+            "service_class",
             "created",
         ]

@@ -1,13 +1,15 @@
-"""Routes of the customer endpoints, and of a user's API tokens and webhooks."""
+"""Routes of the customer and service-class endpoints, and of a user's API tokens and
+webhooks."""
 
 from rest_framework.routers import SimpleRouter
 
 from accounts.api.tokens import ApiTokenViewSet
-from accounts.api.views import CustomerViewSet
+from accounts.api.views import CustomerViewSet, ServiceClassViewSet
 from accounts.api.webhooks import WebhookViewSet
 
 router = SimpleRouter()
 router.register("customers", CustomerViewSet, basename="customer")
+router.register("service-classes", ServiceClassViewSet, basename="service-class")
 router.register("tokens", ApiTokenViewSet, basename="api-token")
 router.register("webhooks", WebhookViewSet, basename="webhook")
 

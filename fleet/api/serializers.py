@@ -8,7 +8,7 @@ from drf_spectacular.utils import extend_schema_field
 from rest_framework import serializers
 
 from cpcc_site.api import StrictCharField, StrictFloatField, StrictIntegerField
-from fleet.models import Driver, GroundStation, SensorType, Vehicle
+from fleet.models import Driver, GroundStation, SensorType, Vehicle, VehicleKind
 from vvm_worker.services import GroundStationConfig, VehicleConfig
 
 
@@ -59,10 +59,17 @@ class SensorOutSerializer(serializers.ModelSerializer):
 
 
 class StaffSensorOutSerializer(SensorOutSerializer):
-    """An SDC entry as staff see it: also whether only privileged customers may use it."""
+    """An SDC entry as staff see it: also whether only privileged customers may use it, and
+    which vehicle kinds can carry it."""
+
+    kinds = serializers.ListField(
+        child=serializers.ChoiceField(choices=VehicleKind.choices),
+        read_only=True,
+        help_text="The vehicle kinds that can carry it; empty: every kind.",
+    )
 
     class Meta(SensorOutSerializer.Meta):
-        fields = [*SensorOutSerializer.Meta.fields, "privileged"]
+        fields = [*SensorOutSerializer.Meta.fields, "privileged", "kinds"]
 
 
 class VehicleInSerializer(serializers.Serializer):
@@ -87,10 +94,35 @@ class VehicleInSerializer(serializers.Serializer):
         help_text="Operation area: a closed ring of [lat, lng] points (the last repeats the "
         "first), at least 3 distinct points, not crossing itself.",
     )
-    min_altitude_m = StrictFloatField(min_value=0.0, required=False)
-    max_altitude_m = StrictFloatField(min_value=0.0)
+    kind = serializers.ChoiceField(
+        choices=VehicleKind.choices,
+        required=False,
+        help_text="How it moves (default aerial); its kind bounds its altitudes and speed: "
+        "ground and surface vehicles stay at 0 m, only underwater ones go below 0 (depth).",
+    )
+    min_altitude_m = StrictFloatField(
+        required=False, help_text="Metres above home; below 0 is depth (underwater only)."
+    )
+    max_altitude_m = StrictFloatField(help_text="Metres above home (0 for ground and surface).")
     max_speed_mps = StrictFloatField(min_value=0.1)
-    climb_rate_mps = StrictFloatField(min_value=0.1, required=False)
+    climb_rate_mps = StrictFloatField(
+        min_value=0.1,
+        required=False,
+        help_text="Climb and descent rate; for an underwater vehicle, how fast it rises.",
+    )
+    dive_rate_mps = StrictFloatField(
+        min_value=0.1,
+        required=False,
+        allow_null=True,
+        help_text="Underwater vehicles: how fast it dives; null: its climb rate.",
+    )
+    turn_rate_dps = StrictFloatField(
+        min_value=1.0,
+        required=False,
+        allow_null=True,
+        help_text="Ground and surface vehicles: how fast it turns in place, degrees a second; "
+        "null: its kind's default.",
+    )
     battery_s = StrictFloatField(
         min_value=1.0, required=False, allow_null=True, help_text="Flight endurance, seconds."
     )
@@ -153,6 +185,7 @@ class VehicleOutSerializer(serializers.ModelSerializer):
         fields = [
             "id",
             "name",
+            "kind",
             "status",
             "status_reason",
             "status_changed",
@@ -169,6 +202,8 @@ class VehicleOutSerializer(serializers.ModelSerializer):
             "max_altitude_m",
             "max_speed_mps",
             "climb_rate_mps",
+            "dive_rate_mps",
+            "turn_rate_dps",
             "battery_s",
             "sensors",
             "sensor_sources",

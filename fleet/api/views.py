@@ -105,7 +105,9 @@ VEHICLE_REFUSED = OpenApiResponse(
     description="A value is malformed, or breaks a rule the schema cannot say: the area is not "
     "a closed ring of at least 3 distinct points that does not cross itself, a sensor is not "
     "in the catalog, a sensor source does not fit its sensor, max_altitude_m is below "
-    "min_altitude_m. The body names the field.",
+    "min_altitude_m, the altitudes or the speed are beyond what its kind can do (ground and "
+    "surface vehicles stay at 0 m, only underwater ones go below 0), its kind cannot carry a "
+    "sensor. The body names the field.",
 )
 
 

@@ -169,8 +169,8 @@ class Commanding(LinkCore):
         """
         beat = self._require_link()
         try:
-            wanted = custom_mode_of(beat.autopilot, name)
-            params = set_mode_params(beat.autopilot, name)
+            wanted = custom_mode_of(beat.autopilot, name, beat.mav_type)
+            params = set_mode_params(beat.autopilot, name, beat.mav_type)
         except KeyError:
             raise MavlinkError(
                 f"unknown flight mode {name!r} for {beat.autopilot.value}", permanent=True

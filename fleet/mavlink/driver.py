@@ -23,6 +23,17 @@ How it flies:
   MAV_CMD_NAV_RETURN_TO_LAUNCH.
 - An operator's "land now" (``land``): MAV_CMD_NAV_LAND where the vehicle is (LAND mode if
   the command is unsupported); the autopilot lands and disarms there.
+- A rover or a boat (ArduRover, HEARTBEAT type GROUND_ROVER or SURFACE_BOAT): GUIDED, arm and
+  SET_POSITION_TARGET_GLOBAL_INT at altitude 0 (no take-off: it drives off), re-sent as for
+  a copter; home with MAV_CMD_NAV_RETURN_TO_LAUNCH (RTL mode if unsupported), which drives
+  home and stops there armed, so the driver disarms it once it stands at home; "land now" is
+  HOLD where it is, then a disarm once it stands. Landed means disarmed: parked.
+- A submarine (ArduSub, SUBMARINE): GUIDED, arm and position targets whose relative altitude
+  is the depth (below 0); ArduSub has no RTL: home is GUIDED to home at the surface, then a
+  disarm once there; "land now" is SURFACE (it rises where it is), then a disarm once it is up.
+
+The vehicle's kind comes from its HEARTBEAT type (``fleet.mavlink.modes.KIND_OF_TYPE``); a
+``kind`` the platform configured for it that differs is refused on connecting.
 
 If the vehicle leaves the mode the driver put it in while flying (a pilot, or a failsafe:
 battery, fence, radio), the driver stops commanding it: ``fly_to`` raises VehicleTookOver and
@@ -48,6 +59,7 @@ import PIL.Image
 
 from fleet.driving import Sample, SensorFailure, SensorRead
 from fleet.geo import Position, distance_m, ground_distance_m
+from fleet.kinds import AERIAL, GROUND, SURFACE, UNDERWATER, limits_of
 from fleet.mavlink.errors import (
     CommandDenied,
     LinkLost,
@@ -57,7 +69,7 @@ from fleet.mavlink.errors import (
 )
 from fleet.mavlink.link import MavlinkLink
 from fleet.mavlink.mission import exclusion_polygons, fence_polygon_items, rally_items
-from fleet.mavlink.modes import COPTER_TYPES, Autopilot
+from fleet.mavlink.modes import KIND_OF_TYPE, KIND_WORDS, Autopilot
 from fleet.mavlink.wire import mavlink
 from fleet.simulation.vehicle import (
     PHASE_CRUISE,
@@ -86,6 +98,8 @@ _ARDUPILOT_RESEND_S = 1.0
 _PX4_STREAM_HZ = 4.0
 _PX4_OFFBOARD_AFTER_S = 1.2  # PX4 enters offboard after a second of setpoints
 _STUCK_ARMED_S = 5.0  # landed but still armed this long after returning: disarm
+_STANDING_MPS = 0.3  # a rover, boat or sub this slow has stopped
+_SURFACE_M = 0.3  # a sub this close below home's altitude is at the surface
 _CAMERA = mavlink.MAV_COMP_ID_CAMERA  # the camera component (MAVLink camera protocol)
 _MAX_PICTURE_BYTES = 20_000_000
 
@@ -105,7 +119,28 @@ _MODES = {
         "land": frozenset({"AUTO.LAND"}),
     },
 }
-_RETURN_MODES = frozenset({"RTL", "LAND", "AUTO.RTL", "AUTO.LAND", "SMART_RTL", "AUTO_RTL"})
+# The same for the vehicles that do not fly (Autopilot.ARDUPILOT only), by kind.
+_GROUND_MODES = {
+    "goto": frozenset({"GUIDED"}),
+    "return": frozenset({"RTL"}),
+    "land": frozenset({"HOLD"}),
+}
+_KIND_MODES = {
+    GROUND: _GROUND_MODES,
+    SURFACE: _GROUND_MODES,
+    UNDERWATER: {
+        "goto": frozenset({"GUIDED"}),
+        "return": frozenset({"GUIDED"}),
+        "land": frozenset({"SURFACE"}),
+    },
+}
+_RETURN_MODES = frozenset(
+    {"RTL", "LAND", "AUTO.RTL", "AUTO.LAND", "SMART_RTL", "AUTO_RTL", "SURFACE"}
+)
+
+
+def _a(kind: str) -> str:
+    return f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} vehicle"
 
 
 class Fence(NamedTuple):
@@ -121,7 +156,8 @@ class Fence(NamedTuple):
 
 
 class MavlinkDriver:
-    """Flies one ArduPilot or PX4 copter over a MAVLink link (see the module docstring).
+    """Flies one ArduPilot or PX4 copter, or an ArduRover rover or boat, or an ArduSub
+    submarine, over a MAVLink link (see the module docstring).
 
     ``connection``: a connection string (``fleet.mavlink.endpoint``) or an unopened
     ``MavlinkLink``. ``spec``: the vehicle's speed, climb rate, take-off altitude and battery
@@ -134,7 +170,9 @@ class MavlinkDriver:
     ``on_link_lost``: called (on the link's thread) when the heartbeat stops.
     ``gcs_failsafe_s``: the autopilot's GCS failsafe is turned on (return home when it hears
     no ground station for this long: the worker stopped, the link died) on every connection;
-    an autopilot that cannot is not flown. None: left as the autopilot has it.
+    an autopilot that cannot is not flown. None: left as the autopilot has it. ``kind``: the
+    kind the platform configured the vehicle as (``fleet.kinds``); connecting to a vehicle
+    whose heartbeat says otherwise is refused. None: whatever the heartbeat says.
     """
 
     def __init__(
@@ -157,6 +195,7 @@ class MavlinkDriver:
         on_link_lost: Callable[[], None] | None = None,
         name: str = "",
         gcs_failsafe_s: float | None = None,
+        kind: str | None = None,
     ) -> None:
         if isinstance(connection, MavlinkLink):
             self.link = connection
@@ -176,6 +215,11 @@ class MavlinkDriver:
         self.arrival_tolerance_m = arrival_tolerance_m
         self.on_link_lost = on_link_lost
         self.gcs_failsafe_s = gcs_failsafe_s
+        if kind is not None:
+            limits_of(kind)  # ValueError for a kind there is not
+        self.configured_kind = kind
+        # What the vehicle is (its heartbeat's type, once connected).
+        self.kind = kind if kind is not None else AERIAL
         self.measures_battery = True  # SYS_STATUS, BATTERY_STATUS
         self.reports_arrival = True  # GLOBAL_POSITION_INT
         self.name = name or str(self.link.endpoint)
@@ -201,6 +245,8 @@ class MavlinkDriver:
         # Telemetry.
         self._position = depot
         self._ground_speed_mps = 0.0  # GLOBAL_POSITION_INT's vx, vy
+        self._climb_mps = 0.0  # GLOBAL_POSITION_INT's vz, up
+        self._heading_deg: float | None = None  # GLOBAL_POSITION_INT's hdg
         self._position_seen_s: float | None = None
         self._home_amsl_m: float | None = None
         self._battery: float | None = None
@@ -234,7 +280,8 @@ class MavlinkDriver:
         position is required, the others are best effort), reads HOME_POSITION, uploads the
         geofence given to the constructor, and starts the guidance thread. Raises LinkError
         (cannot open), LinkLost (no heartbeat in ``timeout_s``), UnsupportedVehicle (not an
-        ArduPilot or PX4 copter), and what the requests raise; the link is closed on failure.
+        ArduPilot or PX4 copter, nor an ArduPilot rover, boat or submarine, or not the kind
+        configured), and what the requests raise; the link is closed on failure.
         """
         try:
             self.link.open()
@@ -243,8 +290,7 @@ class MavlinkDriver:
                 raise UnsupportedVehicle(
                     f"{self.name}: autopilot {beat.autopilot.value} is neither ArduPilot nor PX4"
                 )
-            if beat.mav_type not in COPTER_TYPES:
-                raise UnsupportedVehicle(f"{self.name}: MAV_TYPE {beat.mav_type} is not a copter")
+            self.kind = self._kind_of(beat.mav_type, beat.autopilot)
             self._removers = [
                 self.link.add_listener("HEARTBEAT", self._on_heartbeat),
                 self.link.add_listener("GLOBAL_POSITION_INT", self._on_position),
@@ -263,6 +309,32 @@ class MavlinkDriver:
             target=self._guidance_loop, name=f"mavlink-guidance {self.name}", daemon=True
         )
         self._guidance.start()
+
+    def _kind_of(self, mav_type: int, autopilot: Autopilot) -> str:
+        """The kind of vehicle a heartbeat's type is, checked against the configured kind.
+        Raises UnsupportedVehicle."""
+        kind = KIND_OF_TYPE.get(mav_type)
+        if kind is None:
+            raise UnsupportedVehicle(
+                f"{self.name}: MAV_TYPE {mav_type} is not a copter, rover, boat or submarine"
+            )
+        if kind != AERIAL and autopilot is not Autopilot.ARDUPILOT:
+            raise UnsupportedVehicle(
+                f"{self.name}: {KIND_WORDS[kind]} is flown on ArduPilot only, not on "
+                f"{autopilot.value}"
+            )
+        configured = self.configured_kind
+        if configured is not None and kind != configured:
+            raise UnsupportedVehicle(
+                f"{self.name}: configured as {_a(configured)}, but the autopilot reports "
+                f"{KIND_WORDS[kind]}"
+            )
+        return kind
+
+    @property
+    def flies(self) -> bool:
+        """An aircraft: it takes off and lands (a rover, boat or sub is parked or under way)."""
+        return self.kind == AERIAL
 
     def _set_up(self) -> None:
         """What the vehicle is asked for on every connection (the first, and each time the
@@ -302,6 +374,17 @@ class MavlinkDriver:
             return
         if self.autopilot is Autopilot.PX4:
             enable, action, timeout = "NAV_DLL_ACT", 2, "COM_DL_LOSS_T"
+        elif self.kind in (GROUND, SURFACE):
+            # ArduRover: FS_GCS_ENABLE 1 takes FS_ACTION (HOLD as it ships, or RTL) after
+            # FS_TIMEOUT; an action of "nothing" becomes RTL.
+            enable, action, timeout = "FS_GCS_ENABLE", 1, "FS_TIMEOUT"
+            if self.link.param_get("FS_ACTION") == 0:
+                self.link.param_set("FS_ACTION", 1)
+        elif self.kind == UNDERWATER:
+            # ArduSub: FS_GCS_ENABLE is the action; "warn only" protects nothing: surface.
+            enable, action, timeout = "FS_GCS_ENABLE", 4, "FS_GCS_TIMEOUT"
+            if self.link.param_get(enable) == 1:
+                self.link.param_set(enable, action)
         else:
             enable, action, timeout = "FS_GCS_ENABLE", 1, "FS_GCS_TIMEOUT"
         if self.link.param_get(enable) == 0:
@@ -382,10 +465,14 @@ class MavlinkDriver:
         ``rally`` points (altitudes above ground) become the rally list
         (MAV_MISSION_TYPE_RALLY; an empty one clears it). The minimum altitude is not put on
         the autopilot (a floor would trip on every take-off and landing): the platform keeps
-        tasks above it. Call again whenever any of it changes. Raises ValueError for a bad
-        area or altitude range, MissionRejected/MissionTimeout, and the parameter errors.
+        tasks above it. A rover, boat or sub gets the polygons only (FENCE_TYPE's polygon bit,
+        no ceiling: a rover or boat stays at 0, a sub's ceiling is the surface), and a rover's
+        or boat's range may be the one altitude 0. Call again whenever any of it changes.
+        Raises ValueError for a bad area or altitude range, MissionRejected/MissionTimeout, and
+        the parameter errors.
         """
-        if not max_altitude_m > min_altitude_m:
+        planar = not limits_of(self.kind).vertical
+        if not (max_altitude_m > min_altitude_m or (planar and max_altitude_m == min_altitude_m)):
             raise ValueError(
                 f"max altitude {max_altitude_m!r} must be above min altitude {min_altitude_m!r}"
             )
@@ -401,6 +488,11 @@ class MavlinkDriver:
             self.link.param_set("GF_MAX_VER_DIST", ceiling)
             if self.link.param_get("GF_ACTION") == 0:
                 self.link.param_set("GF_ACTION", 3)  # Return
+        elif not self.flies:
+            # The polygons only: no altitude fence, nor the circle around home.
+            fence_type = int(self.link.param_get("FENCE_TYPE"))
+            self.link.param_set("FENCE_TYPE", (fence_type | 4) & ~(1 | 2))
+            self.link.param_set("FENCE_ENABLE", 1)
         else:
             self.link.param_set("FENCE_ALT_MAX", ceiling)
             # Max altitude and polygon; not ArduCopter's default circle around home
@@ -441,7 +533,9 @@ class MavlinkDriver:
         with self._command_lock:
             self._check_usable(returning_ok=False)
             eta = now_s + self.time_to_s(target, now_s)
-            if self.is_landed_at(now_s):
+            if not self.flies:
+                self._drive_off_towards(target)
+            elif self.is_landed_at(now_s):
                 self._take_off_towards(target)
             else:
                 self._go(target)
@@ -451,7 +545,8 @@ class MavlinkDriver:
         """Send the vehicle home to land (RTL); returns the estimated landing time.
 
         ``now_s`` when it is already landed. The autopilot lands and disarms by itself; the
-        guidance thread disarms a vehicle that stays armed on the ground. Raises LinkLost,
+        guidance thread disarms a vehicle that stays armed on the ground (a rover or boat
+        home, a sub: GUIDED home at the surface, disarmed there). Raises LinkLost,
         VehicleTookOver (unless the vehicle is already returning or landing by itself),
         CommandDenied/CommandTimeout, ModeChangeFailed.
         """
@@ -462,7 +557,11 @@ class MavlinkDriver:
             eta = now_s + self.time_home_s(self._position)
             if self._took_over is not None:
                 return eta  # already returning or landing by itself
-            modes = _MODES[self._flavour()]["return"]
+            if self.kind == UNDERWATER:
+                self._go(self.depot, state="return")
+                logger.info("%s: surfacing at home", self.name)
+                return eta
+            modes = self._modes("return")
             with self._lock:
                 before = (self._state, self._target, self._pending, self._stream_since)
                 self._state = "return"
@@ -492,13 +591,16 @@ class MavlinkDriver:
         unsupported); the autopilot lands and disarms there, and the guidance thread disarms
         a vehicle that stays armed on the ground. ``now_s`` when it is already landed. Sent
         also to a vehicle returning or landing by itself (a failsafe's RTL becomes a landing
-        here). Raises LinkLost, VehicleTookOver (a pilot flies it), CommandDenied/
-        CommandTimeout, ModeChangeFailed.
+        here). A rover or boat: HOLD where it is (then disarmed once it stands); a sub:
+        SURFACE, rising where it is (then disarmed at the surface). Raises LinkLost,
+        VehicleTookOver (a pilot flies it), CommandDenied/CommandTimeout, ModeChangeFailed.
         """
         with self._command_lock:
             if self.is_landed_at(now_s):
                 return now_s
             self._check_usable(returning_ok=True)
+            if not self.flies:
+                return self._stop_here(now_s)
             eta = now_s + max(0.0, self._position.alt - self.depot.alt) / self.spec.climb_rate_mps
             px4 = self.autopilot is Autopilot.PX4
             with self._lock:
@@ -507,7 +609,7 @@ class MavlinkDriver:
                 self._target = self._position.with_alt(self.depot.alt)
                 self._pending = None
                 self._stream_since = None
-                self._set_goal(_MODES[self._flavour()]["land"])
+                self._set_goal(self._modes("land"))
             # Where it is: NaN (PX4) or 0 (ArduPilot) for latitude and longitude.
             nan = math.nan
             params = (0.0, 0.0, 0.0, nan, nan, nan, 0.0) if px4 else (0.0,) * 7
@@ -670,7 +772,8 @@ class MavlinkDriver:
 
     def phase_at(self, t: float) -> str:
         """One of "landed", "takeoff", "cruise", "hovering", "landing", from the driver's
-        state and the last telemetry (``t`` is not used)."""
+        state and the last telemetry (``t`` is not used). A rover, boat or sub is landed when
+        disarmed (parked), or armed and idle standing at home; "landing" while it stops."""
         with self._lock:
             if not self._armed:
                 return PHASE_LANDED
@@ -686,10 +789,17 @@ class MavlinkDriver:
                 return PHASE_HOVERING if near else PHASE_CRUISE
             if self._state == "return":
                 return self._return_phase(here)
+            if self._state == "land" and not self.flies:
+                return PHASE_LANDING  # until it stands and is disarmed
             if self._state == "land":
                 # Down once near home's height (EXTENDED_SYS_STATE may still say "on the
                 # ground" from before the take-off), or once it disarms (higher ground).
                 return PHASE_LANDED if here.alt - self.depot.alt < 0.5 else PHASE_LANDING
+            if not self.flies:
+                standing = self._ground_speed_mps <= _STANDING_MPS
+                home = ground_distance_m(here, self.depot) <= _LANDING_RADIUS_M
+                surfaced = here.alt >= self.depot.alt - _SURFACE_M
+                return PHASE_LANDED if standing and home and surfaced else PHASE_HOVERING
             if self._landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND or (
                 here.alt - self.depot.alt < 0.5
             ):
@@ -763,9 +873,14 @@ class MavlinkDriver:
 
     def time_to_s(self, target: Position, now_s: float) -> float:
         """Estimated seconds for ``fly_to(target)`` from the last known position: a vertical
-        take-off first when landed, then one straight leg (the simulator's kinematics)."""
+        take-off first when landed, then one straight leg (the simulator's kinematics). A rover
+        or boat turns in place first, from the heading it reports; a sub takes off from
+        nowhere."""
         here = self._position
         seconds = 0.0
+        if not self.flies:
+            target = self._reachable(target)
+            return self._turn_s(here, target) + self.leg_s(here, target)
         if self.is_landed_at(now_s):
             top = here.with_alt(max(target.alt, self.spec.takeoff_alt_m, here.alt))
             seconds += self.leg_s(here, top)
@@ -774,21 +889,46 @@ class MavlinkDriver:
 
     def time_home_s(self, start: Position) -> float:
         """Estimated seconds to return from ``start`` in the air: cruise to above the depot at
-        the current altitude (at least the take-off altitude), then land."""
+        the current altitude (at least the take-off altitude), then land. A rover or boat: a
+        half turn at most (its heading then is not known), then the way home; a sub: straight
+        up to home at the surface."""
+        if not self.flies:
+            turn = self.spec.turning_rate_dps
+            half_turn_s = 0.0 if turn is None else 180.0 / turn
+            return half_turn_s + self.leg_s(start, self.depot)
         above = self.depot.with_alt(max(start.alt, self.spec.takeoff_alt_m, self.depot.alt))
         return self.leg_s(start, above) + self.leg_s(above, self.depot)
 
     def leg_s(self, a: Position, b: Position) -> float:
-        """Estimated seconds of a straight leg in the air from ``a`` to ``b``."""
+        """Estimated seconds of a straight leg in the air (or water) from ``a`` to ``b``: up
+        at the climb rate, down at the dive rate (the climb rate without one). No turn."""
         horizontal = ground_distance_m(a, b) / self.spec.max_speed_mps
-        vertical = abs(b.alt - a.alt) / self.spec.climb_rate_mps
-        return max(horizontal, vertical)
+        rise = b.alt - a.alt
+        rate = self.spec.climb_rate_mps if rise >= 0 else self.spec.descent_rate_mps
+        return max(horizontal, abs(rise) / rate)
+
+    def _turn_s(self, here: Position, target: Position) -> float:
+        """A rover's or boat's turn in place towards ``target``, from the heading it last
+        reported (none known, or a vehicle that does not turn in place: 0)."""
+        rate, heading = self.spec.turning_rate_dps, self._heading_deg
+        if rate is None or heading is None or ground_distance_m(here, target) < 0.5:
+            return 0.0
+        north = (target.lat - here.lat) * 111_320.0
+        east = (target.lng - here.lng) * 111_320.0 * math.cos(math.radians(here.lat))
+        bearing = math.degrees(math.atan2(east, north)) % 360
+        return abs((bearing - heading + 180.0) % 360.0 - 180.0) / rate
 
     # --- flying ---------------------------------------------------------------------------
 
     def _flavour(self) -> Autopilot:
         autopilot = self.autopilot
         return autopilot if autopilot in _MODES else Autopilot.ARDUPILOT
+
+    def _modes(self, state: str) -> frozenset[str]:
+        """The modes the vehicle may show in a state without being overruled."""
+        if not self.flies:
+            return _KIND_MODES[self.kind][state]
+        return _MODES[self._flavour()][state]
 
     def _check_usable(self, *, returning_ok: bool) -> None:
         if not self.link.link_ok:
@@ -814,7 +954,7 @@ class MavlinkDriver:
             self._state = "takeoff"
             self._target = top
             self._pending = target
-            self._set_goal(_MODES[self._flavour()]["takeoff"])
+            self._set_goal(self._modes("takeoff"))
         try:
             if not px4:
                 self.link.set_mode("GUIDED")
@@ -845,16 +985,51 @@ class MavlinkDriver:
         logger.info("%s: taking off to %.1f m", self.name, relative)
         self._wake.set()
 
-    def _go(self, target: Position) -> None:
+    def _drive_off_towards(self, target: Position) -> None:
+        """A rover, boat or sub: GUIDED, armed, then the target (no take-off)."""
+        with self._lock:
+            armed = self._armed
+        if not armed:
+            self.link.set_mode("GUIDED")
+            self.link.arm()
+            logger.info("%s: armed in GUIDED", self.name)
+        self._go(target)
+
+    def _stop_here(self, now_s: float) -> float:
+        """A rover's or boat's "land now": HOLD; a sub's: SURFACE. The guidance thread
+        disarms it once it stands (at the surface). Returns when that is estimated."""
+        here = self._position
+        depth = max(0.0, self.depot.alt - here.alt)
+        eta = now_s + depth / self.spec.climb_rate_mps
+        mode = "SURFACE" if self.kind == UNDERWATER else "HOLD"
+        with self._lock:
+            before = (self._state, self._target, self._pending, self._stream_since)
+            self._state = "land"
+            self._target = here.with_alt(max(here.alt, self.depot.alt))
+            self._pending = None
+            self._set_goal(self._modes("land"))
+        try:
+            self.link.set_mode(mode)
+        except MavlinkError:
+            with self._lock:  # still doing what it did: say so
+                self._state, self._target, self._pending, self._stream_since = before
+            raise
+        logger.info("%s: stopping where it is (%s)", self.name, mode)
+        self._wake.set()
+        return eta
+
+    def _go(self, target: Position, *, state: str = "goto") -> None:
         px4 = self.autopilot is Autopilot.PX4
+        if not self.flies:
+            target = self._reachable(target)
         with self._lock:
             if self._state == "takeoff":
                 self._pending = target  # still climbing: go there once up
                 return
-            self._state = "goto"
+            self._state = state
             self._target = target
             self._pending = None
-            self._set_goal(_MODES[self._flavour()]["goto"])
+            self._set_goal(self._modes(state))
         if px4:
             with self._lock:
                 if self._stream_since is None:
@@ -927,12 +1102,20 @@ class MavlinkDriver:
 
     def _guide(self, px4: bool) -> None:
         """One step of what runs in the background: finish the take-off, keep the setpoint
-        alive, enter offboard (PX4), disarm a vehicle left armed on the ground."""
+        alive, enter offboard (PX4), disarm a vehicle left armed on the ground (a rover, boat
+        or sub once it stands where it was to stop)."""
         now = time.monotonic()
         with self._lock:
             state, target, pending = self._state, self._target, self._pending
             taken = self._took_over
-        if taken is not None or not self.link.link_ok:
+            armed = self._armed
+        if not self.link.link_ok:
+            return
+        if not self.flies and armed and self._stopped_for_good(state, taken):
+            logger.info("%s: stopped where it was to: disarming", self.name)
+            self.link.disarm()
+            return
+        if taken is not None:
             return
         if state == "takeoff" and target is not None and self._reached_altitude(target):
             with self._lock:
@@ -940,13 +1123,14 @@ class MavlinkDriver:
                 self._target = pending if pending is not None else target
                 self._pending = None
                 if pending is not None:
-                    self._set_goal(_MODES[self._flavour()]["goto"])
+                    self._set_goal(self._modes("goto"))
                     if px4:
                         self._stream_since = now
             if pending is not None:
                 self._send_setpoint(pending)
             return
-        if state == "goto" and target is not None:
+        following = state == "goto" or (state == "return" and self.kind == UNDERWATER)
+        if following and target is not None:
             if px4:
                 # The guidance also wakes on every position report: keep the stream at 4 Hz.
                 if now - self._last_setpoint >= 0.9 / _PX4_STREAM_HZ:
@@ -967,6 +1151,29 @@ class MavlinkDriver:
             elif now - self._on_ground_since > _STUCK_ARMED_S:
                 logger.info("%s: landed but still armed: disarming", self.name)
                 self.link.disarm()
+
+    def _stopped_for_good(self, state: str, taken: str | None) -> bool:
+        """A rover, boat or sub that stands (at the surface) where it was to stop: at home
+        after a return (its own RTL included), anywhere after "land now" (or its own
+        SURFACE). ArduRover and ArduSub stay armed there; parked is disarmed."""
+        with self._lock:
+            here = self._position
+            standing = max(self._ground_speed_mps, abs(self._climb_mps)) <= _STANDING_MPS
+        if not standing or here.alt < self.depot.alt - _SURFACE_M:
+            return False
+        home = ground_distance_m(here, self.depot) <= max(
+            _LANDING_RADIUS_M, self.arrival_tolerance_m
+        )
+        if taken is not None:
+            return taken == "SURFACE" or (taken in _RETURN_MODES and home)
+        return state == "land" or (state == "return" and home)
+
+    def _reachable(self, target: Position) -> Position:
+        """Where a rover or boat goes for ``target``: at home's altitude (ArduRover ignores
+        altitudes); a sub: no higher than the surface."""
+        if self.kind in (GROUND, SURFACE) or target.alt > self.depot.alt:
+            return target.with_alt(self.depot.alt)
+        return target
 
     def _reached_altitude(self, top: Position) -> bool:
         # ArduPilot ends its take-off within a few decimetres; a little early is harmless
@@ -1026,6 +1233,8 @@ class MavlinkDriver:
         with self._lock:
             self._position = here
             self._ground_speed_mps = math.hypot(msg.vx, msg.vy) / 100  # cm/s
+            self._climb_mps = -msg.vz / 100
+            self._heading_deg = None if msg.hdg == 65535 else msg.hdg / 100
             self._position_seen_s = self.clock()
             anchor = self._odometer_anchor
             if self._armed and anchor is not None:

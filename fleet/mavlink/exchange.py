@@ -35,8 +35,9 @@ class Heartbeat:
 
     @property
     def mode(self) -> str:
-        """The flight mode's name, e.g. "GUIDED" (ArduCopter) or "AUTO.LOITER" (PX4)."""
-        return mode_name(self.autopilot, self.custom_mode)
+        """The flight mode's name, e.g. "GUIDED" (ArduCopter) or "AUTO.LOITER" (PX4), from the
+        mode table of the heartbeat's airframe type (ArduRover's "HOLD" is 4)."""
+        return mode_name(self.autopilot, self.custom_mode, self.mav_type)
 
 
 @dataclass(frozen=True)

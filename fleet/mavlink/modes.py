@@ -1,10 +1,14 @@
-"""Flight modes of ArduCopter and PX4: names, custom mode numbers, and HEARTBEAT decoding.
+"""Flight modes of ArduCopter, ArduRover, ArduSub and PX4: names, custom mode numbers, and
+HEARTBEAT decoding.
 
 A HEARTBEAT carries the flight mode in ``custom_mode`` (with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 in ``base_mode``), and each autopilot encodes it its own way:
 
-- ArduPilot: ``custom_mode`` is the vehicle's mode number; the numbers differ per vehicle
-  (Copter, Plane, Rover). Only the multicopter (ArduCopter) table is here: CPCC flies copters.
+- ArduPilot: ``custom_mode`` is the vehicle's mode number; the numbers differ per firmware, so
+  the table is picked by the HEARTBEAT's ``type`` (as pymavlink's ``mode_mapping_bynumber``
+  does): ArduCopter for multicopters, ArduRover for ground rovers and boats (a boat is
+  ArduRover with FRAME_CLASS=2), ArduSub for submarines. Every function takes that type
+  (``mav_type``), a quadrotor by default.
 - PX4: ``custom_mode`` is a union ``{uint16 reserved; uint8 main_mode; uint8 sub_mode}`` in
   little-endian order, i.e. ``main_mode << 16 | sub_mode << 24``. Sub-modes matter for AUTO
   (takeoff, loiter, mission, RTL, land) and POSCTL (orbit).
@@ -18,6 +22,7 @@ from __future__ import annotations
 
 from enum import Enum
 
+from fleet.kinds import AERIAL, GROUND, SURFACE, UNDERWATER
 from fleet.mavlink.wire import mavlink
 
 
@@ -69,6 +74,40 @@ ARDUCOPTER_MODES: dict[str, int] = {
 }
 ARDUCOPTER_NAMES: dict[int, str] = {number: name for name, number in ARDUCOPTER_MODES.items()}
 
+# ArduRover's (Rover/mode.h, Mode::Number; 2 was a mode since removed), for rovers and boats.
+ARDUROVER_MODES: dict[str, int] = {
+    "MANUAL": 0,
+    "ACRO": 1,
+    "STEERING": 3,
+    "HOLD": 4,
+    "LOITER": 5,
+    "FOLLOW": 6,
+    "SIMPLE": 7,
+    "DOCK": 8,
+    "CIRCLE": 9,
+    "AUTO": 10,
+    "RTL": 11,
+    "SMART_RTL": 12,
+    "GUIDED": 15,
+    "INITIALISING": 16,
+}
+# ArduSub's (ArduSub/defines.h, control_mode_t). ArduSub has no RTL and no LAND.
+ARDUSUB_MODES: dict[str, int] = {
+    "STABILIZE": 0,
+    "ACRO": 1,
+    "ALT_HOLD": 2,
+    "AUTO": 3,
+    "GUIDED": 4,
+    "CIRCLE": 7,
+    "SURFACE": 9,
+    "POSHOLD": 16,
+    "MANUAL": 19,
+    "MOTOR_DETECT": 20,
+    "SURFTRAK": 21,
+}
+ARDUROVER_NAMES: dict[int, str] = {number: name for name, number in ARDUROVER_MODES.items()}
+ARDUSUB_NAMES: dict[int, str] = {number: name for name, number in ARDUSUB_MODES.items()}
+
 # PX4 main modes (px4_custom_mode.h, PX4_CUSTOM_MAIN_MODE) and sub-modes.
 PX4_MAIN_MANUAL = 1
 PX4_MAIN_ALTCTL = 2
@@ -109,7 +148,8 @@ PX4_MODES: dict[str, tuple[int, int]] = {
 }
 PX4_NAMES: dict[tuple[int, int], str] = {modes: name for name, modes in PX4_MODES.items()}
 
-# Airframes this driver flies: multicopters and helicopters (HEARTBEAT.type).
+# Airframes the driver flies (HEARTBEAT.type): multicopters and helicopters, rovers, boats and
+# submarines.
 COPTER_TYPES = frozenset(
     {
         mavlink.MAV_TYPE_QUADROTOR,
@@ -122,6 +162,42 @@ COPTER_TYPES = frozenset(
         mavlink.MAV_TYPE_DODECAROTOR,
     }
 )
+ROVER_TYPES = frozenset({mavlink.MAV_TYPE_GROUND_ROVER})
+BOAT_TYPES = frozenset({mavlink.MAV_TYPE_SURFACE_BOAT})
+SUB_TYPES = frozenset({mavlink.MAV_TYPE_SUBMARINE})
+
+# The vehicle kind (``fleet.kinds``) each airframe type is, and how people name it.
+KIND_OF_TYPE: dict[int, str] = {
+    **{t: AERIAL for t in COPTER_TYPES},
+    **{t: GROUND for t in ROVER_TYPES},
+    **{t: SURFACE for t in BOAT_TYPES},
+    **{t: UNDERWATER for t in SUB_TYPES},
+}
+KIND_WORDS: dict[str, str] = {
+    AERIAL: "a copter",
+    GROUND: "a ground rover",
+    SURFACE: "a surface boat",
+    UNDERWATER: "a submarine",
+}
+
+
+def ardupilot_modes(mav_type: int) -> dict[str, int]:
+    """The ArduPilot mode table of an airframe type: ArduRover's for rovers and boats,
+    ArduSub's for submarines, ArduCopter's for anything else."""
+    if mav_type in ROVER_TYPES or mav_type in BOAT_TYPES:
+        return ARDUROVER_MODES
+    if mav_type in SUB_TYPES:
+        return ARDUSUB_MODES
+    return ARDUCOPTER_MODES
+
+
+def ardupilot_names(mav_type: int) -> dict[int, str]:
+    """Mode names by number for an airframe type (the inverse of ``ardupilot_modes``)."""
+    if mav_type in ROVER_TYPES or mav_type in BOAT_TYPES:
+        return ARDUROVER_NAMES
+    if mav_type in SUB_TYPES:
+        return ARDUSUB_NAMES
+    return ARDUCOPTER_NAMES
 
 
 def px4_custom_mode(main_mode: int, sub_mode: int = 0) -> int:
@@ -134,8 +210,11 @@ def px4_split(custom_mode: int) -> tuple[int, int]:
     return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
 
 
-def mode_name(autopilot: Autopilot, custom_mode: int) -> str:
-    """The name of the mode a heartbeat reports, e.g. "GUIDED" or "AUTO.LOITER".
+def mode_name(
+    autopilot: Autopilot, custom_mode: int, mav_type: int = mavlink.MAV_TYPE_QUADROTOR
+) -> str:
+    """The name of the mode a heartbeat reports, e.g. "GUIDED" or "AUTO.LOITER"; ArduPilot's
+    number is read in the table of the heartbeat's ``mav_type`` (15 is GUIDED on a rover).
 
     An unknown number gives "MODE(n)" (ArduPilot) or "MODE(main.sub)" (PX4), never an error:
     a vehicle in a mode this table lacks must not break the link.
@@ -144,23 +223,29 @@ def mode_name(autopilot: Autopilot, custom_mode: int) -> str:
         main, sub = px4_split(custom_mode)
         name = PX4_NAMES.get((main, sub)) or PX4_NAMES.get((main, 0))
         return name if name is not None else f"MODE({main}.{sub})"
-    return ARDUCOPTER_NAMES.get(custom_mode, f"MODE({custom_mode})")
+    return ardupilot_names(mav_type).get(custom_mode, f"MODE({custom_mode})")
 
 
-def custom_mode_of(autopilot: Autopilot, name: str) -> int:
-    """The HEARTBEAT.custom_mode a mode name shows as. Raises KeyError for an unknown name."""
+def custom_mode_of(
+    autopilot: Autopilot, name: str, mav_type: int = mavlink.MAV_TYPE_QUADROTOR
+) -> int:
+    """The HEARTBEAT.custom_mode a mode name shows as (ArduPilot: in the table of
+    ``mav_type``). Raises KeyError for an unknown name."""
     if autopilot is Autopilot.PX4:
         return px4_custom_mode(*PX4_MODES[name])
-    return ARDUCOPTER_MODES[name]
+    return ardupilot_modes(mav_type)[name]
 
 
-def set_mode_params(autopilot: Autopilot, name: str) -> tuple[float, float, float]:
-    """param1..param3 of MAV_CMD_DO_SET_MODE for a mode name. Raises KeyError if unknown."""
+def set_mode_params(
+    autopilot: Autopilot, name: str, mav_type: int = mavlink.MAV_TYPE_QUADROTOR
+) -> tuple[float, float, float]:
+    """param1..param3 of MAV_CMD_DO_SET_MODE for a mode name (ArduPilot: in the table of
+    ``mav_type``). Raises KeyError if unknown."""
     flag = float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
     if autopilot is Autopilot.PX4:
         main, sub = PX4_MODES[name]
         return flag, float(main), float(sub)
-    return flag, float(ARDUCOPTER_MODES[name]), 0.0
+    return flag, float(ardupilot_modes(mav_type)[name]), 0.0
 
 
 def same_mode(autopilot: Autopilot, reported: int, wanted: int) -> bool:

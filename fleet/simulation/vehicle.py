@@ -5,6 +5,14 @@ reads a clock itself. A ``SimVehicle`` keeps its whole flown history as a list o
 so every query (position, phase, odometry, flight time, battery) can be answered for any time,
 past or planned, and the same sequence of commands always gives the same answers.
 
+How it moves depends on its kind (``fleet.kinds``). An aerial vehicle (a copter) takes off
+vertically, flies straight legs and lands vertically. Ground and surface vehicles (rovers,
+boats) stay at their depot's altitude (their home: 0), never take off, and turn in place
+before each straight leg ("turning" legs of no length). An underwater vehicle starts at the
+surface at its depot, dives and rises along its legs (below its depot's altitude is depth),
+and surfaces to be parked. The vehicle's own "landed" means parked: on the ground, at the
+dock, or stopped by ``land``; "hovering" means stopped on the way.
+
 Commands (``fly_to``, ``return_to_depot``) replace the rest of the plan from the command's time
 on; a leg that is under way is cut at that time and the vehicle continues from where it is.
 Commands must come in non-decreasing time order, otherwise ``ValueError`` is raised.
@@ -16,18 +24,28 @@ import math
 from bisect import bisect_right
 from dataclasses import dataclass
 
+from pyproj import Geod
+
 from fleet.driving import Sample, SensorFailure, SensorRead
 from fleet.geo import Position, distance_m, ground_distance_m, interpolate
+from fleet.kinds import AERIAL, UNDERWATER, limits_of
 
 PHASE_LANDED = "landed"
 PHASE_TAKEOFF = "takeoff"
 PHASE_CRUISE = "cruise"
 PHASE_LANDING = "landing"
 PHASE_HOVERING = "hovering"
+PHASE_TURNING = "turning"  # a ground or surface vehicle turning in place before a leg
 
 
 # Floating-point slack of an arrival exactly at the planned time.
 _ARRIVAL_SLACK_M = 1e-3
+# A turn smaller than this (geodesic rounding) is not made.
+_TURN_SLACK_DEG = 1e-6
+# Headings where there is none yet: a new vehicle faces north.
+_NORTH_DEG = 0.0
+
+_GEOD = Geod(ellps="WGS84")
 
 
 def _check_positive(name: str, value: float) -> None:
@@ -35,22 +53,42 @@ def _check_positive(name: str, value: float) -> None:
         raise ValueError(f"{name} must be a positive finite number, got {value!r}")
 
 
+def _headings(a: Position, b: Position) -> tuple[float, float]:
+    """The heading (degrees clockwise from north, 0..360) leaving ``a`` for ``b`` along the
+    geodesic, and the heading arriving at ``b``."""
+    leave, back, _ = _GEOD.inv(a.lng, a.lat, b.lng, b.lat)
+    return float(leave) % 360.0, (float(back) + 180.0) % 360.0
+
+
+def _turn_deg(start_deg: float, end_deg: float) -> float:
+    """The shortest turn from one heading to another, in degrees (-180..180, + clockwise)."""
+    return (end_deg - start_deg + 180.0) % 360.0 - 180.0
+
+
 @dataclass(frozen=True)
 class VehicleSpec:
-    """What the simulated airframe can do.
+    """What the simulated vehicle can do.
 
     ``max_speed_mps``: horizontal cruise speed (> 0). ``climb_rate_mps``: vertical speed for
-    take-off, climbing, descending and landing (> 0). ``takeoff_alt_m``: height above ground the
-    vehicle climbs to at least before leaving its take-off point (>= 0). ``battery_s``: flight
-    endurance in seconds (> 0), or None for unlimited. Raises ValueError on a bad value.
+    take-off, climbing, descending and landing (> 0). ``takeoff_alt_m``: height above ground an
+    aerial vehicle climbs to at least before leaving its take-off point (>= 0; the other kinds
+    take off from nowhere). ``battery_s``: endurance in seconds (> 0), or None for unlimited.
+    ``kind``: one of ``fleet.kinds.KINDS``. ``dive_rate_mps``: vertical speed going down
+    (> 0), or None for the climb rate. ``turn_rate_dps``: how fast a ground or surface vehicle
+    turns in place, degrees a second (> 0), or None for its kind's default; the other kinds
+    ignore it. Raises ValueError on a bad value, naming the field.
     """
 
     max_speed_mps: float
     climb_rate_mps: float = 3.0
     takeoff_alt_m: float = 5.0
     battery_s: float | None = None
+    kind: str = AERIAL
+    dive_rate_mps: float | None = None
+    turn_rate_dps: float | None = None
 
     def __post_init__(self) -> None:
+        limits_of(self.kind)
         _check_positive("max_speed_mps", self.max_speed_mps)
         _check_positive("climb_rate_mps", self.climb_rate_mps)
         if not (math.isfinite(self.takeoff_alt_m) and self.takeoff_alt_m >= 0.0):
@@ -59,13 +97,32 @@ class VehicleSpec:
             )
         if self.battery_s is not None:
             _check_positive("battery_s", self.battery_s)
+        if self.dive_rate_mps is not None:
+            _check_positive("dive_rate_mps", self.dive_rate_mps)
+        if self.turn_rate_dps is not None:
+            _check_positive("turn_rate_dps", self.turn_rate_dps)
+
+    @property
+    def descent_rate_mps(self) -> float:
+        """Vertical speed going down: the dive rate, else the climb rate."""
+        return self.climb_rate_mps if self.dive_rate_mps is None else self.dive_rate_mps
+
+    @property
+    def turning_rate_dps(self) -> float | None:
+        """How fast the vehicle turns in place before a leg (None: it turns as it moves, at
+        no cost, as aerial and underwater vehicles do)."""
+        default = limits_of(self.kind).turn_rate_dps
+        if default is None:
+            return None
+        return default if self.turn_rate_dps is None else self.turn_rate_dps
 
 
 @dataclass(frozen=True)
 class Leg:
     """One straight segment of a flight plan, flown at constant velocity from start to end.
 
-    ``phase`` is "takeoff", "cruise" or "landing". ``start_s``/``end_s`` are on the caller's clock.
+    ``phase`` is "takeoff", "cruise", "turning" (in place: ``start == end``) or "landing".
+    ``start_s``/``end_s`` are on the caller's clock.
     """
 
     start_s: float
@@ -89,21 +146,25 @@ class Leg:
 
 @dataclass(frozen=True)
 class _Step:
-    """A leg of the history plus the running totals that make queries O(log n)."""
+    """A leg of the history plus the running totals that make queries O(log n), and the
+    headings at its ends (kept for vehicles that turn in place; 0 for the others)."""
 
     leg: Leg
     length_m: float
     landed_after: bool
     distance_before_m: float
     flight_before_s: float
+    heading_from_deg: float = _NORTH_DEG
+    heading_to_deg: float = _NORTH_DEG
 
 
 class SimVehicle:
     """A simulated vehicle that starts landed at its depot and flies straight legs.
 
-    ``spec`` says how fast it flies, ``depot`` where it takes off and lands, ``now_s`` the time it
-    comes into existence (no command may be earlier). Queries before the first command answer
-    "landed at the depot".
+    ``spec`` says how fast it flies and its kind, ``depot`` where it takes off and lands (for
+    ground and surface vehicles also the altitude they move at; for an underwater vehicle the
+    surface), ``now_s`` the time it comes into existence (no command may be earlier). Queries
+    before the first command answer "landed at the depot".
     """
 
     def __init__(self, spec: VehicleSpec, depot: Position, *, now_s: float = 0.0) -> None:
@@ -132,22 +193,41 @@ class SimVehicle:
             return self._command_s
         return max(self._command_s, self._steps[-1].leg.end_s)
 
+    @property
+    def _in_plane(self) -> bool:
+        """A ground or surface vehicle: it stays at its depot's altitude."""
+        return not limits_of(self.spec.kind).vertical
+
+    @property
+    def _submerges(self) -> bool:
+        return self.spec.kind == UNDERWATER
+
     # Commands
 
     def fly_to(self, target: Position, now_s: float) -> float:
         """Plan a flight from wherever the vehicle is at ``now_s`` to ``target``.
 
-        Replaces the rest of the plan. From landed: a vertical take-off to
-        ``max(target.alt, takeoff_alt_m)``, then one straight cruise leg; airborne: one straight
-        cruise leg. A leg lasts ``max(horizontal / max_speed, vertical / climb_rate)``, so the
-        vehicle arrives exactly at ``target``. Returns the arrival time (``now_s`` if already
-        there). Raises ValueError if ``now_s`` is not finite or earlier than the last command.
+        Replaces the rest of the plan. An aerial vehicle, from landed: a vertical take-off to
+        ``max(target.alt, takeoff_alt_m)``, then one straight cruise leg; airborne: one
+        straight cruise leg. A leg lasts ``max(horizontal / max_speed, vertical / rate)`` (the
+        climb rate going up, the dive rate going down), so the vehicle arrives exactly at
+        ``target``. An underwater vehicle needs no take-off: it dives along its one leg. A
+        ground or surface vehicle first turns in place from its heading (that of its last
+        leg; north when new) to the leg's, at its turn rate, then drives the leg.
+
+        Returns the arrival time (``now_s`` if already there). Raises ValueError if ``now_s``
+        is not finite or earlier than the last command, or the target is where the kind
+        cannot go: for a ground or surface vehicle any altitude but its depot's, for an
+        underwater one above the surface (the plan is then unchanged).
         """
+        target = self._reachable(target)
         here, landed = self._begin_command(now_s)
         if here == target:
             return now_s
         t = now_s
-        if landed:
+        if self._in_plane:
+            t = self._turn(t, here, target)
+        elif landed and not self._submerges:
             climb_to = max(target.alt, self.spec.takeoff_alt_m)
             if climb_to > here.alt:
                 top = here.with_alt(climb_to)
@@ -160,11 +240,26 @@ class SimVehicle:
 
         Replaces the rest of the plan. The cruise keeps the current altitude (at least
         ``takeoff_alt_m``); the landing leg ends at the depot, after which the vehicle is landed.
-        Returns the landing time (``now_s`` if already landed). Raises ValueError like ``fly_to``.
+        A ground or surface vehicle turns and drives to the depot and stops there. An
+        underwater vehicle rises straight up to the surface where it is, then cruises on the
+        surface to the depot and docks (it never travels submerged towards a dock it cannot
+        see, and a vehicle at the surface is the one an operator can find). Both end with a
+        landing leg of no length, which marks them landed. Returns the landing time
+        (``now_s`` if already landed). Raises ValueError like ``fly_to``.
         """
         here, landed = self._begin_command(now_s)
         if landed:
             return now_s
+        if self._in_plane or self._submerges:
+            t = now_s
+            surface = here.with_alt(self.depot.alt)
+            if here != surface:
+                t = self._append(t, here, surface, PHASE_CRUISE)
+            if surface != self.depot:
+                if self._in_plane:
+                    t = self._turn(t, surface, self.depot)
+                t = self._append(t, surface, self.depot, PHASE_CRUISE)
+            return self._append(t, self.depot, self.depot, PHASE_LANDING, landed_after=True)
         cruise_alt = max(here.alt, self.spec.takeoff_alt_m, self.depot.alt)
         above = self.depot.with_alt(cruise_alt)
         t = now_s
@@ -175,7 +270,9 @@ class SimVehicle:
 
     def land(self, now_s: float) -> float:
         """Plan a landing where the vehicle is: straight down to the depot's height (altitudes
-        are above ground, as the autopilot's are relative to its home).
+        are above ground, as the autopilot's are relative to its home). A ground or surface
+        vehicle stops where it is; an underwater vehicle rises straight up to the surface
+        (phase "landing") and stays there.
 
         Replaces the rest of the plan; afterwards the vehicle is landed there, and a later
         ``fly_to`` takes off from there. Returns the touchdown time (``now_s`` if already
@@ -210,10 +307,13 @@ class SimVehicle:
     # Estimates (the plan is not changed)
 
     def time_to_s(self, target: Position, now_s: float) -> float:
-        """How long ``fly_to(target, now_s)`` would take from where the vehicle is then."""
+        """How long ``fly_to(target, now_s)`` would take from where the vehicle is then (for a
+        ground or surface vehicle with its turn from its heading then)."""
         here = self.position_at(now_s)
         seconds = 0.0
-        if self.is_landed_at(now_s):
+        if self._in_plane:
+            seconds += self._turn_s(self._heading_at(now_s), here, target)
+        elif self.is_landed_at(now_s) and not self._submerges:
             climb_to = max(target.alt, self.spec.takeoff_alt_m)
             if climb_to > here.alt:
                 top = here.with_alt(climb_to)
@@ -223,12 +323,22 @@ class SimVehicle:
 
     def time_home_s(self, start: Position) -> float:
         """How long ``return_to_depot`` would take from ``start`` in the air: cruise to above
-        the depot, then land."""
+        the depot, then land. A ground or surface vehicle's heading at ``start`` is not known:
+        its turn is counted as half a turn, the most it can be (an estimate that errs on the
+        safe side, as a battery's reserve wants). An underwater vehicle's: surface, then
+        cruise home."""
+        if self._in_plane:
+            half_turn_s = 180.0 / self._turn_rate()
+            return half_turn_s + self._duration(start, self.depot)
+        if self._submerges:
+            surface = start.with_alt(self.depot.alt)
+            return self._duration(start, surface) + self._duration(surface, self.depot)
         above = self.depot.with_alt(max(start.alt, self.spec.takeoff_alt_m, self.depot.alt))
         return self._duration(start, above) + self._duration(above, self.depot)
 
     def leg_s(self, a: Position, b: Position) -> float:
-        """How long a straight leg in the air from ``a`` to ``b`` takes."""
+        """How long a straight leg in the air from ``a`` to ``b`` takes. The heading at ``a``
+        is not known: a ground or surface vehicle's turn before the leg is not counted."""
         return self._duration(a, b)
 
     def read_sensor(self, read: SensorRead) -> Sample:
@@ -246,7 +356,7 @@ class SimVehicle:
         return self._steps[i].leg.position_at(t)
 
     def phase_at(self, t: float) -> str:
-        """One of "landed", "takeoff", "cruise", "landing", "hovering" at time t.
+        """One of "landed", "takeoff", "cruise", "turning", "landing", "hovering" at time t.
 
         At the instant one leg ends and the next begins, the next leg's phase is reported.
         """
@@ -328,10 +438,64 @@ class SimVehicle:
     # Internals
 
     def _duration(self, start: Position, end: Position) -> float:
-        """A straight leg's duration: cruise at max speed while climbing at the climb rate."""
+        """A straight leg's duration: cruise at max speed while climbing at the climb rate
+        (descending at the dive rate)."""
         horizontal = ground_distance_m(start, end)
-        vertical = abs(end.alt - start.alt)
-        return max(horizontal / self.spec.max_speed_mps, vertical / self.spec.climb_rate_mps)
+        rise = end.alt - start.alt
+        rate = self.spec.climb_rate_mps if rise >= 0.0 else self.spec.descent_rate_mps
+        return max(horizontal / self.spec.max_speed_mps, abs(rise) / rate)
+
+    def _reachable(self, target: Position) -> Position:
+        """``target`` as the vehicle's kind reaches it; ValueError where it cannot go."""
+        kind, plane = self.spec.kind, self.depot.alt
+        if self._in_plane:
+            if abs(target.alt - plane) > _ARRIVAL_SLACK_M:
+                raise ValueError(
+                    f"a {kind} vehicle moves in the plane at {plane:g} m: it cannot go to "
+                    f"altitude {target.alt:g} m"
+                )
+            return target.with_alt(plane)
+        if self._submerges and target.alt > plane + _ARRIVAL_SLACK_M:
+            raise ValueError(
+                f"an {kind} vehicle goes no higher than the surface ({plane:g} m): it cannot "
+                f"go to altitude {target.alt:g} m"
+            )
+        return target
+
+    def _turn_rate(self) -> float:
+        rate = self.spec.turning_rate_dps
+        assert rate is not None  # only vehicles that turn in place ask
+        return rate
+
+    def _turn_s(self, heading_deg: float, here: Position, target: Position) -> float:
+        """Seconds to turn in place from ``heading_deg`` to the leg from ``here`` to
+        ``target`` (0 for no horizontal leg)."""
+        if here.lat == target.lat and here.lng == target.lng:
+            return 0.0
+        turn = abs(_turn_deg(heading_deg, _headings(here, target)[0]))
+        return 0.0 if turn < _TURN_SLACK_DEG else turn / self._turn_rate()
+
+    def _turn(self, start_s: float, here: Position, target: Position) -> float:
+        """Append the turn in place towards ``target`` (if any); return when it is done."""
+        heading = self._heading_at(start_s)
+        seconds = self._turn_s(heading, here, target)
+        if seconds == 0.0:
+            return start_s
+        leave = _headings(here, target)[0]
+        return self._append(
+            start_s, here, here, PHASE_TURNING, duration_s=seconds, headings=(heading, leave)
+        )
+
+    def _heading_at(self, t: float) -> float:
+        """The heading at time t (kept for vehicles that turn in place): turns and legs change
+        it evenly from their start to their end."""
+        i = self._index_at(t)
+        if i < 0:
+            return _NORTH_DEG
+        step = self._steps[i]
+        fraction = self._fraction(step.leg, t)
+        start, end = step.heading_from_deg, step.heading_to_deg
+        return (start + _turn_deg(start, end) * fraction) % 360.0
 
     def _index_at(self, t: float) -> int:
         """Index of the last step started at or before t, or -1."""
@@ -378,6 +542,8 @@ class SimVehicle:
                 landed_after=False,
                 distance_before_m=step.distance_before_m,
                 flight_before_s=step.flight_before_s,
+                heading_from_deg=step.heading_from_deg,
+                heading_to_deg=self._heading_at(now_s),
             )
 
     def _append(
@@ -388,17 +554,28 @@ class SimVehicle:
         phase: str,
         *,
         landed_after: bool = False,
+        duration_s: float | None = None,
+        headings: tuple[float, float] | None = None,
     ) -> float:
-        """Add one leg starting at start_s; return its end time."""
-        end_s = start_s + self._duration(start, end)
+        """Add one leg starting at start_s; return its end time. ``duration_s``: the leg's
+        (a turn's), else the straight leg's; ``headings``: at its start and end, else those
+        of the way it goes (kept only for vehicles that turn in place)."""
+        end_s = start_s + (self._duration(start, end) if duration_s is None else duration_s)
         if self._steps:
             prev = self._steps[-1]
             hover_s = 0.0 if prev.landed_after else start_s - prev.leg.end_s
             distance_before = prev.distance_before_m + prev.length_m
             flight_before = prev.flight_before_s + prev.leg.duration_s + hover_s
+            heading = prev.heading_to_deg
         else:
             distance_before = 0.0
             flight_before = 0.0
+            heading = _NORTH_DEG
+        if headings is None:
+            headings = (heading, heading)
+            moves = start.lat != end.lat or start.lng != end.lng
+            if moves and self.spec.turning_rate_dps is not None:
+                headings = _headings(start, end)
         self._steps.append(
             _Step(
                 leg=Leg(start_s, end_s, start, end, phase),
@@ -406,6 +583,8 @@ class SimVehicle:
                 landed_after=landed_after,
                 distance_before_m=distance_before,
                 flight_before_s=flight_before,
+                heading_from_deg=headings[0],
+                heading_to_deg=headings[1],
             )
         )
         self._starts.append(start_s)

@@ -35,12 +35,16 @@ WAITING_SCHEMA = {
     "description": "What the VV waits for, in your words; null when it runs without waiting "
     "or has ended. `reason`: `no_vehicle` (no vehicle in service covers its next task; it "
     "continues when one does), `queue` (behind your other VVs: your limit of VVs in "
-    "parallel), `flying` (a vehicle flies to its task) or `message` (its program waits in "
-    "VV.message.receive, at most until its timeout). `since`: when it started waiting "
+    "parallel), `service_level` (queued and held while the fleet misses your service "
+    "class's target), `flying` (a vehicle flies to its task) or `message` (its program waits "
+    "in VV.message.receive, at most until its timeout). `since`: when it started waiting "
     "(null when not known); `next_task_eta_s`: seconds until the vehicle is expected at its "
     "next task, by its plan (null when not known).",
     "properties": {
-        "reason": {"type": "string", "enum": ["no_vehicle", "queue", "flying", "message"]},
+        "reason": {
+            "type": "string",
+            "enum": ["no_vehicle", "queue", "service_level", "flying", "message"],
+        },
         "message": {"type": "string"},
         # (OpenAPI 3.1: drf-spectacular makes only the field itself nullable.)
         "since": {"type": ["string", "null"], "format": "date-time"},

@@ -6,6 +6,7 @@ from rest_framework.routers import DefaultRouter
 from missions.api.downloads import VVReadingsCSVView, VVReadingsGeoJSONView
 from missions.api.dry_run import DryRunView
 from missions.api.messages import VVMessagesView
+from missions.api.service_levels import ServiceLevelsView
 from missions.api.views import (
     UUID_PATTERN,
     VirtualVehicleViewSet,
@@ -24,6 +25,7 @@ ONE_VV = rf"^vvs/(?P<id>{UUID_PATTERN})/"
 
 urlpatterns = [
     path("vvs/dry-run/", DryRunView.as_view(), name="vv-dry-run"),  # before vvs/{id}/
+    path("service-levels/", ServiceLevelsView.as_view(), name="service-levels"),
     *router.urls,
     re_path(ONE_VV + r"storage/$", VVStorageListView.as_view(), name="vv-storage"),
     # A key is any non-empty string: dots, slashes, spaces, even line breaks (percent-encoded).

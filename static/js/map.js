@@ -26,6 +26,13 @@
  * Names (VVs, vehicles, areas, ground stations) are the customers' and operators' words, never
  * markup: every tooltip is a DOM node whose text is set by text() (Leaflet would take a string
  * as HTML).
+ *
+ * Each vehicle is drawn with the symbol of its kind (fleet/kinds.py; a state without one is
+ * aerial): a copter's four rotors, a rover on its wheels, a boat's hull and sail, a submarine's
+ * hull and tower, whose label says its depth ("Sub · -5 m"). The symbols are paths drawn by
+ * the map's own renderer (KindMarker, canvas or SVG), nothing loaded; the admin's fleet
+ * overview draws with them too (CPCCMap.kindMarker). State: data-vehicle-kinds, the vehicles
+ * drawn per kind ("aerial:2,surface:1"), and each marker's options.kind.
  */
 (function () {
   'use strict';
@@ -48,6 +55,120 @@
   var LABELS_UP_TO = 60; // permanent vehicle labels only while they stay readable
   var PLATFORM_TILES = '/tiles/{z}/{x}/{y}.png'; // fleet/views.py: the simulated world
   var MAX_ZOOM = 21;
+
+  // --- vehicle kinds ------------------------------------------------------------------------
+
+  var KINDS = ['aerial', 'ground', 'surface', 'underwater']; // fleet/kinds.py
+  var KIND_COLOR = {
+    aerial: COLOR.vehicle, ground: '#8d5524', surface: '#0077b6', underwater: '#f4b400'
+  };
+  var KIND_RADIUS = 10; // a symbol needs more room than a dot to be told apart
+  // Each kind's symbol in units of the marker's radius (x right, y down, within [-1, 1]):
+  // circles [x, y, r], ellipses [x, y, rx, ry] and polygons (a list of points, clockwise on the
+  // screen so that the parts fill as one under the nonzero rule).
+  var SYMBOLS = {
+    aerial: { // a quadcopter from above: four rotors round a body
+      circles: [[-0.58, -0.58, 0.42], [0.58, -0.58, 0.42], [0.58, 0.58, 0.42],
+                [-0.58, 0.58, 0.42], [0, 0, 0.42]]
+    },
+    ground: { // a rover from the side: a body and a cab on two wheels
+      polygons: [[[-0.95, -0.35], [-0.45, -0.35], [-0.25, -0.85], [0.4, -0.85], [0.6, -0.35],
+                  [0.95, -0.35], [0.95, 0.35], [-0.95, 0.35]]],
+      circles: [[-0.52, 0.5, 0.34], [0.52, 0.5, 0.34]]
+    },
+    surface: { // a boat: a hull under a sail
+      polygons: [[[-1, 0.2], [1, 0.2], [0.6, 0.8], [-0.6, 0.8]],
+                 [[0.05, -0.95], [0.8, 0.1], [0.05, 0.1]]]
+    },
+    underwater: { // a submarine: a long hull, its tower and its rudder
+      ellipses: [[-0.08, 0.25, 0.88, 0.42]],
+      polygons: [[[-0.35, -0.55], [0.15, -0.55], [0.25, 0], [-0.35, 0]],
+                 [[0.7, 0.25], [1, -0.15], [1, 0.65]]]
+    }
+  };
+
+  function kindOf(v) {
+    return SYMBOLS[v.kind] ? v.kind : 'aerial';
+  }
+
+  /* Metres, as a label shows them: "-5 m" (never "-0 m"). */
+  function metres(value) {
+    var m = Math.round(value);
+    return (m === 0 ? 0 : m) + ' m';
+  }
+
+  /* What a vehicle's label adds to its name: an underwater vehicle's depth. */
+  function depthNote(v) {
+    return kindOf(v) === 'underwater' && typeof v.alt === 'number' ? ' · ' + metres(v.alt) : '';
+  }
+
+  /* A circle marker drawn as its kind's symbol (options.kind), on a canvas or an SVG renderer;
+   * it is found under the pointer as the circle of its radius. */
+  var KindMarker = L.CircleMarker.extend({
+    options: { kind: 'aerial', radius: KIND_RADIUS, fillRule: 'nonzero', lineJoin: 'round' },
+
+    _updatePath: function () {
+      var symbol = SYMBOLS[this.options.kind] || SYMBOLS.aerial;
+      var renderer = this._renderer;
+      if (renderer._ctx) {
+        if (!renderer._drawing || this._empty()) return;
+        var ctx = renderer._ctx;
+        ctx.beginPath();
+        trace(symbol, this._point, this._radius, canvasPen(ctx));
+        renderer._fillStroke(ctx, this);
+      } else {
+        var d = [];
+        if (!this._empty()) trace(symbol, this._point.round(), this._radius, svgPen(d));
+        renderer._setPath(this, d.length ? d.join('') : 'M0 0');
+      }
+    }
+  });
+
+  /* The symbol's outline, drawn with a pen (a canvas's or an SVG path's) at `at`, `r` px. */
+  function trace(symbol, at, r, pen) {
+    var i;
+    for (i = 0; i < (symbol.polygons || []).length; i++) {
+      var points = symbol.polygons[i];
+      for (var k = 0; k < points.length; k++) {
+        pen(k ? 'L' : 'M', at.x + points[k][0] * r, at.y + points[k][1] * r);
+      }
+      pen('Z');
+    }
+    var ellipses = (symbol.circles || []).map(function (c) { return [c[0], c[1], c[2], c[2]]; })
+      .concat(symbol.ellipses || []);
+    for (i = 0; i < ellipses.length; i++) {
+      var e = ellipses[i];
+      pen('E', at.x + e[0] * r, at.y + e[1] * r, e[2] * r, e[3] * r);
+    }
+  }
+
+  function canvasPen(ctx) {
+    return function (op, x, y, rx, ry) {
+      if (op === 'M') ctx.moveTo(x, y);
+      else if (op === 'L') ctx.lineTo(x, y);
+      else if (op === 'Z') ctx.closePath();
+      else { ctx.moveTo(x + rx, y); ctx.ellipse(x, y, rx, ry, 0, 0, 2 * Math.PI, false); }
+    };
+  }
+
+  function svgPen(d) {
+    var n = function (v) { return Math.round(v * 10) / 10; };
+    return function (op, x, y, rx, ry) {
+      if (op === 'Z') d.push('Z');
+      else if (op !== 'E') d.push(op + n(x) + ',' + n(y));
+      else { // two half arcs, clockwise
+        var arc = 'A' + n(rx) + ',' + n(ry) + ' 0 1,1 ';
+        d.push('M' + n(x - rx) + ',' + n(y) + arc + n(x + rx) + ',' + n(y) + arc + n(x - rx) +
+               ',' + n(y) + 'Z');
+      }
+    };
+  }
+
+  /* A vehicle's marker: its kind's symbol at latlng (options as L.circleMarker's). */
+  function kindMarker(latlng, kind, options) {
+    var known = SYMBOLS[kind] ? kind : 'aerial';
+    return new KindMarker(latlng, L.extend({}, options || {}, { kind: known }));
+  }
 
   /* Tooltip content from text: a node Leaflet shows as it is. */
   function text(value) {
@@ -480,18 +601,26 @@
     var ids = Object.keys(this.vehicles);
     var labels = ids.length <= LABELS_UP_TO;
     var live = {};
+    var kinds = {};
     for (var i = 0; i < ids.length; i++) {
       var v = this.vehicles[ids[i]];
+      var kind = kindOf(v);
       live[v.id] = true;
+      kinds[kind] = (kinds[kind] || 0) + 1;
       var marker = this.vehicleMarkers[v.id];
       var aboard = (v.vvs || []).map(function (x) { return x.name; }).join(', ');
-      var label = (v.name || 'vehicle') + (aboard ? ' · ' + aboard : '');
+      var label = (v.name || 'vehicle') + depthNote(v) + (aboard ? ' · ' + aboard : '');
+      if (marker && marker.options.kind !== kind) { // its kind was changed: drawn anew
+        this.layers.vehicles.removeLayer(marker);
+        marker = null;
+      }
       if (!marker) {
-        marker = L.circleMarker([v.lat, v.lng], {
-          renderer: this.renderer, radius: 7, color: '#fff', weight: 2,
-          fillColor: COLOR.vehicle, fillOpacity: 1
+        marker = kindMarker([v.lat, v.lng], kind, {
+          renderer: this.renderer, color: '#fff', weight: 1.5,
+          fillColor: KIND_COLOR[kind], fillOpacity: 1
         }).addTo(this.layers.vehicles);
-        marker.bindTooltip(text(label), { permanent: labels, direction: 'right', offset: [8, 0],
+        marker.bindTooltip(text(label), { permanent: labels, direction: 'right',
+                                          offset: [KIND_RADIUS + 1, 0],
                                           className: 'vehicle-label' });
         this.vehicleMarkers[v.id] = marker;
       } else {
@@ -513,6 +642,8 @@
       }
     }
     this.element.dataset.vehicles = String(ids.length);
+    this.element.dataset.vehicleKinds = KINDS.filter(function (k) { return kinds[k]; })
+      .map(function (k) { return k + ':' + kinds[k]; }).join(',');
   };
 
   /* Live: a socket that reconnects by itself and starts again from a snapshot. */
@@ -557,5 +688,10 @@
   };
 
   CPCCMap.text = text; // for the other maps' tooltips
+  // The vehicles' symbols, for the other maps (the admin's fleet overview).
+  CPCCMap.KINDS = KINDS;
+  CPCCMap.kindMarker = kindMarker;
+  CPCCMap.kindOf = kindOf;
+  CPCCMap.depthNote = depthNote;
   window.CPCCMap = CPCCMap;
 })();

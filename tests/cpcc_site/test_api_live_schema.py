@@ -45,6 +45,7 @@ RULES_BEYOND_THE_SCHEMA = {
     "PUT /api/v1/customers/{id}/",
     "PATCH /api/v1/customers/{id}/",
     "POST /api/v1/webhooks/",
+    "GET /api/v1/service-levels/",  # since and until: an instant each, since before until
 }
 
 

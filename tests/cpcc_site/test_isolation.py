@@ -45,7 +45,15 @@ from django.utils.http import urlsafe_base64_encode
 from rest_framework.authtoken.models import Token
 from rest_framework.test import APIClient
 
-from accounts.models import ApiToken, Customer, NotifyEvent, User, Webhook, WebhookDelivery
+from accounts.models import (
+    ApiToken,
+    Customer,
+    NotifyEvent,
+    ServiceClass,
+    User,
+    Webhook,
+    WebhookDelivery,
+)
 from cpcc_site.asgi import application
 from cpcc_site.websocket import SameOriginValidator
 from fleet.models import GroundStation, SensorType, Vehicle
@@ -216,6 +224,7 @@ ROUTES: dict[str, Route] = {
     "api/v1/sensors/": Route(Kind.SIGNED_IN, "/api/v1/sensors/"),
     # Where tasks can be served: the same for everyone, no vehicle named.
     "api/v1/service-area/": Route(Kind.SIGNED_IN, "/api/v1/service-area/"),
+    "api/v1/service-levels/": Route(Kind.STAFF, "/api/v1/service-levels/"),
     "api/v1/vehicles/$": Route(Kind.STAFF, "/api/v1/vehicles/", ("GET", "POST")),
     "api/v1/vehicles/(?P<pk>[^/.]+)/$": Route(
         Kind.STAFF, "/api/v1/vehicles/{vehicle}/", ("GET", "PATCH", "DELETE")
@@ -241,6 +250,10 @@ ROUTES: dict[str, Route] = {
         Kind.STAFF, "/api/v1/ground-stations/{gs}/", ("GET", "PUT", "PATCH", "DELETE")
     ),
     "api/v1/customers/$": Route(Kind.STAFF, "/api/v1/customers/", ("GET", "POST")),
+    "api/v1/service-classes/$": Route(Kind.STAFF, "/api/v1/service-classes/", ("GET", "POST")),
+    "api/v1/service-classes/(?P<pk>[^/.]+)/$": Route(
+        Kind.STAFF, "/api/v1/service-classes/{service_class}/"
+    ),
     "api/v1/customers/(?P<pk>[^/.]+)/$": Route(
         Kind.STAFF, "/api/v1/customers/{customer}/", ("GET", "PUT", "PATCH", "DELETE")
     ),
@@ -310,6 +323,9 @@ ROUTES: dict[str, Route] = {
     "admin/(?P<url>.*)$": Route(Kind.STAFF, "/admin/no/such/page/", staff_status=404),
     # Custom views of the model admins (ModelAdmin.get_urls overrides).
     "admin/fleet/vehicle/overview/": Route(Kind.STAFF, "/admin/fleet/vehicle/overview/"),
+    "admin/accounts/serviceclass/levels/": Route(
+        Kind.STAFF, "/admin/accounts/serviceclass/levels/"
+    ),
     # An action of the fleet overview: a POST without one is refused, saying which there are.
     "admin/fleet/vehicle/overview/<int:object_id>/act/": Route(
         Kind.STAFF, "/admin/fleet/vehicle/overview/{vehicle}/act/", ("POST",), staff_status=400
@@ -594,7 +610,9 @@ def _staff_ids(world: World, vehicle: Vehicle, station: GroundStation) -> dict[s
     from django.contrib.contenttypes.models import ContentType
 
     a, vv = world.a, world.a.flown
+    gold = ServiceClass.objects.create(name="gold", p95_s=30.0, weight=4.0)
     objects: dict[str, Any] = {
+        "accounts.serviceclass": gold,
         "accounts.customer": a.customer,
         "accounts.user": a.user,
         "authtoken.tokenproxy": a.user,  # the token admin looks tokens up by their user
@@ -616,6 +634,7 @@ def _staff_ids(world: World, vehicle: Vehicle, station: GroundStation) -> dict[s
         "uidb64": urlsafe_base64_encode(force_bytes(a.user.pk)),
         "vehicle": str(vehicle.pk),
         "gs": str(station.pk),
+        "service_class": str(gold.pk),
     }
 
 

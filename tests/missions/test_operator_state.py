@@ -31,8 +31,8 @@ FOR_OPERATORS = {
     "battery": 0.8,
     "battery_why": "",
 }
-# What a customer's map shows of a vehicle carrying one of its VVs.
-CARRIER_KEYS = {"id", "lat", "lng", "alt", "phase", "t", "vvs"}
+# What a customer's map shows of a vehicle carrying one of its VVs (its kind: the symbol).
+CARRIER_KEYS = {"id", "lat", "lng", "alt", "kind", "phase", "t", "vvs"}
 
 
 @pytest.fixture(autouse=True)

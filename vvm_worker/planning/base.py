@@ -27,17 +27,23 @@ class PlanTask:
     requested on the platform clock (seconds) and breaks ties between equally good choices.
     `group` names the request the task belongs to: the tasks of one `executeAll` batch share
     it and the batch is done when its last task is read; None means a request of its own.
-    Raises ValueError when `requested_s` is not a finite number.
+    `weight` is how much a second of the request's waiting counts (its customer's service
+    class; 1 without one): every planner weighs a request's waiting time by it, and with
+    every weight 1 plans as if there were no weights. Raises ValueError when `requested_s` is
+    not a finite number or `weight` not a positive finite one.
     """
 
     id: int
     position: Position
     requested_s: float
     group: str | None = None
+    weight: float = 1.0
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.requested_s):
             raise ValueError(f"task {self.id}: requested_s {self.requested_s!r} is not finite")
+        if not (math.isfinite(self.weight) and self.weight > 0):
+            raise ValueError(f"task {self.id}: weight {self.weight!r} is not a positive number")
 
 
 class Planner(Protocol):
@@ -121,3 +127,19 @@ def tie_tolerance(value: float) -> float:
     such near-ties would be broken by rounding noise instead of by (requested_s, id).
     """
     return 1e-9 * abs(value) + 1e-12
+
+
+def weighted(open_tasks: Sequence[PlanTask]) -> bool:
+    """Whether any task weighs other than 1 (otherwise the planners plan as without weights)."""
+    return any(task.weight != 1.0 for task in open_tasks)
+
+
+def waiting_order(open_tasks: Sequence[PlanTask], now_s: float | None) -> list[PlanTask]:
+    """The tasks by weighted waiting, longest first: weight times age at `now_s` (None: the
+    latest request time), ties by (requested_s, id). With every weight 1 this is
+    `canonical_order` (the oldest first). Raises ValueError when two tasks share an id."""
+    ordered = canonical_order(open_tasks)
+    if not weighted(ordered):
+        return ordered
+    now = max(task.requested_s for task in ordered) if now_s is None else now_s
+    return sorted(ordered, key=lambda task: -task.weight * max(0.0, now - task.requested_s))

@@ -54,26 +54,42 @@ class CostMatrix:
 @dataclass(frozen=True, slots=True)
 class TravelTime:
     """Seconds a vehicle needs to fly straight from one position to another: it cruises at
-    `max_speed_mps` while climbing or descending at `climb_rate_mps`, so a leg lasts
-    max(ground distance / speed, height difference / climb rate), as `fleet.simulation` flies
-    it. A cost function (symmetric) with a vectorised fast path in `build_cost_matrix`.
+    `max_speed_mps` while climbing at `climb_rate_mps` or descending at `dive_rate_mps` (None:
+    the climb rate), so a leg lasts max(ground distance / speed, height difference / rate), as
+    `fleet.simulation` flies it. A cost function with a vectorised fast path in
+    `build_cost_matrix`; symmetric unless the two rates differ (an underwater vehicle that
+    dives slower than it rises). A ground or surface vehicle's turns in place before each leg
+    are not counted: they depend on the heading it arrives with, which a cost between two
+    positions does not know, so its costs are estimates on the low side.
     Raises ValueError when a rate is not a positive finite number.
     """
 
     max_speed_mps: float
     climb_rate_mps: float = 3.0
+    dive_rate_mps: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("max_speed_mps", "climb_rate_mps"):
+        for name in ("max_speed_mps", "climb_rate_mps", "dive_rate_mps"):
             value = getattr(self, name)
+            if value is None and name == "dive_rate_mps":
+                continue
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be a positive finite number, got {value!r}")
 
+    @property
+    def descent_rate_mps(self) -> float:
+        """Vertical speed going down: the dive rate, else the climb rate."""
+        return self.climb_rate_mps if self.dive_rate_mps is None else self.dive_rate_mps
+
+    @property
+    def symmetric(self) -> bool:
+        """Whether a leg costs the same both ways (it does unless the rates differ)."""
+        return self.descent_rate_mps == self.climb_rate_mps
+
     def __call__(self, a: Position, b: Position) -> float:
-        return max(
-            ground_distance_m(a, b) / self.max_speed_mps,
-            abs(b.alt - a.alt) / self.climb_rate_mps,
-        )
+        rise = b.alt - a.alt
+        rate = self.climb_rate_mps if rise >= 0.0 else self.descent_rate_mps
+        return max(ground_distance_m(a, b) / self.max_speed_mps, abs(rise) / rate)
 
 
 NO_WAY_COST = 1e9
@@ -115,9 +131,15 @@ class AroundZones:
 
 
 def _exact_block(
-    cost: CostFn, positions: Sequence[Position], values: FloatArray, known: TaskCosts | None
+    cost: CostFn,
+    positions: Sequence[Position],
+    values: FloatArray,
+    known: TaskCosts | None,
+    *,
+    symmetric: bool = True,
 ) -> None:
-    """The task block of `values`, one call of `cost` per unordered pair not `known`."""
+    """The task block of `values`, one call of `cost` per unordered pair not `known` (per
+    ordered pair when the cost is not `symmetric`)."""
     n = len(positions)
     old = [-1] * n if known is None else [known.index.get(p, -1) for p in positions]
     seen = [k for k in range(n) if old[k] >= 0]
@@ -127,7 +149,10 @@ def _exact_block(
         values[np.ix_(rows, rows)] = known.block[np.ix_(at, at)]
     for i in range(n):
         for j in range(i + 1, n):
-            if old[i] < 0 or old[j] < 0:
+            if (old[i] < 0 or old[j] < 0) and not symmetric:
+                values[i + 1, j + 1] = cost(positions[i], positions[j])
+                values[j + 1, i + 1] = cost(positions[j], positions[i])
+            elif old[i] < 0 or old[j] < 0:
                 # Symmetric in theory; mirroring keeps the matrix exactly so.
                 values[i + 1, j + 1] = values[j + 1, i + 1] = cost(positions[i], positions[j])
     if known is not None:
@@ -172,32 +197,40 @@ def build_cost_matrix(
 
     Row 0 always comes from `cost` itself, so the first step of every planner is judged with
     the true cost. The task block calls `cost` once per ordered pair (n * (n - 1) calls) for a
-    custom cost; `distance_m` and `TravelTime` are evaluated once per unordered pair up to
-    `EXACT_DEFAULT_LIMIT` tasks (pairs `known` from the caller's last matrix are copied from
-    it, and it keeps this one), and from a vectorised approximation of the ground distance
-    above that (error below 1e-6 relative for legs under 50 km). Raises ValueError when a cost
-    is negative or not finite.
+    custom cost; `distance_m` and `TravelTime` are evaluated once per unordered pair (per
+    ordered pair for a `TravelTime` that is not symmetric) up to `EXACT_DEFAULT_LIMIT` tasks
+    (pairs `known` from the caller's last matrix are copied from it, and it keeps this one),
+    and from a vectorised approximation of the ground distance above that (error below 1e-6
+    relative for legs under 50 km). Raises ValueError when a cost is negative or not finite.
     """
     if isinstance(cost, AroundZones):
         return _around_zones(cost, origin, positions, known)
     n = len(positions)
     values = np.zeros((n + 1, n + 1), dtype=np.float64)
     values[0, 1:] = costs_from(cost, origin, positions)
-    if (cost is distance_m or isinstance(cost, TravelTime)) and n <= EXACT_DEFAULT_LIMIT:
-        _exact_block(cost, positions, values, known)
-        return CostMatrix(values, symmetric=True)
     if cost is distance_m or isinstance(cost, TravelTime):
-        if n > EXACT_DEFAULT_LIMIT:
-            ground = approximate_ground_matrix(positions)
-            alt = np.fromiter((p.alt for p in positions), dtype=np.float64, count=n)
-            dalt = np.abs(alt[:, None] - alt[None, :])
-            if isinstance(cost, TravelTime):
-                ground *= 1.0 / cost.max_speed_mps
-                dalt *= 1.0 / cost.climb_rate_mps
-                values[1:, 1:] = np.maximum(ground, dalt, out=ground)
+        symmetric = not isinstance(cost, TravelTime) or cost.symmetric
+        if n <= EXACT_DEFAULT_LIMIT:
+            _exact_block(cost, positions, values, known, symmetric=symmetric)
+            return CostMatrix(values, symmetric=symmetric)
+        ground = approximate_ground_matrix(positions)
+        alt = np.fromiter((p.alt for p in positions), dtype=np.float64, count=n)
+        if isinstance(cost, TravelTime):
+            ground *= 1.0 / cost.max_speed_mps
+            # rise[i, j]: the climb from task i to task j (below 0: a descent).
+            rise = alt[None, :] - alt[:, None]
+            if symmetric:
+                np.abs(rise, out=rise)
+                rise *= 1.0 / cost.climb_rate_mps
             else:
-                values[1:, 1:] = np.hypot(ground, dalt, out=ground)
-        return CostMatrix(values, symmetric=True)
+                rise = np.where(
+                    rise >= 0.0, rise / cost.climb_rate_mps, -rise / cost.descent_rate_mps
+                )
+            values[1:, 1:] = np.maximum(ground, rise, out=ground)
+        else:
+            dalt = np.abs(alt[:, None] - alt[None, :])
+            values[1:, 1:] = np.hypot(ground, dalt, out=ground)
+        return CostMatrix(values, symmetric=symmetric)
     block = np.zeros((n, n), dtype=np.float64)
     for i, a in enumerate(positions):
         for j, b in enumerate(positions):

@@ -30,13 +30,15 @@ def path_cost(matrix: CostMatrix, path: Sequence[int]) -> float:
     return float(matrix.values[idx[:-1], idx[1:]].sum())
 
 
-def greedy_chain(matrix: CostMatrix) -> list[int]:
-    """The nearest-neighbour path from node 0: always the cheapest unvisited node next.
+def greedy_chain(matrix: CostMatrix, weights: FloatArray | None = None) -> list[int]:
+    """The nearest-neighbour path from node 0: always the cheapest unvisited node next, or
+    with `weights` (one per node, positive; entry 0 ignored) the least cost per unit of the
+    node's weight.
 
     Costs within `tie_tolerance` of the cheapest count as ties and go to the lowest node index,
     which callers make the (requested_s, id) order.
     """
-    values = matrix.values
+    values = matrix.values if weights is None else matrix.values / weights[None, :]
     m = matrix.size
     visited = np.zeros(m, dtype=bool)
     visited[0] = True

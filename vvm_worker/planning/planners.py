@@ -1,5 +1,9 @@
 """The route planners a vehicle can run, and `make_planner` to pick one by name.
 
+Every planner weighs a request's waiting by its `PlanTask.weight` (the customer's service
+class), each the way its objective allows (see each class); with every weight 1 each plans
+exactly as without weights.
+
 - `latency` (the default): least total waiting of the customers (traveling repairman), with
   old tasks weighing more; shortest tours for batches and surveys; re-planned as tasks arrive.
 - `tour`: re-plans a short open path over all open tasks at every call.
@@ -15,10 +19,12 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from fleet.airspace import Airspace
 from fleet.geo import Position, distance_m
 
-from .base import CostFn, Planner, PlanTask, canonical_order
+from .base import CostFn, Planner, PlanTask, canonical_order, waiting_order, weighted
 from .costs import AroundZones, TaskCosts, TravelTime, build_cost_matrix, costs_from
 from .exact import HELD_KARP_LIMIT, NODE_LIMIT, solve_open_path
 from .heuristics import (
@@ -37,7 +43,10 @@ GATED_TOUR_LIMIT = 30
 
 
 class FcfsPlanner:
-    """First come, first served: the earliest requested task, then the lowest id. Stateless."""
+    """First come, first served: the earliest requested task, then the lowest id. Weighted:
+    the longest weighted waiting first (weight times age at `now_s`, see `waiting_order`), so
+    a request of weight 4 overtakes one of weight 1 that has waited up to 4 times as long.
+    Stateless."""
 
     name: str = "fcfs"
     retargets: bool = False
@@ -47,14 +56,15 @@ class FcfsPlanner:
         self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
     ) -> PlanTask | None:
         """The earliest requested open task, or None. Raises ValueError on duplicate ids."""
-        tasks = canonical_order(open_tasks)
+        tasks = waiting_order(open_tasks, now_s)
         return tasks[0] if tasks else None
 
     def route(
         self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
     ) -> list[PlanTask]:
-        """All open tasks by (requested_s, id). Raises ValueError on duplicate ids."""
-        return canonical_order(open_tasks)
+        """All open tasks by (requested_s, id), or by weighted waiting when weighted. Raises
+        ValueError on duplicate ids."""
+        return waiting_order(open_tasks, now_s)
 
     def plan(
         self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
@@ -74,7 +84,8 @@ class NearestPlanner:
     """The paper's nearest neighbour: the open task cheapest to reach from where the vehicle is.
 
     Costs within 1e-9 (relative) of the cheapest count as ties, broken by (requested_s, id).
-    Stateless. `cost` is called once per open task in `next_task`; `route` builds the whole
+    Weighted: the least cost per unit of weight (a request of weight 4 four times as far away
+    ties with one of weight 1). Stateless. `cost` is called once per open task in `next_task`; `route` builds the whole
     cost matrix (see `build_cost_matrix`).
     """
 
@@ -93,6 +104,8 @@ class NearestPlanner:
         if not tasks:
             return None
         costs = costs_from(self.cost, current, [task.position for task in tasks])
+        if weighted(tasks):
+            costs = costs / np.asarray([task.weight for task in tasks])
         return tasks[first_cheapest(costs)]
 
     def route(
@@ -103,7 +116,8 @@ class NearestPlanner:
         if not tasks:
             return []
         matrix = build_cost_matrix(self.cost, current, [task.position for task in tasks])
-        return [tasks[node - 1] for node in greedy_chain(matrix)[1:]]
+        weights = node_weights(tasks) if weighted(tasks) else None
+        return [tasks[node - 1] for node in greedy_chain(matrix, weights)[1:]]
 
     def plan(
         self, current: Position, open_tasks: Sequence[PlanTask], now_s: float | None = None
@@ -134,6 +148,9 @@ class TourPlanner:
     Because it always minimises the remaining path, a far task can be postponed for as long as
     nearer tasks keep arriving; callers that need a bound on waiting should use `fcfs` or
     `gated-tsp`.
+
+    Weighted: a path has no waiting to weigh, so the weights rank: the heaviest requests
+    first (their shortest path), then from its end the next weight's, and so on.
     """
 
     name: str = "tour"
@@ -159,6 +176,16 @@ class TourPlanner:
     ) -> list[PlanTask]:
         """All open tasks in the order of the planned open path from `current`."""
         tasks = canonical_order(open_tasks)
+        if not weighted(tasks):
+            return self._path(current, tasks)
+        planned: list[PlanTask] = []
+        for weight in sorted({task.weight for task in tasks}, reverse=True):
+            layer = self._path(current, [task for task in tasks if task.weight == weight])
+            planned.extend(layer)
+            current = layer[-1].position
+        return planned
+
+    def _path(self, current: Position, tasks: Sequence[PlanTask]) -> list[PlanTask]:
         if not tasks:
             return []
         matrix = build_cost_matrix(self.cost, current, [task.position for task in tasks])
@@ -202,6 +229,9 @@ class GatedTspPlanner:
     and solves that, until the search proves its tour optimal (Held-Karp always does), so
     `state()["exact"]` says True once a tour is planned.
 
+    Weighted: the batch is the `tour_limit` longest weighted waiting (see `waiting_order`)
+    instead of the earliest requested; its tour stays the shortest.
+
     State: the ids of the tour in progress and whether it was proven optimal.
     """
 
@@ -233,7 +263,7 @@ class GatedTspPlanner:
 
         Returns None when no task is open. Raises ValueError on duplicate ids or bad costs.
         """
-        tasks = canonical_order(open_tasks)
+        tasks = waiting_order(open_tasks, now_s)
         by_id = {task.id: task for task in tasks}
         self._tour = [task_id for task_id in self._tour if task_id in by_id]
         if not self._tour:
@@ -252,7 +282,7 @@ class GatedTspPlanner:
         batch ends) are only a preview ordered by the `tour` heuristic: their exact tour is
         computed when the vehicle gets there, with the tasks open then.
         """
-        tasks = canonical_order(open_tasks)
+        tasks = waiting_order(open_tasks, now_s)
         by_id = {task.id: task for task in tasks}
         tour = [task_id for task_id in self._tour if task_id in by_id]
         if not tour and tasks:
@@ -323,7 +353,8 @@ class LatencyPlanner:
     ever; a task older than `max_wait_s` is overdue and weighs `OVERDUE_WEIGHT` times more,
     which puts it ahead of everything but a negligible detour. Costs are travel times
     (`TravelTime` of the vehicle) when the caller gives them, so a climb counts as much as the
-    distance.
+    distance. A request's age weight is multiplied by its `PlanTask.weight` (a batch's: the
+    largest of its tasks'), so the objective is the customers' weighted waiting.
 
     How: up to `exact_limit` tasks, exactly (dynamic programming over subsets). Above, the
     better of the previous plan with the new tasks inserted where they cost least and a greedy
@@ -425,9 +456,14 @@ class LatencyPlanner:
             for task in tasks
         ]
         ages: dict[int, float] = {}
+        classes: dict[int, float] = {}
         for node, task in enumerate(tasks, start=1):
             ages[groups[node]] = max(ages.get(groups[node], 0.0), now - task.requested_s)
-        weights = [0.0] + [self.weight(ages[groups[node]]) for node in range(1, len(tasks) + 1)]
+            classes[groups[node]] = max(classes.get(groups[node], 0.0), task.weight)
+        weights = [0.0] + [
+            self.weight(ages[groups[node]]) * classes[groups[node]]
+            for node in range(1, len(tasks) + 1)
+        ]
         n = len(tasks)
         if n <= self.exact_limit:
             return exact_path(matrix, weights, groups)[0]
@@ -466,6 +502,11 @@ class LatencyPlanner:
             raise ValueError(f"latency state: 'route' must be a list of task ids, not {route!r}")
         self._route = list(route)
         self._last = None
+
+
+def node_weights(tasks: Sequence[PlanTask]) -> np.ndarray[Any, np.dtype[np.float64]]:
+    """The tasks' weights by node of their cost matrix (node 0, the vehicle: 1)."""
+    return np.asarray([1.0, *(task.weight for task in tasks)], dtype=np.float64)
 
 
 def make_planner(

@@ -450,6 +450,8 @@
   // What crop and resize copy from the picture they are given into the one they return.
   const PICTURE_SOURCE_KEYS = freeze(['sensor', 'time', 'position']);
   const MAX_ALT_M = 20000;
+  // Below 0 is depth (an underwater vehicle's task); no sea is deeper.
+  const MIN_ALT_M = -11000;
   const MAX_KEY = 128;
   const MAX_LINE = 4000;
   // Deeper values could not be read back by the platform (nor by most JSON readers).
@@ -636,7 +638,7 @@
     constructor(lat, lng, alt) {
       this.lat = checkNumber('latitude', lat, -90, 90);
       this.lng = checkNumber('longitude', lng, -180, 180);
-      this.alt = checkNumber('altitude', alt === undefined ? 0 : alt, 0, MAX_ALT_M);
+      this.alt = checkNumber('altitude', alt === undefined ? 0 : alt, MIN_ALT_M, MAX_ALT_M);
     }
     getLat() { return this.lat; }
     getLng() { return this.lng; }

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import TypedDict
 
@@ -9,7 +10,7 @@ from django.core.exceptions import ValidationError
 from django.db import transaction
 from django.utils.text import slugify
 
-from accounts.models import Customer, User
+from accounts.models import Customer, ServiceClass, User
 from missions.models import ENDED_STATUSES
 from vvm_worker.runtime import VVM_API_CALLS, Limits
 from vvm_worker.services.base import VVM, sensor_entries
@@ -30,6 +31,7 @@ class CustomerConfig(TypedDict, total=False):
     max_messages_per_vv: int
     max_message_bytes: int
     allowed_api_calls: list[str]
+    service_class: ServiceClass | None
 
 
 class CustomerBusy(RuntimeError):
@@ -93,9 +95,10 @@ def customer_update(
     allowed_sensors: Sequence[str] | None,
     vvm: VVM,
 ) -> Customer:
-    """Change a customer's name or quotas; ``allowed_sensors`` None keeps them.
+    """Change a customer's name, quotas or service class; ``allowed_sensors`` None keeps them.
 
-    New quotas hold for the next step of each VV; more parallel VVs admit queued ones at once.
+    New quotas hold for the next step of each VV; more parallel VVs admit queued ones at once,
+    and so does a new class (unless it holds them: ``vvs._admit``).
     VVs keep the SDC entries they were submitted with. Raises ValidationError naming the field.
     """
     entries = (
@@ -105,14 +108,15 @@ def customer_update(
     )
     with transaction.atomic():
         customer = Customer.objects.select_for_update().get(pk=customer.pk)
-        before = customer.max_parallel_vvs
+        before = customer.max_parallel_vvs, customer.service_class_id
         for name, value in config.items():
             setattr(customer, name, value)
         _validate(customer)
         customer.save()
         if entries is not None:
             customer.allowed_sensors.set(entries)
-        if customer.max_parallel_vvs > before:
+        # More parallel VVs start queued ones; a new class may hold them, or no longer.
+        if customer.max_parallel_vvs > before[0] or customer.service_class_id != before[1]:
             vvm.dispatcher.customer_slot_freed(customer.pk)
     return customer
 
@@ -126,6 +130,36 @@ def customer_delete(*, customer: Customer) -> None:
         if busy:
             raise CustomerBusy(customer, busy)
         customer.delete()
+
+
+def service_class_save(*, name: str, p95_s: float, weight: float = 1.0) -> ServiceClass:
+    """Create the service class ``name`` or change its target ``p95_s`` (seconds, > 0) and
+    ``weight`` (> 0). A new target holds at the next admission of its customers' VVs.
+    Raises ValidationError naming the field."""
+    for field, value in (("p95_s", p95_s), ("weight", weight)):
+        if not math.isfinite(value):
+            raise ValidationError({field: f"must be a finite number, got {value!r}"})
+    with transaction.atomic():
+        service_class = ServiceClass.objects.select_for_update().filter(
+            name=name
+        ).first() or ServiceClass(name=name)
+        service_class.p95_s, service_class.weight = p95_s, weight
+        service_class.full_clean()
+        service_class.save()
+    return service_class
+
+
+def customer_class_set(
+    *, customer: Customer, service_class: ServiceClass | None, vvm: VVM
+) -> Customer:
+    """Put the customer in ``service_class`` (None: no class, so no target and weight 1).
+    Its queued VVs are looked at again at once: the new class may hold them, or no longer.
+    Raises ValidationError (naming ``service_class``) for a class that is not stored."""
+    if service_class is not None and service_class.pk is None:
+        raise ValidationError({"service_class": "save the service class first"})
+    return customer_update(
+        customer=customer, config={"service_class": service_class}, allowed_sensors=None, vvm=vvm
+    )
 
 
 def user_set_login(

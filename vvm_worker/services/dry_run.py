@@ -39,7 +39,7 @@ from django.conf import settings
 from django.core.exceptions import ValidationError
 
 from accounts.models import Customer, User
-from fleet.models import NoFlyZone, SensorType
+from fleet.models import NoFlyZone, SensorType, VehicleKind
 from fleet.selectors import ground_station_list, vehicles_in_service
 from missions.models import vv_name_problem
 from vvm_worker.runtime import SyntaxProblem, check_syntax
@@ -252,9 +252,15 @@ def fleet_copy(*, name: str, program: str) -> dict[str, Any]:
             "max_speed_mps": vehicle.max_speed_mps,
             "climb_rate_mps": vehicle.climb_rate_mps,
             "sensors": sensors,
+            "kind": vehicle.kind,
         }
         if vehicle.battery_s:
             spec["battery_s"] = vehicle.battery_s
+        # A scenario gives a rate only to the kinds that have it.
+        if vehicle.dive_rate_mps and vehicle.kind == VehicleKind.UNDERWATER:
+            spec["dive_rate_mps"] = vehicle.dive_rate_mps
+        if vehicle.turn_rate_dps and vehicle.kind in (VehicleKind.GROUND, VehicleKind.SURFACE):
+            spec["turn_rate_dps"] = vehicle.turn_rate_dps
         vehicles.append(spec)
     zones = [
         {
@@ -273,6 +279,7 @@ def fleet_copy(*, name: str, program: str) -> dict[str, Any]:
             "params": s.params or {},
             "privileged": s.privileged,
             "description": s.description,
+            "kinds": list(s.kinds or []),
         }
         for s in SensorType.objects.order_by("pk")
     ]

@@ -20,10 +20,12 @@ from fleet.models import (
     GroundStation,
     NoFlyZone,
     RallyPoint,
+    SensorType,
     Vehicle,
     VehicleCommand,
     VehicleStatus,
 )
+from fleet.selectors import sensors_not_carried
 from missions.models import (
     ACTIVE_STATUSES,
     ENDED_STATUSES,
@@ -65,6 +67,9 @@ class VehicleConfig(TypedDict, total=False):
     climb_rate_mps: float
     battery_s: float | None
     sensor_sources: dict[str, Any]
+    kind: str
+    dive_rate_mps: float | None
+    turn_rate_dps: float | None
 
 
 class GroundStationConfig(TypedDict, total=False):
@@ -85,7 +90,8 @@ class GroundStationBusy(RuntimeError):
         self.count = count
 
 
-def _validate_vehicle(vehicle: Vehicle) -> None:
+def _validate_vehicle(vehicle: Vehicle, sensors: Sequence[SensorType] | None = None) -> None:
+    """``sensors``: those it is to carry (None: those it carries)."""
     # The database constraint would only say "constraint violated"; name the field instead.
     if (
         vehicle.max_altitude_m is not None
@@ -95,7 +101,11 @@ def _validate_vehicle(vehicle: Vehicle) -> None:
         raise ValidationError(
             {"max_altitude_m": f"must not be below min_altitude_m ({vehicle.min_altitude_m:g} m)"}
         )
-    vehicle.full_clean()  # field ranges, a unique name, and the area (Vehicle.clean)
+    vehicle.full_clean()  # field ranges, a unique name, the area, its kind's limits
+    carried = sensors if sensors is not None else vehicle.sensors.all() if vehicle.pk else ()
+    problem = sensors_not_carried(kind=vehicle.kind, sensors=carried)
+    if problem is not None:
+        raise ValidationError({"sensors" if sensors is not None else "kind": problem})
 
 
 def vehicle_set_status(
@@ -389,7 +399,7 @@ def vehicle_create(*, config: VehicleConfig, sensors: Sequence[str], vvm: VVM) -
     entries = sensor_entries(sensors, field="sensors")
     with transaction.atomic():
         vehicle = Vehicle(**config)
-        _validate_vehicle(vehicle)
+        _validate_vehicle(vehicle, entries)
         vehicle.save()
         vehicle.sensors.set(entries)
     vehicle_register(vehicle=vehicle, vvm=vvm)
@@ -412,7 +422,7 @@ def vehicle_update(
         vehicle = Vehicle.objects.select_for_update().get(pk=vehicle.pk)
         for name, value in config.items():
             setattr(vehicle, name, value)
-        _validate_vehicle(vehicle)
+        _validate_vehicle(vehicle, entries)
         vehicle.save()
         if entries is not None:
             vehicle.sensors.set(entries)

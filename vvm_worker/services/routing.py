@@ -64,6 +64,8 @@ def vehicle_caps(
         climb_rate_mps=vehicle.climb_rate_mps,
         open_tasks=open_tasks,
         route=route,
+        kind=vehicle.kind,
+        dive_rate_mps=vehicle.dive_rate_mps,
     )
 
 

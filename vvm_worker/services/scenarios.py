@@ -33,6 +33,7 @@ from vvm_worker.scenario import (
     vv_instances,
 )
 from vvm_worker.services.base import VVM
+from vvm_worker.services.customers import service_class_save
 from vvm_worker.services.fleet import vehicle_register, vehicle_set_status
 from vvm_worker.services.vvs import vv_submit
 
@@ -60,9 +61,10 @@ def _check_vv_names(scenario: Scenario) -> None:
 
 
 def _check_sensors(scenario: Scenario) -> None:
-    known = set(SensorType.objects.values_list("name", flat=True)) | {
-        s.name for s in scenario.sensors
-    }
+    """Every vehicle sensor is in the SDC (the scenario's entries already put there) and
+    carried by the vehicle's kind."""
+    carriers = {s.name: s for s in SensorType.objects.all()}
+    known = set(carriers) | {s.name for s in scenario.sensors}
     specs = [(f"vehicles[{i}]", v) for i, v in enumerate(scenario.vehicles)]
     specs += [
         (f"events[{i}].add_vehicle", e.add_vehicle)
@@ -75,6 +77,14 @@ def _check_sensors(scenario: Scenario) -> None:
                 raise ScenarioError(
                     f"{path}.sensors[{k}]",
                     f"unknown SDC entry {name!r} (known: {', '.join(sorted(known))})",
+                    file=str(scenario.path) if scenario.path else None,
+                )
+            entry = carriers.get(name)
+            if entry is not None and not entry.carried_by(spec.kind):
+                raise ScenarioError(
+                    f"{path}.sensors[{k}]",
+                    f"vehicle {spec.name!r} is {spec.kind}: it cannot carry SDC entry {name!r} "
+                    f"(carried by {', '.join(entry.kinds)} vehicles only)",
                     file=str(scenario.path) if scenario.path else None,
                 )
 
@@ -95,6 +105,9 @@ def vehicle_upsert(*, spec: VehicleSpec) -> Vehicle:
             "max_altitude_m": spec.max_altitude_m,
             "max_speed_mps": spec.max_speed_mps,
             "climb_rate_mps": spec.climb_rate_mps or 3.0,
+            "kind": spec.kind,
+            "dive_rate_mps": spec.dive_rate_mps,
+            "turn_rate_dps": spec.turn_rate_dps,
             "battery_s": spec.battery_s,
             "lat": spec.depot.lat,
             "lng": spec.depot.lng,
@@ -112,6 +125,12 @@ def _customer_upsert(spec: CustomerSpec) -> Customer:
         value = getattr(spec, name)
         if value is not None:
             quotas[name] = value
+    if spec.service_class is not None:  # a class the scenario leaves out keeps the customer's
+        quotas["service_class"] = service_class_save(
+            name=spec.service_class.name,
+            p95_s=spec.service_class.p95_s or 0.0,
+            weight=spec.service_class.weight,
+        )
     customer, _ = Customer.objects.update_or_create(
         name=spec.name, defaults={"slug": slugify(spec.name), **quotas}
     )
@@ -144,8 +163,8 @@ def scenario_apply(
     which).
 
     Raises ScenarioError for a vehicle sensor that is in neither the SDC nor the scenario,
-    and for a VV's name with a control or bidirectional formatting character (which
-    ``vv_submit`` would refuse).
+    or that the vehicle's kind cannot carry (``SensorType.kinds``), and for a VV's name with
+    a control or bidirectional formatting character (which ``vv_submit`` would refuse).
     """
     loaded = LoadedScenario()
     with transaction.atomic():
@@ -158,6 +177,7 @@ def scenario_apply(
                     "params": dict(entry.params),
                     "privileged": entry.privileged,
                     "description": entry.description or entry.name,
+                    "kinds": list(entry.kinds),
                 },
             )
         _check_sensors(scenario)

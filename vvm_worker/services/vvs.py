@@ -13,7 +13,8 @@ from typing import Any
 
 from django.core.exceptions import ValidationError
 from django.db import connection, transaction
-from django.db.models import F, JSONField, Value
+from django.db.models import F, JSONField, QuerySet, Value
+from django.db.models.functions import Coalesce
 from django.utils import timezone
 
 from accounts.models import Customer, NotifyEvent, User
@@ -30,6 +31,7 @@ from missions.models import (
     TaskStatus,
     VirtualVehicle,
     VVStatus,
+    WaitReason,
     vv_name_problem,
 )
 from missions.selectors import vv_get_for_user
@@ -70,6 +72,7 @@ from vvm_worker.services.routing import (
     vv_release_tasks,
     vv_route,
 )
+from vvm_worker.services.service_levels import class_held_nudge, class_level
 from vvm_worker.services.values import Unstorable, check_text, json_value
 
 
@@ -226,7 +229,10 @@ def _check_queue(customer: Customer, *, adding: int) -> None:
 
 
 def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
-    """Start the customer's oldest queued VVs while it runs fewer than its quota allows."""
+    """Start the customer's oldest queued VVs while it runs fewer than its quota allows,
+    unless the fleet misses its service class's target now: then none starts and each says
+    why it is held (``WaitReason.SERVICE_LEVEL``) until a later pass finds the class within
+    its target (one of its tasks ends: ``class_held_nudge``; a ground station's sweep)."""
     if not VirtualVehicle.objects.filter(customer_id=customer_id, status=VVStatus.QUEUED).exists():
         return []  # nothing waits (a VV that is queued later asks again)
     return _admit(customer_id, vvm)
@@ -242,6 +248,8 @@ def _admit(customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
         if free <= 0:
             return []
         queued = VirtualVehicle.objects.filter(customer=customer, status=VVStatus.QUEUED)
+        if _held_by_service_level(customer, queued, vvm):
+            return []
         admitted = list(queued.order_by("submitted_s", "created", "id")[:free])
         if not admitted:
             return []
@@ -267,6 +275,45 @@ def _admit(customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
             vvm.announce(lambda vv=vv: vv_event(vv))
             vvm.dispatcher.vv_arrived(vv.id)
         return admitted
+
+
+def _held_by_service_level(customer: Customer, queued: QuerySet[VirtualVehicle], vvm: VVM) -> bool:
+    """Whether admission holds the customer's ``queued`` VVs because the fleet misses its
+    service class's target now: their rows say so in the customer's words (one UPDATE). Once
+    it keeps the target again, those held before are plain queued VVs again. A customer
+    without a class is never held (and costs no query)."""
+    if customer.service_class_id is None:
+        return False
+    now = vvm.clock.now_s()
+    level = class_level(service_class=customer.service_class, now_s=now)
+    if not level.missing:
+        queued.filter(waiting_reason=WaitReason.SERVICE_LEVEL).update(
+            waiting_reason="", waiting_message="", waiting_since_s=None
+        )
+        return False
+    held = queued.update(
+        waiting_reason=WaitReason.SERVICE_LEVEL,
+        waiting_message=level.hold_message(),
+        waiting_since_s=Coalesce(F("waiting_since_s"), Value(now)),
+    )
+    logger.info(
+        "vvs held: the fleet misses the service class's target",
+        extra={
+            "customer": customer.slug,
+            "service_class": level.spec.name,
+            "target_p95_s": level.spec.p95_s,
+            "p95_s": level.p95_s,
+            "held": held,
+        },
+    )
+    return True
+
+
+def _slot_freed(vv: VirtualVehicle, vvm: VVM) -> None:
+    """A VV of the customer that ran ended: admit its queued ones, and (its open tasks end
+    with it) look again at the VVs of its class held for the class's target."""
+    vvm.dispatcher.customer_slot_freed(vv.customer_id)
+    class_held_nudge(service_class_id=vv.customer.service_class_id, vvm=vvm, told=vv.customer_id)
 
 
 def _step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
@@ -628,7 +675,7 @@ def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
         "vv ended",
         extra={"vv": str(vv.id), "customer": vv.customer.slug, "status": vv.status},
     )
-    vvm.dispatcher.customer_slot_freed(vv.customer_id)
+    _slot_freed(vv, vvm)
     event = ended_event(vv.status)
     if event is not None:
         vv_notify(vv=vv, event=event, vvm=vvm, at_ms=vvm.clock.epoch_ms(now))
@@ -734,6 +781,7 @@ def _answer_and_advance(
     else:
         entry = answer_task(pending, time_ms=time_ms, data=readings)
     vvm.announce(lambda: task_event(task, vv.customer_id))
+    class_held_nudge(service_class_id=vv.customer.service_class_id, vvm=vvm)
     if failure is None:
         vv_notify(vv=vv, event=NotifyEvent.TASK_DONE, vvm=vvm, at_ms=time_ms, task_id=task_id)
     settled = (
@@ -888,7 +936,7 @@ def vv_cancel(*, vv_id: uuid.UUID, vvm: VVM) -> bool:
         vvm.announce(lambda: vv_event(vv))
         vvm.runtime.forget(str(vv.pk))
         if not was_queued:
-            vvm.dispatcher.customer_slot_freed(vv.customer_id)
+            _slot_freed(vv, vvm)
     logger.info("vv cancelled", extra={"vv": str(vv_id)})
     return True
 

@@ -1,8 +1,11 @@
-"""``manage.py mavsim NAME``: a MAVLink-speaking simulated copter for one vehicle of the fleet.
+"""``manage.py mavsim NAME``: a MAVLink-speaking simulated vehicle for one vehicle of the fleet.
 
-It flies like the vehicle's record says (depot, maximum speed, climb rate, battery endurance)
-and speaks MAVLink like ArduCopter, so the RV worker's MAVLink driver, MAVProxy or
-QGroundControl can fly it. Unless ``--no-payload``, it also carries a companion computer
+It moves like the vehicle's record says (depot, maximum speed, climb and dive rates, turn
+rate, battery endurance) and speaks MAVLink like ArduCopter (``--frame copter``), ArduRover
+(``rover``, ``boat``) or ArduSub (``sub``), so the RV worker's MAVLink driver, MAVProxy or
+QGroundControl can fly it. The frame defaults to the one of the vehicle's kind (a copter for an
+aerial vehicle, a rover for a ground one, a boat for a surface one, a sub for an underwater
+one). Unless ``--no-payload``, it also carries a companion computer
 sending the simulated field's CO2 and NOx and a camera whose images it serves over HTTP
 (``--field-seed`` picks that world). Runs in the foreground until Ctrl-C or SIGTERM.
 """
@@ -19,15 +22,15 @@ from django.core.management.base import BaseCommand, CommandError, CommandParser
 
 from fleet.mavlink.endpoint import mirror_endpoint
 from fleet.mavlink.errors import LinkError
-from fleet.mavlink.sim import FLAVOURS, MavSim
+from fleet.mavlink.sim import FLAVOURS, FRAME_OF_KIND, FRAMES, MavSim
 from fleet.selectors import vehicle_list
 from fleet.simulation.vehicle import VehicleSpec
 
 
 class Command(BaseCommand):
     help = (
-        "Run a MAVLink-speaking simulated copter (ArduCopter by default) for one vehicle: "
-        "its depot, speed, climb rate and battery come from the database."
+        "Run a MAVLink-speaking simulated vehicle (ArduCopter, ArduRover or ArduSub) for one "
+        "vehicle: its depot, speeds, rates and battery come from the database."
     )
 
     def add_arguments(self, parser: CommandParser) -> None:
@@ -47,6 +50,15 @@ class Command(BaseCommand):
         )
         parser.add_argument("--system-id", type=int, default=1, help="MAVLink system id")
         parser.add_argument("--autopilot", choices=sorted(FLAVOURS), default="ardupilot")
+        parser.add_argument(
+            "--frame",
+            choices=FRAMES,
+            default=None,
+            help=(
+                "what it is: copter (ArduCopter or PX4), rover or boat (ArduRover), sub "
+                "(ArduSub); default: the frame of the vehicle's kind"
+            ),
+        )
         parser.add_argument(
             "--battery", type=float, default=1.0, help="the charge it starts with, 0..1"
         )
@@ -81,17 +93,21 @@ class Command(BaseCommand):
                     raise CommandError(f"{name} has no driver_url: give --connection")
                 connection = mirror_endpoint(vehicle.driver_url)
             speed = settings.CPCC_SIM_SPEED if options["speed"] is None else options["speed"]
+            frame = options["frame"] or FRAME_OF_KIND[vehicle.kind]
             sim = MavSim(
                 connection,
                 spec=VehicleSpec(
                     max_speed_mps=vehicle.max_speed_mps,
                     climb_rate_mps=vehicle.climb_rate_mps,
                     battery_s=vehicle.battery_s,
+                    dive_rate_mps=vehicle.dive_rate_mps,
+                    turn_rate_dps=vehicle.turn_rate_dps,
                 ),
                 depot=vehicle.depot,
                 speed=speed,
                 system_id=options["system_id"],
                 autopilot=options["autopilot"],
+                frame=frame,
                 battery=options["battery"],
                 name=name,
                 field_seed=options["field_seed"],
@@ -104,8 +120,13 @@ class Command(BaseCommand):
         stop = threading.Event()
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: stop.set())
+        if FRAME_OF_KIND[vehicle.kind] != frame:
+            self.stderr.write(
+                f"mavsim {name}: a {frame} for a vehicle configured as {vehicle.kind}: the "
+                "platform's driver will refuse it"
+            )
         self.stdout.write(
-            f"mavsim {name}: {options['autopilot']} copter on {sim.endpoint} "
+            f"mavsim {name}: {options['autopilot']} {frame} on {sim.endpoint} "
             f"(system {options['system_id']}, speed {speed:g})"
         )
         self.stdout.flush()

@@ -1,4 +1,5 @@
-"""MavSim: a simulated copter that speaks MAVLink like ArduCopter (or, optionally, PX4).
+"""MavSim: a simulated copter that speaks MAVLink like ArduCopter (or, optionally, PX4), or a
+rover, boat or submarine that speaks it like ArduRover and ArduSub (``frame``).
 
 ``copter.py`` (``MavSim``) wires the parts, runs them in its loop and has the API tests and
 ``manage.py mavsim`` use; each part is a module: ``transport.py`` (the connection, the loop
@@ -10,8 +11,19 @@ messages and their rates), ``params.py`` (the parameter protocol), ``missions.py
 mission protocol's transfers), ``auto.py`` (flying the mission in AUTO), ``guided.py`` with
 ``targets.py`` (GUIDED's targets and frames), ``fence.py`` (the geofence), ``payload.py`` with
 ``companion.py`` (the sensors: the simulated field at the vehicle) and ``camera.py`` (the
-camera protocol and the image server); ``flavours.py`` says what differs between ArduCopter
-and PX4.
+camera protocol and the image server); ``flavours.py`` says what differs between ArduCopter,
+PX4, ArduRover and ArduSub.
+
+With ``frame="rover"`` or ``"boat"`` it is ArduRover (HEARTBEAT type GROUND_ROVER or
+SURFACE_BOAT, Rover/mode.h's mode numbers: HOLD 4, AUTO 10, RTL 11, GUIDED 15): it arms in
+MANUAL, HOLD, GUIDED and the other manual modes, refuses NAV_TAKEOFF and NAV_LAND
+(UNSUPPORTED), drives to GUIDED's targets in the plane (their altitude ignored) turning in
+place first, stops in HOLD, drives home in RTL and stops there armed, and takes FS_ACTION on a
+GCS failsafe. With ``frame="sub"`` it is ArduSub (SUBMARINE, ArduSub/defines.h's numbers:
+GUIDED 4, SURFACE 9, MANUAL 19): GUIDED's targets may be below the surface (negative relative
+altitudes: depths, in GLOBAL_POSITION_INT.relative_alt and VFR_HUD.alt too), SURFACE rises
+where it is, and there is no RTL: home is GUIDED to home at 0, then a disarm. The kinematics
+are the simulator's for the kind (``ground``, ``surface``, ``underwater``).
 
 Any MAVLink ground station (MAVProxy, MAVSDK, QGroundControl, a pymavlink script,
 ``MavlinkDriver``) can fly it over a real link: it sends HEARTBEAT as a quadrotor with
@@ -71,6 +83,6 @@ id), ``drop_incoming`` (lose the next messages of a type), ``set_battery``,
 """
 
 from fleet.mavlink.sim.copter import MavSim
-from fleet.mavlink.sim.flavours import FLAVOURS
+from fleet.mavlink.sim.flavours import FLAVOURS, FRAME_OF_KIND, FRAMES
 
-__all__ = ["FLAVOURS", "MavSim"]
+__all__ = ["FLAVOURS", "FRAMES", "FRAME_OF_KIND", "MavSim"]

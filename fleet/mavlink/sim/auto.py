@@ -7,6 +7,9 @@ seconds where it is), NAV_RETURN_TO_LAUNCH and NAV_LAND (land and disarm); any o
 (DO_*, CONDITION_*) is passed over. Each item begun
 is announced ("Mission: 2 WP") and with MISSION_CURRENT, each navigation item done (after its
 hold time) with MISSION_ITEM_REACHED, a waypoint also with "Reached command #2". At the end the vehicle hovers where it is (or stays landed).
+
+A rover, a boat or a sub needs no NAV_TAKEOFF to start from where it is parked, and passes over
+the items its firmware does not fly (NAV_TAKEOFF and NAV_LAND; a sub also NAV_RETURN_TO_LAUNCH).
 """
 
 from __future__ import annotations
@@ -70,7 +73,9 @@ class Flight(Protocol):
 class MissionRunner:
     """Runs the mission returned by ``items`` on ``flight``. ``send`` sends a message from the
     autopilot (it gets pymavlink's MAVLink object), ``text`` a STATUSTEXT at INFO severity;
-    ``first_seq`` is where a mission starts (1 on ArduPilot, where item 0 is home)."""
+    ``first_seq`` is where a mission starts (1 on ArduPilot, where item 0 is home);
+    ``takes_off``: the vehicle must take off first (a copter); ``passed_over``: navigation
+    commands the vehicle does not fly."""
 
     def __init__(
         self,
@@ -80,12 +85,16 @@ class MissionRunner:
         text: Callable[[str], None],
         *,
         first_seq: int,
+        takes_off: bool = True,
+        passed_over: frozenset[int] = frozenset(),
     ) -> None:
         self._flight = flight
         self._items = items
         self._send = send
         self._text = text
         self.first_seq = first_seq
+        self._takes_off = takes_off
+        self._passed_over = passed_over
         self.current = first_seq
         self.complete = False
         self._started = False  # the current item has been begun
@@ -97,7 +106,7 @@ class MissionRunner:
         items = self._items()
         if len(items) <= self.first_seq:
             return "no mission"
-        if armed and self._flight.on_ground:
+        if armed and self._flight.on_ground and self._takes_off:
             first = items[min(self.current, len(items) - 1)]
             if first.command != mavlink.MAV_CMD_NAV_TAKEOFF:
                 return "Auto: Missing Takeoff Cmd"
@@ -198,7 +207,7 @@ class MissionRunner:
     def _begin(self, item: MissionItem) -> bool:
         """Start flying an item; False for one that is passed over."""
         name = NAV_NAMES.get(item.command)
-        if name is None:
+        if name is None or item.command in self._passed_over:
             return False
         flight = self._flight
         try:

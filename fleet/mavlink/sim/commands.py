@@ -7,8 +7,12 @@ confirmation > 0) of the command just executed is answered again without executi
 its ACK was lost. Both messages end up as the same seven numbers (COMMAND_INT's x/y in degrees)
 and a frame: COMMAND_LONG has none, and ArduPilot reads its positions as relative to home.
 
-``Commander`` is the autopilot's arming and modes, and the commands that change them or fly
-the copter, as ArduCopter (or PX4) runs them.
+``Commander`` is the autopilot's arming and modes, and the commands that change them or move
+the vehicle, as ArduCopter (or PX4, ArduRover, ArduSub) runs them. A rover, a boat and a sub
+neither take off nor land (UNSUPPORTED, as ArduRover and ArduSub answer): they move once armed,
+in GUIDED or AUTO; a rover's HOLD stops it where it is, its RTL drives home and stops there
+(armed, as ArduRover stays); a sub's SURFACE rises where it is. Each may disarm anywhere: a
+rover stops, a sub floats up to the surface.
 """
 
 from __future__ import annotations
@@ -144,11 +148,14 @@ class Commander:
             send,
             lambda line: text(mavlink.MAV_SEVERITY_INFO, line),
             first_seq=flavour.mission_first_seq,
+            takes_off=flavour.takes_off,
+            passed_over=flavour.unsupported,
         )
         self.guided = Guided(
             pilot,
             fence,
             mode=flavour.follows_targets,
+            takes_off=flavour.takes_off,
             home=flight.home,
             ground_amsl_m=ground_amsl_m,
             send=send,
@@ -161,6 +168,8 @@ class Commander:
         to send after the ACK, if anything."""
         f = self._flavour
         accepted = mavlink.MAV_RESULT_ACCEPTED
+        if command in f.unsupported:
+            return mavlink.MAV_RESULT_UNSUPPORTED, None
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] >= 0.5:
                 return self._arm(), None
@@ -169,7 +178,7 @@ class Commander:
             return self._set_mode_command(p), None
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
             return self._takeoff(p[6]), None
-        if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+        if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH and f.rtl is not None:
             return self.change_mode(f.rtl), None
         if command == mavlink.MAV_CMD_NAV_LAND:
             return self.change_mode(f.land), None
@@ -220,7 +229,7 @@ class Commander:
             self._log(f"{done} at {p.lat:.6f}, {p.lng:.6f}, {p.alt:.1f} m")
         if event == TOOK_OFF and f.after_takeoff is not None and self.mode == f.takeoff_mode:
             self.mode = f.after_takeoff
-        elif event == LANDED and self.armed:
+        elif event == LANDED and self.armed and f.takes_off:
             self.stop_motors()  # ArduCopter disarms by itself once landed
         if self.mode == f.mission:
             self.auto.tick()
@@ -258,12 +267,21 @@ class Commander:
     def _disarm(self, *, force: bool) -> int:
         if not self.armed:
             return int(mavlink.MAV_RESULT_ACCEPTED)
-        if not self._flight.on_ground:
-            if not force:
+        flight = self._flight
+        if not flight.on_ground:
+            now = flight.now()
+            if not flight.takes_off:
+                # A rover or boat stops where it is; a sub, buoyant, floats up to the surface.
+                if flight.here().alt < flight.home.alt:
+                    flight.start_landing(now)
+                else:
+                    flight.touchdown(now)
+            elif not force:
                 self._text(mavlink.MAV_SEVERITY_CRITICAL, "Disarm: vehicle is flying")
                 return int(mavlink.MAV_RESULT_FAILED)
-            # Forced disarm in the air: the motors stop and the copter drops where it is.
-            self._flight.touchdown(self._flight.now())
+            else:
+                # Forced disarm in the air: the motors stop and the copter drops where it is.
+                flight.touchdown(now)
         self.stop_motors()
         return int(mavlink.MAV_RESULT_ACCEPTED)
 
@@ -272,7 +290,8 @@ class Commander:
     def change_mode(self, mode: str) -> int:
         """Switch to a mode (a name); returns the MAV_RESULT."""
         f = self._flavour
-        if mode not in f.armable | f.hold | {f.follows_targets, f.rtl, f.land, f.mission}:
+        known = f.armable | f.hold | {f.follows_targets, f.land, f.mission}
+        if mode not in known and mode != f.rtl:
             self._text(mavlink.MAV_SEVERITY_WARNING, f"Mode change to {mode} failed")
             return int(mavlink.MAV_RESULT_FAILED)
         if mode == f.follows_targets and f.setpoint_stream and not self.guided.setpoints.live():
@@ -292,7 +311,8 @@ class Commander:
         self.mode = mode
         if mode == f.mission:
             self.auto.start()  # the next tick begins (or resumes) the current item
-        if not flight.on_ground:
+        # A rover, boat or sub obeys a mode wherever it is parked too (RTL drives home).
+        if not flight.on_ground or (not f.takes_off and self.armed):
             if mode == f.rtl:
                 flight.start_return(now)
             elif mode == f.land:
@@ -311,7 +331,8 @@ class Commander:
         command is the message's id."""
         if not msg.base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             return
-        result = self.change_mode(mode_name(self._flavour.autopilot, int(msg.custom_mode)))
+        f = self._flavour
+        result = self.change_mode(mode_name(f.autopilot, int(msg.custom_mode), f.mav_type))
         system, component = reply_to(msg)
         self._send(
             lambda mav: mav.command_ack_send(
@@ -327,7 +348,7 @@ class Commander:
             custom = px4_custom_mode(round(p[1]), round(p[2]))
         else:
             custom = round(p[1])
-        return self.change_mode(mode_name(autopilot, custom))
+        return self.change_mode(mode_name(autopilot, custom, self._flavour.mav_type))
 
     # --- flying -----------------------------------------------------------------------------
 

@@ -1,4 +1,4 @@
-"""The simulated copter: ``MavSim`` wires the parts that live in the sibling modules (see the
+"""The simulated vehicle (a copter unless told otherwise): ``MavSim`` wires the parts that live in the sibling modules (see the
 package's docstring), runs them in its loop and is what tests and ``manage.py mavsim`` use."""
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from fleet.mavlink.sim.commands import Commander, CommandServer, Outcome
 from fleet.mavlink.sim.companion import FieldSensors
 from fleet.mavlink.sim.failsafes import Failsafes
 from fleet.mavlink.sim.fence import Fence, FenceStatus
-from fleet.mavlink.sim.flavours import FLAVOURS, initial_params
+from fleet.mavlink.sim.flavours import flavour_of, initial_params
 from fleet.mavlink.sim.flight import Flight
 from fleet.mavlink.sim.messages import LOW_BATTERY
 from fleet.mavlink.sim.missions import MissionServer
@@ -38,13 +38,15 @@ _FENCE = mavlink.MAV_MISSION_TYPE_FENCE
 
 
 class MavSim:
-    """A simulated copter on a MAVLink connection. See the package docstring.
+    """A simulated vehicle on a MAVLink connection. See the package docstring.
 
     ``connection``: where it listens or sends (``fleet.mavlink.endpoint``), e.g.
     ``udpin:127.0.0.1:14560``. ``spec``/``depot``: the airframe and its home (the vehicle
     starts landed there, disarmed). ``speed``: time acceleration of the flight (0: instant).
     ``system_id``/``component_id``: its MAVLink ids. ``autopilot``: "ardupilot" (ArduCopter)
-    or "px4". ``ground_amsl_m``: the ground's altitude above mean sea level (the world is
+    or "px4". ``frame``: "copter" (the default), "rover", "boat" (ArduRover) or "sub"
+    (ArduSub; ArduPilot only): its HEARTBEAT type, modes and commands, and how it moves (the
+    ``spec``'s kind is set to the frame's). ``ground_amsl_m``: the ground's altitude above mean sea level (the world is
     flat at the depot's ground). ``battery``: the charge it starts with (0..1).
     ``arm_min_battery``: below this it refuses to arm. ``clock``: the wall clock (injectable).
     ``field_seed``: the seed of the ``SensorField`` its sensors read and its camera sees (the
@@ -53,7 +55,8 @@ class MavSim:
     HEARTBEAT; off by default, as a bare ArduCopter (a plain GCS then hears only the
     autopilot). ``camera_url_host``: where the camera's image server listens (port chosen by
     the OS) and the host its ``file_url`` names.
-    Raises LinkError for a malformed connection string, ValueError for a bad speed.
+    Raises LinkError for a malformed connection string, ValueError for a bad speed, autopilot
+    or frame.
     """
 
     def __init__(
@@ -66,6 +69,7 @@ class MavSim:
         system_id: int = 1,
         component_id: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
         autopilot: str = "ardupilot",
+        frame: str = "copter",
         ground_amsl_m: float = 0.0,
         battery: float = 1.0,
         battery_capacity_mah: int = 5000,
@@ -78,10 +82,10 @@ class MavSim:
     ) -> None:
         if not (math.isfinite(speed) and speed >= 0):
             raise ValueError(f"speed must be a finite number >= 0, got {speed!r}")
-        if autopilot not in FLAVOURS:
-            raise ValueError(f"autopilot must be one of {sorted(FLAVOURS)}, got {autopilot!r}")
+        self.flavour = flavour_of(autopilot, frame)
+        if spec.kind != self.flavour.kind:
+            spec = replace(spec, kind=self.flavour.kind)
         self.endpoint = parse_endpoint(connection)
-        self.flavour = FLAVOURS[autopilot]
         self.name = name
         self.speed = speed
         self.system_id = system_id
@@ -108,14 +112,13 @@ class MavSim:
             name=name,
         )
         send = self._transport.send
-        rtl_alt_param, rtl_alt_unit = self.flavour.rtl_alt_param
         self._flight = Flight(
             spec,
             depot,
             speed=speed,
             wall=self._wall,
             battery=battery,
-            return_alt=lambda: self._params.value(rtl_alt_param) * rtl_alt_unit,
+            return_alt=self._return_alt,
         )
         self._params = ParamServer(
             initial_params(
@@ -230,6 +233,7 @@ class MavSim:
 
     @property
     def on_ground(self) -> bool:
+        """Landed (a copter), or parked (a rover, boat or sub: not under way)."""
         return self._flight.on_ground
 
     def position(self) -> Position:
@@ -350,9 +354,10 @@ class MavSim:
             self._close()
             raise LinkError(f"mavsim cannot serve images: {exc}") from exc
         logger.info(
-            "mavsim %s: %s copter on %s (speed %g)",
+            "mavsim %s: %s %s on %s (speed %g)",
             self.name,
             self.flavour.autopilot.value,
+            self.flavour.frame,
             self.endpoint,
             self.speed,
         )
@@ -363,6 +368,13 @@ class MavSim:
 
     def _wall(self) -> float:
         return self.clock() - self._t0
+
+    def _return_alt(self) -> float:
+        """The altitude above home an aircraft returns at (RTL_ALT); 0 for the others."""
+        if self.flavour.rtl_alt_param is None:
+            return 0.0
+        name, unit = self.flavour.rtl_alt_param
+        return self._params.value(name) * unit
 
     def _step(self, msg: Any | None) -> None:
         """A message received (or None), then the clock ticks."""

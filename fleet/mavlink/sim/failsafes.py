@@ -3,7 +3,12 @@ Copter::fence_check and FENCE_ACTION), the battery (a warning when low, landing 
 ArduPilot's battery failsafe), the ground station gone silent (ArduCopter's GCS failsafe,
 FS_GCS_ENABLE and FS_GCS_TIMEOUT; PX4's data link loss, NAV_DLL_ACT and COM_DL_LOSS_T: home),
 disarming when armed on the ground too long (DISARM_DELAY, PX4's COM_DISARM_PRFLT) and PX4
-leaving offboard when the setpoints stop (COM_OF_LOSS_T)."""
+leaving offboard when the setpoints stop (COM_OF_LOSS_T).
+
+A rover or boat (ArduRover) takes FS_ACTION on a GCS failsafe (FS_GCS_ENABLE, FS_TIMEOUT: 1 RTL,
+2 HOLD, ...) and HOLD where a copter would land; a sub (ArduSub) does what FS_GCS_ENABLE says
+(1 warn, 2 disarm, 3 depth hold, 4 surface) and surfaces where a copter would land or return.
+Neither disarms by itself."""
 
 from __future__ import annotations
 
@@ -79,7 +84,7 @@ class Failsafes:
         action = round(self._params.get("FENCE_ACTION", REPORT_ONLY))
         if action == REPORT_ONLY or commander.mode == f.land:
             return
-        if action in LANDING_ACTIONS:
+        if action in LANDING_ACTIONS or f.rtl is None:
             commander.change_mode(f.land)
         elif (
             commander.mode != f.rtl and commander.change_mode(f.rtl) != mavlink.MAV_RESULT_ACCEPTED
@@ -117,15 +122,35 @@ class Failsafes:
             return
         self.gcs_failsafe = True
         self._text(mavlink.MAV_SEVERITY_CRITICAL, "GCS Failsafe")
-        if flight.on_ground:
+        if not f.takes_off:
+            self._gcs_failsafe_action()
+        elif flight.on_ground:
             commander.stop_motors()
         elif commander.mode not in (f.rtl, f.land) and (
-            commander.change_mode(f.rtl) != mavlink.MAV_RESULT_ACCEPTED
+            commander.change_mode(f.rtl or f.land) != mavlink.MAV_RESULT_ACCEPTED
         ):
             commander.change_mode(f.land)
 
+    def _gcs_failsafe_action(self) -> None:
+        """What ArduRover (FS_ACTION) and ArduSub (FS_GCS_ENABLE) do when the GCS is gone."""
+        f, commander = self._flavour, self._commander
+        if f.rtl is None:  # ArduSub
+            action = round(self._params.value("FS_GCS_ENABLE"))
+            if action == 2:
+                commander.execute(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (0.0,) * 7, 0)
+            elif action in (3, 4):
+                commander.change_mode("ALT_HOLD" if action == 3 else f.land)
+            return
+        action = round(self._params.get("FS_ACTION", 2))
+        if action in (1, 3):  # RTL (SmartRTL is not simulated)
+            commander.change_mode(f.rtl or f.land)
+        elif action != 0:
+            commander.change_mode(f.land)  # HOLD
+
     def _check_auto_disarm(self) -> None:
         commander = self._commander
+        if self._flavour.disarm_delay_param is None:
+            return
         delay = self._params.value(self._flavour.disarm_delay_param)
         if (
             commander.armed

@@ -1,8 +1,13 @@
-"""The copter's flight: where it is and what manoeuvre it flies, on the simulated clock.
+"""The vehicle's flight (or drive, or dive): where it is and what manoeuvre it makes, on the
+simulated clock.
 
-``Flight`` flies a ``fleet.simulation.SimVehicle`` (vertical take-off, straight legs, vertical
-landing: exactly the in-process simulator's kinematics) and drains the battery over flight
-time; it knows nothing of modes or MAVLink. ``Pilot`` is that flight as AUTO and GUIDED fly it,
+``Flight`` moves a ``fleet.simulation.SimVehicle`` of the spec's kind (a copter's vertical
+take-off, straight legs and vertical landing; a rover's or boat's turns and legs in the plane;
+a sub's dives and rises: exactly the in-process simulator's kinematics) and drains the battery
+over the time it is under way; it knows nothing of modes or MAVLink. For a vehicle that does
+not fly, "on the ground" means parked (not under way): it leaves that state with its first
+leg and comes back to it at the end of a return or a stop ("landing" is stopping there, a sub
+rising to the surface). ``Pilot`` is that flight as AUTO and GUIDED fly it,
 with the autopilot's arming and modes.
 """
 
@@ -11,9 +16,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Protocol
+from typing import Any, Protocol
 
 from fleet.geo import Position, distance_m
+from fleet.kinds import AERIAL, UNDERWATER, limits_of
 from fleet.mavlink.mission import MissionItem
 from fleet.mavlink.sim.targets import global_target
 from fleet.simulation.vehicle import SimVehicle, VehicleSpec
@@ -35,12 +41,12 @@ def velocity_ned(here: Position, ahead: Position, dt_s: float) -> tuple[float, f
 
 
 class Flight:
-    """The airframe ``spec`` flying from ``home``, where it starts landed.
+    """The airframe ``spec`` flying from ``home``, where it starts landed (parked).
 
     The simulated clock runs ``speed`` times the wall clock ``wall`` (seconds since boot); at
     speed 0 it stands at the end of whatever is planned, so every manoeuvre ends at once.
     ``battery`` is the charge it starts with (0..1), ``return_alt`` the altitude above home it
-    returns at (at least; a parameter, read when the return begins).
+    returns at (at least; a parameter, read when the return begins; an aircraft's only).
     """
 
     def __init__(
@@ -55,6 +61,7 @@ class Flight:
     ) -> None:
         self.spec = spec
         self.home = home
+        self.takes_off = spec.kind == AERIAL
         self._speed = speed
         self._wall = wall
         self._return_alt = return_alt
@@ -117,7 +124,8 @@ class Flight:
     def set_speed(self, field: str, mps: float) -> None:
         """Change a speed of the spec (``max_speed_mps``, ``climb_rate_mps``) from the next leg
         on."""
-        self.spec = replace(self.spec, **{field: mps})
+        changes: dict[str, Any] = {field: mps}
+        self.spec = replace(self.spec, **changes)
         self._vehicle.spec = self.spec
 
     # --- manoeuvres -------------------------------------------------------------------------
@@ -137,11 +145,22 @@ class Flight:
         self._fly(self._vehicle.position_at(now).with_alt(alt), "goto", now)
 
     def go_to(self, target: Position) -> None:
-        """Fly straight to ``target`` and hover there."""
+        """Fly straight to ``target`` and hover there. A rover or boat goes to it in the plane
+        (the autopilot ignores a target's altitude), a sub no higher than the surface."""
+        target = self.reachable(target)
         same = self._target is not None and distance_m(target, self._target) < _SAME_TARGET_M
         if same and self.stage == "goto":
             return  # the same target again (targets are re-sent against packet loss)
         self._fly(target, "goto", self.now())
+
+    def reachable(self, target: Position) -> Position:
+        """Where the vehicle's kind goes for ``target``: a rover or boat at home's altitude, a
+        sub at most at the surface, an aircraft there."""
+        if not limits_of(self.spec.kind).vertical:
+            return target.with_alt(self.home.alt)
+        if self.spec.kind == UNDERWATER and target.alt > self.home.alt:
+            return target.with_alt(self.home.alt)
+        return target
 
     def hover_for(self, seconds: float) -> None:
         """Stay where it is for ``seconds`` of simulated time."""
@@ -175,7 +194,8 @@ class Flight:
         self._fly(here.with_alt(self.home.alt), "landing", now)
 
     def touchdown(self, at: float) -> None:
-        """On the ground at ``at``: the flight's SimVehicle is retired, a new one stands here."""
+        """On the ground at ``at`` (parked, for a vehicle that does not fly; a sub parks at
+        the surface): the flight's SimVehicle is retired, a new one stands here."""
         spot = self._vehicle.position_at(at).with_alt(self.home.alt)
         self._flown_before_s += self._vehicle.flight_s(at)
         self._vehicle = SimVehicle(self.spec, spot, now_s=at)
@@ -199,6 +219,8 @@ class Flight:
         return None
 
     def _fly(self, target: Position, stage: str, now: float) -> None:
+        if not self.takes_off and stage != "landing":
+            self.on_ground = False  # under way: no take-off first
         self._target = target
         self.stage = stage
         self.stage_end_s = self._vehicle.fly_to(target, now)

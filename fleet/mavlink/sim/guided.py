@@ -15,6 +15,10 @@
   STATUSTEXT ("Guided: frame 8 not supported"). When they came is kept for PX4, whose
   offboard mode wants them streaming (``SetpointStream``).
 
+A rover, a boat or a sub (``takes_off`` False) follows targets once armed, with no take-off;
+a rover and a boat ignore a target's altitude, a sub goes no higher than the surface (its
+negative altitudes are depths).
+
 A target outside an enabled fence is refused, as ArduCopter's ModeGuided::set_destination
 refuses it: the vehicle stays where it is and no breach follows. Velocity and acceleration
 targets are not simulated.
@@ -90,7 +94,7 @@ class SetpointStream:
 
 class Guided:
     """GUIDED's targets for ``vehicle``. ``mode`` is the mode that follows them (GUIDED),
-    ``home`` and ``ground_amsl_m`` what relative and absolute altitudes mean, ``send`` sends a
+    ``takes_off`` whether the vehicle must be flying first (a copter) or only armed, ``home`` and ``ground_amsl_m`` what relative and absolute altitudes mean, ``send`` sends a
     message from the autopilot, ``text`` a STATUSTEXT (severity, text), ``wall`` is the wall
     clock ``setpoints`` runs on."""
 
@@ -100,6 +104,7 @@ class Guided:
         fence: Fence,
         *,
         mode: str,
+        takes_off: bool = True,
         home: Position,
         ground_amsl_m: float,
         send: Callable[[Callable[[Any], None]], None],
@@ -109,6 +114,7 @@ class Guided:
         self._vehicle = vehicle
         self._fence = fence
         self.mode = mode
+        self._takes_off = takes_off
         self._home = home
         self._ground_amsl_m = ground_amsl_m
         self._send = send
@@ -123,10 +129,10 @@ class Guided:
         )
 
     def refusal(self, target: Position) -> str | None:
-        """Why a target is not flown, or None: the vehicle must be flying, the target inside
-        the fence."""
-        if not self._vehicle.armed or self._vehicle.on_ground:
-            return "not flying: arm and take off first"
+        """Why a target is not flown, or None: the vehicle must be flying (a rover, boat or sub:
+        armed), the target inside the fence."""
+        if not self._vehicle.armed or (self._takes_off and self._vehicle.on_ground):
+            return "not flying: arm and take off first" if self._takes_off else "not armed"
         breached = self._fence.breaches(target)
         if breached:
             return f"destination outside {fence_names(breached)}"
@@ -199,8 +205,10 @@ class Guided:
         vehicle = self._vehicle
         if msg.type_mask & POSITION_IGNORE:
             return  # velocity or acceleration targets: not simulated
-        if vehicle.mode != self.mode or not vehicle.armed or vehicle.on_ground:
-            return  # ArduCopter ignores targets outside GUIDED and before take-off
+        if vehicle.mode != self.mode or not vehicle.armed:
+            return  # ArduPilot ignores targets outside GUIDED and disarmed
+        if self._takes_off and vehicle.on_ground:
+            return  # ArduCopter ignores them before take-off
         kind = msg.get_type()
         frame = int(msg.coordinate_frame)
         try:

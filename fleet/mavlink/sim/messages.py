@@ -51,7 +51,15 @@ def current_ca(on_ground: bool) -> int:
     return 50 if on_ground else 1500  # 0.5 A idle, 15 A hovering or cruising
 
 
-def heartbeat(mav: Any, *, autopilot: int, custom_mode: int, armed: bool, critical: bool) -> None:
+def heartbeat(
+    mav: Any,
+    *,
+    autopilot: int,
+    custom_mode: int,
+    armed: bool,
+    critical: bool,
+    mav_type: int = mavlink.MAV_TYPE_QUADROTOR,
+) -> None:
     base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     if armed:
         base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
@@ -59,7 +67,7 @@ def heartbeat(mav: Any, *, autopilot: int, custom_mode: int, armed: bool, critic
         status = mavlink.MAV_STATE_CRITICAL
     else:
         status = mavlink.MAV_STATE_ACTIVE if armed else mavlink.MAV_STATE_STANDBY
-    mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, autopilot, base, custom_mode, status)
+    mav.heartbeat_send(mav_type, autopilot, base, custom_mode, status)
 
 
 def global_position(
@@ -150,6 +158,21 @@ def home_position(mav: Any, *, home: Position, ground_amsl_m: float) -> None:
         0.0,
         0.0,
     )
+
+
+def vfr_hud(
+    mav: Any,
+    *,
+    speed_mps: float,
+    heading_deg: float | None,
+    throttle_pct: int,
+    alt_m: float,
+    climb_mps: float,
+) -> None:
+    """The HUD: ground speed (as airspeed too), heading (degrees, 0 when there is none),
+    throttle, altitude and climb rate."""
+    heading = 0 if heading_deg is None else round(heading_deg) % 360
+    mav.vfr_hud_send(speed_mps, speed_mps, heading, throttle_pct, alt_m, climb_mps)
 
 
 def extended_sys_state(mav: Any, *, landed_state: int) -> None:

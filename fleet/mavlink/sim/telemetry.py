@@ -12,6 +12,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+from fleet.kinds import UNDERWATER
 from fleet.mavlink.modes import custom_mode_of
 from fleet.mavlink.sim import messages
 from fleet.mavlink.sim.camera import Shot
@@ -42,6 +43,7 @@ DATA_STREAMS: Mapping[int, tuple[int, ...]] = {
         mavlink.MAVLINK_MSG_ID_GPS_RAW_INT,
     ),
     mavlink.MAV_DATA_STREAM_RAW_SENSORS: (mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE,),
+    mavlink.MAV_DATA_STREAM_EXTRA2: (mavlink.MAVLINK_MSG_ID_VFR_HUD,),
 }
 _MIN_INTERVAL_S = 0.005  # 200 Hz at most
 
@@ -171,6 +173,7 @@ class Telemetry:
                 mavlink.MAVLINK_MSG_ID_FENCE_STATUS: self._send_fence_status,
                 mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE: self._send_scaled_pressure,
                 mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: self._send_gps_raw,
+                mavlink.MAVLINK_MSG_ID_VFR_HUD: self._send_vfr_hud,
             },
             wall,
         )
@@ -251,11 +254,16 @@ class Telemetry:
         status, flavour = self._status, self._flavour
         self._announced = (status.armed, status.mode)
         autopilot = flavour.heartbeat_autopilot
-        custom = custom_mode_of(flavour.autopilot, status.mode)
+        custom = custom_mode_of(flavour.autopilot, status.mode, flavour.mav_type)
         armed, critical = status.armed, self._flight.battery_failsafe
         self._send(
             lambda mav: messages.heartbeat(
-                mav, autopilot=autopilot, custom_mode=custom, armed=armed, critical=critical
+                mav,
+                mav_type=flavour.mav_type,
+                autopilot=autopilot,
+                custom_mode=custom,
+                armed=armed,
+                critical=critical,
             )
         )
 
@@ -340,9 +348,38 @@ class Telemetry:
     def _send_fence_status(self) -> None:
         self._send(self._fence_status.send)
 
+    def _send_vfr_hud(self) -> None:
+        flight = self._flight
+        now = flight.now()
+        here = flight.position_at(now)
+        north, east, down = flight.velocity(now)
+        heading = flight.heading_deg(now)
+        if flight.spec.kind == UNDERWATER:
+            alt = here.alt - flight.home.alt  # ArduSub's VFR_HUD.alt is the depth (below 0)
+        else:
+            alt = self._ground_amsl_m + here.alt
+        throttle = 0 if flight.on_ground else 50
+        self._send(
+            lambda mav: messages.vfr_hud(
+                mav,
+                speed_mps=math.hypot(north, east),
+                heading_deg=heading,
+                throttle_pct=throttle,
+                alt_m=alt,
+                climb_mps=-down,
+            )
+        )
+
     def _send_extended_state(self) -> None:
         flight = self._flight
-        if flight.on_ground:
+        if not flight.takes_off:
+            # Nothing a rover, boat or sub does is a take-off or landing: parked, or under way
+            # (which no landed state names).
+            parked = flight.on_ground
+            landed = (
+                mavlink.MAV_LANDED_STATE_ON_GROUND if parked else mavlink.MAV_LANDED_STATE_UNDEFINED
+            )
+        elif flight.on_ground:
             landed = mavlink.MAV_LANDED_STATE_ON_GROUND
         elif flight.stage == "takeoff":
             landed = mavlink.MAV_LANDED_STATE_TAKEOFF

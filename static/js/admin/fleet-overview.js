@@ -13,7 +13,11 @@
    State for tests, on the map's element: data-state ("ready"), data-vehicles (RV markers
    drawn), data-areas, data-stations; on #fleet-live: data-live ("true" while the socket is
    up), data-frames (frames applied) and data-seq; on each row: data-status, data-updates (how
-   many reports changed it). Names are operators' words, never markup: text only. */
+   many reports changed it). Names are operators' words, never markup: text only.
+
+   Each RV is drawn with its kind's symbol (static/js/map.js, CPCCMap.kindMarker: a copter, a
+   rover, a boat, a submarine, whose label says its depth), filled with its status's colour;
+   data-vehicle-kinds on the map's element counts them per kind ("aerial:2,ground:1"). */
 (function () {
   'use strict';
 
@@ -21,7 +25,7 @@
 
   function label(v) {
     var count = v.vvs_aboard === undefined ? (v.vvs || []).length : v.vvs_aboard;
-    return v.name + ' · ' + (count === 1 ? '1 VV' : count + ' VVs');
+    return v.name + CPCCMap.depthNote(v) + ' · ' + (count === 1 ? '1 VV' : count + ' VVs');
   }
 
   function popup(v) {
@@ -83,12 +87,16 @@
   FleetMap.prototype.show = function (v) {
     var marker = this.markers[v.name];
     var text = label(v);
+    if (marker && marker.options.kind !== CPCCMap.kindOf(v)) { // its kind changed: drawn anew
+      this.vehicles.removeLayer(marker);
+      marker = null;
+    }
     if (!marker) {
-      marker = L.circleMarker([v.lat, v.lng], {
-        radius: 7, color: '#ffffff', weight: 2, fillColor: M.statusColor(v.status), fillOpacity: 1
+      marker = CPCCMap.kindMarker([v.lat, v.lng], CPCCMap.kindOf(v), {
+        color: '#ffffff', weight: 1.5, fillColor: M.statusColor(v.status), fillOpacity: 1
       });
       marker.bindTooltip(M.text(text), {
-        permanent: true, direction: 'right', offset: [9, 0], className: 'cpcc-map-label'
+        permanent: true, direction: 'right', offset: [11, 0], className: 'cpcc-map-label'
       });
       if (v.url) marker.bindPopup(popup(v));
       marker.addTo(this.vehicles);
@@ -102,7 +110,13 @@
   };
 
   FleetMap.prototype.count = function () {
+    var kinds = {};
+    this.vehicles.getLayers().forEach(function (marker) {
+      kinds[marker.options.kind] = (kinds[marker.options.kind] || 0) + 1;
+    });
     this.element.dataset.vehicles = String(this.vehicles.getLayers().length);
+    this.element.dataset.vehicleKinds = CPCCMap.KINDS.filter(function (k) { return kinds[k]; })
+      .map(function (k) { return k + ':' + kinds[k]; }).join(',');
   };
 
   /* One row of the table, updated from a vehicle's report. */
@@ -111,6 +125,7 @@
     this.statuses = statuses;
     this.id = tr.querySelector('[data-vehicle-id]').dataset.vehicleId;
     this.name = tr.dataset.vehicle;
+    this.kind = this.cell('kind').dataset.kind; // until its worker's reports say it
     var next = tr.nextElementSibling;
     this.actions = next && next.dataset.actionsFor === this.name ? next : null;
     this.updates = 0;
@@ -237,7 +252,10 @@
       if (!row) return; // added since the page was loaded: shown when it is loaded again
       row.apply(v);
       if (v.status !== 'removed') {
-        self.map.show({ name: row.name, lat: v.lat, lng: v.lng, status: v.status, vvs: v.vvs });
+        self.map.show({
+          name: row.name, kind: v.kind || row.kind, lat: v.lat, lng: v.lng, alt: v.alt,
+          status: v.status, vvs: v.vvs
+        });
       }
     });
     (gone || []).forEach(function (id) {

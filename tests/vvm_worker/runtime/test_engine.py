@@ -248,7 +248,7 @@ def test_sensor_list_has_name_description_kind_unit_params() -> None:
     [
         ("200, 12, 50", "latitude 200 is outside -90..90"),
         ("48, 190, 50", "longitude 190 is outside -180..180"),
-        ("48, 12, -5", "altitude -5 is outside"),
+        ("48, 12, -11001", "altitude -11001 is outside"),
         ("'north', 12, 5", "latitude must be a finite number"),
     ],
 )

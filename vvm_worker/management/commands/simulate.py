@@ -179,3 +179,38 @@ class Command(BaseCommand):
                 f"mean {latency['mean_s']:.1f} s, p95 {latency['p95_s']:.1f} s, "
                 f"max {latency['max_s']:.1f} s"
             )
+        if "service_levels" in summary:
+            levels = summary["service_levels"]
+            console.print(service_level_table(levels["customers"]))
+            console.print(service_level_table(levels["classes"], "Service levels per class"))
+
+
+def service_level_table(rows: list[dict[str, Any]], title: str = "Service levels") -> Table:
+    """Figures per customer (or class) and class: ``LevelStats.as_dict`` rows as a table."""
+    table = Table(title=title)
+    for column in (
+        "class",
+        "customer",
+        "target p95 (s)",
+        "requests",
+        "median (s)",
+        "p95 (s)",
+        "within target",
+        "meets target",
+    ):
+        table.add_column(column)
+    for row in rows:
+        target = row["target_p95_s"]
+        within = row["within_target"]
+        meets = row["meets_target"]
+        table.add_row(
+            row["service_class"],
+            row["customer"],
+            "" if target is None else f"{target:.0f}",
+            str(row["requests"]),
+            f"{row['median_s']:.1f}",
+            f"{row['p95_s']:.1f}",
+            "" if within is None else f"{within:.1%}",
+            "" if meets is None else ("yes" if meets else "no"),
+        )
+    return table

@@ -1,0 +1,105 @@
+"""The service-levels report in the admin (issue 28): how the fleet kept each customer's class
+over the last hour, the last day or a period staff choose, from the service classes' list.
+
+A mixin of the service class admin (``accounts/admin.py``): its page is
+``admin/accounts/serviceclass/levels/``, behind the admin's login like every admin view, and
+shows what ``GET /api/v1/service-levels/`` answers.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Any
+
+from django import forms
+from django.core.exceptions import PermissionDenied
+from django.http import HttpRequest
+from django.template.response import TemplateResponse
+from django.urls import URLPattern, path
+
+from vvm_worker.clock import SystemClock
+from vvm_worker.services.service_levels import service_levels_report
+
+PERIODS = {"hour": 3_600.0, "day": 86_400.0}
+
+
+class PeriodForm(forms.Form):
+    """The period of the report: the last hour, the last day, or from ``since`` to ``until``
+    (UTC, until excluded)."""
+
+    period = forms.ChoiceField(
+        choices=[("hour", "last hour"), ("day", "last day"), ("custom", "from … until …")],
+        initial="day",
+    )
+    since = forms.DateTimeField(
+        required=False, widget=forms.DateTimeInput(attrs={"type": "datetime-local"})
+    )
+    until = forms.DateTimeField(
+        required=False, widget=forms.DateTimeInput(attrs={"type": "datetime-local"})
+    )
+
+    def period_s(self, now_s: float) -> tuple[float, float]:
+        """(since, until) in epoch seconds; call after ``is_valid``."""
+        data = self.cleaned_data
+        if data["period"] in PERIODS:
+            return now_s - PERIODS[data["period"]], now_s
+        return _seconds(data["since"]), _seconds(data["until"])
+
+    def clean(self) -> dict[str, Any]:
+        data = super().clean() or {}
+        if data.get("period") == "custom":
+            since, until = data.get("since"), data.get("until")
+            if since is None:
+                self.add_error("since", "Give the start of the period.")
+            if until is None:
+                self.add_error("until", "Give the end of the period.")
+            if since is not None and until is not None and since >= until:
+                self.add_error("until", "The end must come after the start.")
+        return data
+
+
+def _seconds(moment: dt.datetime) -> float:
+    if moment.tzinfo is None:
+        moment = moment.replace(tzinfo=dt.UTC)
+    return moment.timestamp()
+
+
+class ServiceLevelsReportMixin:
+    """Adds the report's page to a ModelAdmin (the service classes')."""
+
+    admin_site: Any
+    opts: Any
+    has_view_permission: Any
+
+    def get_urls(self) -> list[URLPattern]:
+        report = path(
+            "levels/",
+            self.admin_site.admin_view(self.service_levels_view),
+            name="accounts_serviceclass_levels",
+        )
+        return [report, *super().get_urls()]  # type: ignore[misc]
+
+    def service_levels_view(self, request: HttpRequest) -> TemplateResponse:
+        """Requests, median and p95 latency and the share within target per customer and
+        class, and per class, over the chosen period."""
+        if not self.has_view_permission(request):
+            raise PermissionDenied
+        form = PeriodForm(request.GET or {"period": "day"})
+        customers, classes, since, until = [], [], None, None
+        if form.is_valid():
+            since_s, until_s = form.period_s(SystemClock().now_s())
+            customers = service_levels_report(since_s=since_s, until_s=until_s)
+            classes = service_levels_report(since_s=since_s, until_s=until_s, by_customer=False)
+            since = dt.datetime.fromtimestamp(since_s, dt.UTC)
+            until = dt.datetime.fromtimestamp(until_s, dt.UTC)
+        context = {
+            **self.admin_site.each_context(request),
+            "title": "Service levels",
+            "opts": self.opts,
+            "form": form,
+            "since": since,
+            "until": until,
+            "customers": [s.as_dict() for s in customers],
+            "classes": [s.as_dict() for s in classes],
+        }
+        return TemplateResponse(request, "admin/service_levels.html", context)

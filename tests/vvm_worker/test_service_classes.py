@@ -1,0 +1,353 @@
+"""Service classes: a scenario's customers in them, and admission that holds the queued VVs
+of a class while the fleet misses its target (and starts them once it keeps it again),
+saying so in the customer's words. Always with a second customer, who sees none of it."""
+
+from __future__ import annotations
+
+import copy
+import itertools
+from pathlib import Path
+from typing import Any
+
+import pytest
+from django.core.exceptions import ValidationError
+
+from accounts.models import Customer, ServiceClass
+from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus, WaitReason
+from missions.waiting import vv_waiting
+from tests.api_fixtures import token_client
+from tests.factories import CustomerFactory, VehicleFactory
+from vvm_worker.scenario import Scenario, ScenarioError, parse_scenario
+from vvm_worker.service_levels import ServiceClassSpec
+from vvm_worker.services import vv_admit_queued, vv_cancel, vv_submit
+from vvm_worker.services.customers import customer_class_set, service_class_save
+from vvm_worker.services.scenarios import scenario_apply
+from vvm_worker.services.service_levels import (
+    LEVEL_MIN_SAMPLES,
+    LEVEL_WINDOW_S,
+    class_held_nudge,
+)
+
+NOW = 10_000.0
+PROGRAM = "VV.log('hello');\n"
+HELD = (
+    "held: your service class 'premium' targets 30 s (p95) and the fleet is at 41 s now; "
+    "it starts when the fleet catches up"
+)
+
+# --- scenarios ---------------------------------------------------------------------------------
+
+SCENARIO: dict[str, Any] = {
+    "ground_stations": [{"name": "GS Base", "position": [48.0, 12.0, 0]}],
+    "vehicles": [],
+    "customers": [
+        {"name": "Gold A", "max_parallel_vvs": 2, "service_class": {"name": "gold", "p95_s": 30}},
+        {
+            "name": "Gold B",
+            "max_parallel_vvs": 2,
+            "service_class": {"name": "gold", "p95_s": 30, "weight": 1},
+        },
+        {
+            "name": "Plain",
+            "max_parallel_vvs": 1,
+            "service_class": {"name": "standard", "p95_s": 120.5, "weight": 0.5},
+        },
+        {"name": "Nobody", "max_parallel_vvs": 1},
+    ],
+    "vvs": [],
+}
+
+
+def parsed(doc: dict[str, Any]) -> Scenario:
+    return parse_scenario(doc, base_dir=Path("/nonexistent"))
+
+
+def scenario_with(index: int, service_class: Any) -> dict[str, Any]:
+    doc = copy.deepcopy(SCENARIO)
+    doc["customers"][index]["service_class"] = service_class
+    return doc
+
+
+def test_a_scenario_customer_names_its_service_class() -> None:
+    customers = {c.name: c for c in parsed(SCENARIO).customers}
+    assert customers["Gold A"].service_class == ServiceClassSpec("gold", 30.0, 1.0)
+    assert customers["Gold B"].service_class == customers["Gold A"].service_class
+    assert customers["Plain"].service_class == ServiceClassSpec("standard", 120.5, 0.5)
+    assert customers["Nobody"].service_class is None
+
+
+@pytest.mark.parametrize(
+    ("service_class", "where", "words"),
+    [
+        ({"name": "x", "p95_s": 0}, "customers[2].service_class.p95_s", "greater than 0"),
+        ({"name": "x", "p95_s": "30"}, "customers[2].service_class.p95_s", "must be a number"),
+        (
+            {"name": "x", "p95_s": 30, "weight": -1},
+            "customers[2].service_class.weight",
+            "greater than 0",
+        ),
+        ({"name": "x"}, "customers[2].service_class", "missing required key 'p95_s'"),
+        ({"name": "", "p95_s": 3}, "customers[2].service_class.name", "must not be empty"),
+        ({"name": "x" * 61, "p95_s": 3}, "customers[2].service_class.name", "at most 60"),
+        ({"name": "x", "p95_s": 3, "tier": 1}, "customers[2].service_class", "unknown key"),
+        ("gold", "customers[2].service_class", "must be an object"),
+    ],
+)
+def test_a_bad_service_class_is_refused_saying_where(service_class, where, words) -> None:
+    with pytest.raises(ScenarioError) as refused:
+        parsed(scenario_with(2, service_class))
+    assert refused.value.path == where
+    assert words in refused.value.message
+
+
+def test_one_class_given_two_ways_is_refused_naming_both_customers() -> None:
+    with pytest.raises(ScenarioError) as refused:
+        parsed(scenario_with(1, {"name": "gold", "p95_s": 45}))
+    assert refused.value.path == "customers[1].service_class"
+    message = refused.value.message
+    assert "'Gold B'" in message and "'Gold A'" in message and "customers[0]" in message
+    assert "45" in message and "30" in message
+
+
+def test_a_scenario_puts_its_classes_and_customers_in_the_database(db) -> None:
+    scenario = parsed(SCENARIO)
+    loaded = scenario_apply(scenario=scenario, logins=False)
+    classes = {c.name: (c.p95_s, c.weight) for c in ServiceClass.objects.all()}
+    assert classes == {"gold": (30.0, 1.0), "standard": (120.5, 0.5)}
+    by_name = {name: c.service_class for name, c in loaded.customers.items()}
+    assert by_name["Gold A"] == by_name["Gold B"] == ServiceClass.objects.get(name="gold")
+    assert by_name["Plain"].name == "standard" and by_name["Nobody"] is None
+    scenario_apply(scenario=scenario, logins=False)  # twice: nothing changes
+    assert ServiceClass.objects.count() == 2
+    assert Customer.objects.get(name="Gold A").service_class.name == "gold"
+
+
+# --- admission ---------------------------------------------------------------------------------
+
+_rows = itertools.count()
+
+
+def load_of(
+    customer: Customer,
+    *,
+    latencies: list[float] | tuple[()] = (),
+    open_ages: list[float] | tuple[()] = (),
+    now: float = NOW,
+) -> VirtualVehicle:
+    """A running VV of the customer with tasks read ``latencies`` seconds after their request
+    (each read a second before ``now``) and open tasks requested ``open_ages`` seconds before
+    ``now``: what the fleet did for the customer lately."""
+    vv = VirtualVehicle.objects.create(
+        customer=customer,
+        name=f"load {next(_rows)}",
+        program=PROGRAM,
+        seed=1,
+        start_ms=0,
+        submitted_s=0.0,
+        status=VVStatus.RUNNING,
+    )
+    done = [(TaskStatus.DONE, now - 1 - s, now - 1) for s in latencies]
+    open_ = [(TaskStatus.OPEN, now - s, None) for s in open_ages]
+    Task.objects.bulk_create(
+        Task(
+            vv=vv,
+            q=q,
+            lat=48.0,
+            lng=12.0,
+            alt=50.0,
+            tolerance_m=2.0,
+            sensors=["CO2"],
+            status=status,
+            requested_s=requested_s,
+            done_s=done_s,
+        )
+        for q, (status, requested_s, done_s) in enumerate([*done, *open_], start=1)
+    )
+    return vv
+
+
+@pytest.fixture
+def vvm(vvm_factory, ground_station):
+    made = vvm_factory()
+    made.clock.t = NOW
+    return made
+
+
+@pytest.fixture
+def premium(db) -> ServiceClass:
+    return service_class_save(name="premium", p95_s=30.0)
+
+
+@pytest.fixture
+def slow_premium(premium, vvm) -> Customer:
+    """Another customer of the class, whose tasks the fleet reads late: 41 s (p95)."""
+    other = CustomerFactory(name="Customer C", max_parallel_vvs=50)
+    customer_class_set(customer=other, service_class=premium, vvm=vvm)
+    load_of(other, latencies=[10.0] * LEVEL_MIN_SAMPLES + [41.0] * 3, open_ages=[2.0])
+    return other
+
+
+def waiting_of(vv: VirtualVehicle):
+    vv.refresh_from_db()
+    return vv_waiting(vv, tasks_open=0)
+
+
+def test_a_class_that_misses_its_target_holds_new_vvs_and_says_why(
+    customer_a, customer_b, user_a, user_b, premium, slow_premium, vvm
+) -> None:
+    customer_class_set(customer=customer_a, service_class=premium, vvm=vvm)
+    held = vv_submit(customer=customer_a, name="held", program=PROGRAM, vvm=vvm)
+    assert held.status == VVStatus.QUEUED
+    waiting = waiting_of(held)
+    assert (waiting.reason, waiting.message, waiting.since_s) == (
+        WaitReason.SERVICE_LEVEL,
+        HELD,
+        NOW,
+    )
+    assert "Customer C" not in waiting.message and "Heli" not in waiting.message
+    shown = token_client(user_a).get(f"/api/v1/vvs/{held.pk}/").json()["waiting"]
+    assert (shown["reason"], shown["message"]) == ("service_level", HELD)
+    assert token_client(user_b).get(f"/api/v1/vvs/{held.pk}/").status_code == 404
+    # A customer without a class is never held, however late the fleet is for it.
+    load_of(customer_b, latencies=[41.0] * LEVEL_MIN_SAMPLES, open_ages=[100.0])
+    free = vv_submit(customer=customer_b, name="free", program=PROGRAM, vvm=vvm)
+    assert free.status == VVStatus.RUNNING and waiting_of(free) is None
+
+
+def test_held_vvs_start_once_the_class_is_back_within_target(
+    customer_a, premium, slow_premium, vvm
+) -> None:
+    customer_class_set(customer=customer_a, service_class=premium, vvm=vvm)
+    held = vv_submit(customer=customer_a, name="held", program=PROGRAM, vvm=vvm)
+    vvm.clock.t += 60  # still late: only the time passes
+    assert vv_admit_queued(customer_id=customer_a.pk, vvm=vvm) == []
+    assert waiting_of(held).since_s == NOW, "held since it was first held"
+    # The fleet catches up: many tasks of the class read fast.
+    load_of(slow_premium, latencies=[5.0] * 60)
+    vvm.dispatcher.slots.clear()
+    class_held_nudge(service_class_id=premium.pk, vvm=vvm)
+    assert vvm.dispatcher.slots == [customer_a.pk], "only the customer whose VVs are held"
+    (started,) = vv_admit_queued(customer_id=customer_a.pk, vvm=vvm)
+    assert started.pk == held.pk
+    held.refresh_from_db()
+    assert held.status == VVStatus.RUNNING and waiting_of(held) is None
+
+
+def test_the_end_of_a_vv_of_the_class_looks_again_at_the_held_ones(
+    customer_a, customer_b, premium, slow_premium, vvm
+) -> None:
+    customer_class_set(customer=customer_a, service_class=premium, vvm=vvm)
+    vv_submit(customer=customer_a, name="held", program=PROGRAM, vvm=vvm)
+    running_b = vv_submit(customer=customer_b, name="b", program=PROGRAM, vvm=vvm)
+    (load,) = VirtualVehicle.objects.filter(customer=slow_premium)
+    vvm.dispatcher.slots.clear()
+    vv_cancel(vv_id=running_b.pk, vvm=vvm)  # customer B has no class: nobody else is asked
+    assert vvm.dispatcher.slots == [customer_b.pk]
+    vv_cancel(vv_id=load.pk, vvm=vvm)  # its open task ends with it
+    assert vvm.dispatcher.slots == [customer_b.pk, slow_premium.pk, customer_a.pk]
+    # Its task cancelled, the class has no open task left: the fleet has caught up with it.
+    (started,) = vv_admit_queued(customer_id=customer_a.pk, vvm=vvm)
+    assert started.status == VVStatus.RUNNING
+
+
+def test_a_flooding_customer_is_held_by_its_own_class_not_the_other_one(
+    customer_a, customer_b, premium, vvm
+) -> None:
+    standard = service_class_save(name="standard", p95_s=120.0, weight=0.5)
+    customer_class_set(customer=customer_a, service_class=premium, vvm=vvm)
+    customer_class_set(customer=customer_b, service_class=standard, vvm=vvm)
+    load_of(customer_a, latencies=[12.0] * LEVEL_MIN_SAMPLES, open_ages=[3.0])
+    load_of(customer_b, latencies=[300.0] * LEVEL_MIN_SAMPLES, open_ages=[400.0])
+    flood = vv_submit(customer=customer_b, name="flood", program=PROGRAM, vvm=vvm)
+    assert flood.status == VVStatus.QUEUED
+    assert "'standard' targets 120 s (p95) and the fleet is at 5 min now" in (
+        waiting_of(flood).message
+    )
+    assert vv_submit(customer=customer_a, name="p", program=PROGRAM, vvm=vvm).status == (
+        VVStatus.RUNNING
+    )
+
+
+@pytest.mark.parametrize(
+    ("latencies", "open_ages"),
+    [
+        ([41.0] * (LEVEL_MIN_SAMPLES - 2), [41.0]),  # too few to say anything yet
+        ([41.0] * LEVEL_MIN_SAMPLES, []),  # nothing of the class is open: caught up
+        ([20.0] * LEVEL_MIN_SAMPLES, [29.0]),  # within the target
+    ],
+)
+def test_admission_does_not_hold_without_a_reason(
+    customer_a, premium, vvm, latencies, open_ages
+) -> None:
+    customer_class_set(customer=customer_a, service_class=premium, vvm=vvm)
+    load_of(customer_a, latencies=latencies, open_ages=open_ages)
+    vv = vv_submit(customer=customer_a, name="vv", program=PROGRAM, vvm=vvm)
+    assert vv.status == VVStatus.RUNNING
+
+
+def test_tasks_read_before_the_window_do_not_count(customer_a, premium, vvm) -> None:
+    customer_class_set(customer=customer_a, service_class=premium, vvm=vvm)
+    load_of(customer_a, open_ages=[1.0] * LEVEL_MIN_SAMPLES)
+    later = vvm.clock.t = NOW + LEVEL_WINDOW_S + 1
+    vv = vv_submit(customer=customer_a, name="vv", program=PROGRAM, vvm=vvm)
+    assert vv.status == VVStatus.QUEUED, "its open tasks waited longer than the window: late"
+    # All of them read late, but before the window; one new task is open.
+    Task.objects.filter(status=TaskStatus.OPEN).update(status=TaskStatus.DONE, done_s=NOW)
+    load_of(customer_a, open_ages=[1.0], now=later)
+    (started,) = vv_admit_queued(customer_id=customer_a.pk, vvm=vvm)
+    assert started.pk == vv.pk
+
+
+def test_a_class_is_saved_and_set_through_the_services(customer_a, customer_b, vvm) -> None:
+    gold = service_class_save(name="gold", p95_s=30.0, weight=2.0)
+    assert service_class_save(name="gold", p95_s=25.0).pk == gold.pk  # by name: changed
+    gold.refresh_from_db()
+    assert (gold.p95_s, gold.weight) == (25.0, 1.0)
+    for bad, field in [
+        ({"name": "x", "p95_s": 0.0}, "p95_s"),
+        ({"name": "x", "p95_s": float("nan")}, "p95_s"),
+        ({"name": "x", "p95_s": 5.0, "weight": 0.0}, "weight"),
+        ({"name": "", "p95_s": 5.0}, "name"),
+    ]:
+        with pytest.raises(ValidationError) as refused:
+            service_class_save(**bad)
+        assert field in refused.value.message_dict
+    vvm.dispatcher.slots.clear()
+    customer_class_set(customer=customer_a, service_class=gold, vvm=vvm)
+    assert vvm.dispatcher.slots == [customer_a.pk], "its queued VVs are looked at again"
+    with pytest.raises(ValidationError, match="service_class"):
+        customer_class_set(customer=customer_a, service_class=ServiceClass(name="new"), vvm=vvm)
+    customer_a.refresh_from_db()
+    customer_b.refresh_from_db()
+    assert customer_a.service_class == gold and customer_b.service_class is None
+    customer_class_set(customer=customer_a, service_class=None, vvm=vvm)
+    customer_a.refresh_from_db()
+    assert customer_a.service_class is None
+
+
+def test_held_vvs_start_in_the_simulation_when_the_class_catches_up(
+    platform, ground_station, customer_a, customer_b, premium
+) -> None:
+    """No sweep runs in ``simulate``: the end of the class's tasks must start the held VVs."""
+    platform.add_vehicle_loop(VehicleFactory(name="Heli One"))
+    platform.clock.t = NOW
+    for customer in (customer_a, customer_b):
+        customer_class_set(customer=customer, service_class=premium, vvm=platform.vvm)
+    late = load_of(customer_b, latencies=[41.0] * LEVEL_MIN_SAMPLES)
+    late.status, late.finished_s = VVStatus.FINISHED, NOW - 1
+    late.save()
+    one_task = (
+        "var co2 = VV.sensor.get('CO2');\n"
+        "VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(48.1111, 12.8619, 50),"
+        " tolerance: 2, sensors: [co2]});\n"
+    )
+    first = vv_submit(customer=customer_b, name="first", program=one_task, vvm=platform.vvm)
+    platform.drain(until=lambda: Task.objects.filter(vv=first).exists())
+    held = vv_submit(customer=customer_a, name="held", program=one_task, vvm=platform.vvm)
+    assert held.status == VVStatus.QUEUED
+    assert waiting_of(held).reason == WaitReason.SERVICE_LEVEL
+    platform.drain()
+    held.refresh_from_db()
+    first.refresh_from_db()
+    assert first.status == held.status == VVStatus.FINISHED
+    assert held.started_s >= Task.objects.get(vv=first).done_s

@@ -1,0 +1,200 @@
+"""Service levels, the database side: a customer's class, and whether the fleet keeps a
+class's target now (the tasks of its customers read lately and those still open). Admission
+holds the queued VVs of a class that misses its target (``vvs._admit``) and asks again when
+one of the class's tasks ends (``class_held_nudge``) or a ground station sweeps.
+
+The figures themselves are computed in the pure core ``vvm_worker.service_levels``.
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Collection
+from dataclasses import dataclass
+from typing import Any
+
+from django.db.models import Q
+
+from accounts.models import Customer, ServiceClass
+from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus, WaitReason
+from missions.waiting import duration_text
+from vvm_worker.service_levels import (
+    NO_CLASS,
+    LevelStats,
+    ServiceClassSpec,
+    level_stats,
+    misses_target,
+    percentile,
+)
+from vvm_worker.services.base import VVM
+
+# The tasks read in this many seconds (platform clock) before now say how the fleet keeps a
+# class's target now; older ones say how it kept it then.
+LEVEL_WINDOW_S = 600.0
+# Fewer latencies than this (read lately and still open together) say nothing yet.
+LEVEL_MIN_SAMPLES = 20
+
+
+def class_spec(service_class: ServiceClass | None) -> ServiceClassSpec:
+    """A class row as the pure core's spec; ``NO_CLASS`` for None (no target, weight 1)."""
+    if service_class is None:
+        return NO_CLASS
+    return ServiceClassSpec(service_class.name, service_class.p95_s, service_class.weight)
+
+
+def customer_class_spec(*, customer: Customer) -> ServiceClassSpec:
+    """The customer's service class (``NO_CLASS`` when it has none)."""
+    return class_spec(customer.service_class)
+
+
+@dataclass(frozen=True)
+class ClassLatencies:
+    """A class's tasks now: ``recent`` latencies (read within the window, seconds from the
+    request to the reading) and ``open_ages`` (how long each open task has waited so far)."""
+
+    recent: list[float]
+    open_ages: list[float]
+
+
+def class_latencies(
+    *, service_class_id: int, now_s: float, window_s: float = LEVEL_WINDOW_S
+) -> ClassLatencies:
+    """The latencies of the tasks of the class's customers read since ``now_s - window_s``
+    and the ages of those still open (platform clock): one query. A task read belongs to a
+    VV that has not ended or ended after it, so the VVs that ended before the window are not
+    read."""
+    since = now_s - window_s
+    rows = (
+        Task.objects.filter(vv__customer__service_class_id=service_class_id)
+        .filter(Q(vv__finished_s__isnull=True) | Q(vv__finished_s__gte=since))
+        .filter(Q(status=TaskStatus.OPEN) | Q(status=TaskStatus.DONE, done_s__gte=since))
+        .order_by()
+        .values_list("requested_s", "done_s")
+    )
+    recent, open_ages = [], []
+    for requested_s, done_s in rows:
+        if done_s is None:
+            open_ages.append(max(0.0, now_s - requested_s))
+        else:
+            recent.append(done_s - requested_s)
+    return ClassLatencies(recent=recent, open_ages=open_ages)
+
+
+@dataclass(frozen=True)
+class ClassLevel:
+    """How the fleet keeps a class's target now: ``p95_s`` over its recent and open tasks
+    (None: none), and ``missing`` (admission holds the class's queued VVs)."""
+
+    spec: ServiceClassSpec
+    p95_s: float | None
+    missing: bool
+
+    def hold_message(self) -> str:
+        """Why a held VV waits, in its owner's words (never a vehicle or another customer)."""
+        target = f"{self.spec.p95_s or 0.0:g} s"  # as staff set it
+        now = duration_text(self.p95_s or 0.0)
+        return (
+            f"held: your service class '{self.spec.name}' targets {target} (p95) and the fleet "
+            f"is at {now} now; it starts when the fleet catches up"
+        )
+
+
+def class_level(
+    *, service_class: ServiceClass, now_s: float, min_samples: int = LEVEL_MIN_SAMPLES
+) -> ClassLevel:
+    """Whether the fleet misses the class's target now (``misses_target`` over its tasks read
+    lately and still open). A class with no open task is never missing: the fleet has
+    caught up with it, and a VV started now is served without waiting behind others."""
+    spec = class_spec(service_class)
+    seen = class_latencies(service_class_id=service_class.pk, now_s=now_s)
+    values = [*seen.recent, *seen.open_ages]
+    missing = bool(seen.open_ages) and misses_target(
+        spec.p95_s,
+        recent_latencies=seen.recent,
+        open_ages=seen.open_ages,
+        min_samples=min_samples,
+    )
+    return ClassLevel(spec=spec, p95_s=percentile(values, 95) if values else None, missing=missing)
+
+
+def class_held_nudge(*, service_class_id: int | None, vvm: VVM, told: int | None = None) -> None:
+    """One of the class's tasks ended (read, rejected or cancelled with its VV): the fleet
+    may keep the target again, so admission looks again at each customer of the class whose
+    queued VVs it holds, except ``told`` (a customer the caller asked admission for). One
+    query; nothing for no class or when none is held."""
+    if service_class_id is None:
+        return
+    held = (
+        VirtualVehicle.objects.filter(
+            customer__service_class_id=service_class_id,
+            status=VVStatus.QUEUED,
+            waiting_reason=WaitReason.SERVICE_LEVEL,
+        )
+        .exclude(customer_id=told)
+        .order_by("customer_id")
+        .values_list("customer_id", flat=True)
+        .distinct()
+    )
+    for customer_id in held:
+        vvm.dispatcher.customer_slot_freed(customer_id)
+
+
+# --- the report: how each customer's class was kept over a period (Part E) ---------------------
+
+# The customer of a report's row per class.
+ALL_CUSTOMERS = "(all)"
+
+
+def service_levels_report(
+    *,
+    since_s: float | None = None,
+    until_s: float | None = None,
+    vv_ids: Collection[uuid.UUID] | None = None,
+    by_customer: bool = True,
+) -> list[LevelStats]:
+    """Figures per customer and class (``level_stats``: requests read, median and p95 of the
+    latency from request to reading, share within the class's target) of the tasks requested
+    from ``since_s`` (inclusive) to ``until_s`` (exclusive) on the platform clock (None: no
+    bound) and read; ``vv_ids``: only these VVs' tasks (a simulation's). ``by_customer``
+    False: one row per class, its customer ``ALL_CUSTOMERS``. One query; a customer is
+    counted in the class it has now. Sorted by class name, then customer."""
+    rows = Task.objects.filter(status=TaskStatus.DONE, done_s__isnull=False)
+    if since_s is not None:
+        rows = rows.filter(requested_s__gte=since_s)
+    if until_s is not None:
+        rows = rows.filter(requested_s__lt=until_s)
+    if vv_ids is not None:
+        rows = rows.filter(vv_id__in=list(vv_ids))
+    specs: dict[tuple[Any, ...], ServiceClassSpec] = {}
+
+    def latency(
+        customer: str, name: str | None, p95_s: float | None, weight: float | None, wait: float
+    ) -> tuple[str, ServiceClassSpec, float]:
+        who = customer if by_customer else ALL_CUSTOMERS
+        if name is None:
+            return who, NO_CLASS, wait
+        key = (name, p95_s, weight)
+        spec = specs.get(key)
+        if spec is None:  # one spec per class, not one per row
+            spec = specs[key] = ServiceClassSpec(name, p95_s, 1.0 if weight is None else weight)
+        return who, spec, wait
+
+    return level_stats(
+        latency(customer, name, p95_s, weight, done_s - requested_s)
+        for customer, name, p95_s, weight, requested_s, done_s in rows.order_by().values_list(
+            "vv__customer__name",
+            "vv__customer__service_class__name",
+            "vv__customer__service_class__p95_s",
+            "vv__customer__service_class__weight",
+            "requested_s",
+            "done_s",
+        )
+    )
+
+
+def service_levels_classed(*, vv_ids: Collection[uuid.UUID]) -> bool:
+    """Whether any customer of these VVs has a service class (``simulate`` then shows the
+    figures per class)."""
+    return VirtualVehicle.objects.filter(
+        pk__in=list(vv_ids), customer__service_class__isnull=False
+    ).exists()
