@@ -18,6 +18,7 @@ from django.template.response import TemplateResponse
 from django.urls import URLPattern, path
 
 from vvm_worker.clock import SystemClock
+from vvm_worker.service_levels import LevelStats
 from vvm_worker.services.service_levels import service_levels_report
 
 PERIODS = {"hour": 3_600.0, "day": 86_400.0}
@@ -99,7 +100,15 @@ class ServiceLevelsReportMixin:
             "form": form,
             "since": since,
             "until": until,
-            "customers": [s.as_dict() for s in customers],
-            "classes": [s.as_dict() for s in classes],
+            "customers": [_shown(s) for s in customers],
+            "classes": [_shown(s) for s in classes],
         }
         return TemplateResponse(request, "admin/service_levels.html", context)
+
+
+def _shown(stats: LevelStats) -> dict[str, object]:
+    """A row of the report as the page shows it: the API's figures and the share in percent."""
+    row = stats.as_dict()
+    within = stats.within_target
+    row["within_target_percent"] = None if within is None else round(100 * within, 1)
+    return row

@@ -52,6 +52,7 @@ class ServiceClass(models.Model):
 
     class Meta:
         ordering = ["name"]
+        verbose_name_plural = "service classes"
         constraints = [
             models.CheckConstraint(condition=models.Q(p95_s__gt=0), name="service_p95_positive"),
             models.CheckConstraint(

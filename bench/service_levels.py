@@ -27,6 +27,7 @@ import json
 import os
 import platform
 import random
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -166,6 +167,11 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=1800.0, help="s of Poisson arrivals")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--out", default="var/bench/service_levels.json")
+    parser.add_argument(
+        "--keep",
+        action="store_true",
+        help="keep the runs' SQLite databases (printed) to look at them in the admin",
+    )
     args = parser.parse_args()
 
     tmp = Path(tempfile.mkdtemp(prefix="cpcc-bench-levels-"))
@@ -200,6 +206,10 @@ def main() -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=1))
     print(f"\nwritten to {out}")
+    if args.keep:
+        print(f"the runs' databases: {tmp}/*/simulate.sqlite3")
+    else:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":

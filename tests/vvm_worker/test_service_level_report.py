@@ -199,7 +199,7 @@ def test_the_admin_page_shows_the_report_to_staff_only(classed, staff, user_a) -
     assert shown.status_code == 200
     html = shown.content.decode()
     assert 'data-class="premium" data-customer="Customer A"' in html
-    assert "75 %" in html and "40.0" in html
+    assert "75.0 %" in html and "40.0" in html
     changelist = client.get("/admin/accounts/serviceclass/")
     assert page in changelist.content.decode()
     refused = client.get(page, {"period": "custom", "since": "2026-01-01 00:01"})
