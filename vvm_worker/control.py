@@ -570,9 +570,13 @@ class ControlLoop:
 
     def _take_off_home(self, now: float, token: int) -> None:
         """Landed away from home (an operator's "land now"): up to the middle of the
-        altitudes it may fly, home around the no-fly zones, and down."""
+        altitudes it may fly, home around the no-fly zones, and down. A vehicle that does not
+        fly (ground, surface, underwater: its altitudes end at 0 m) goes home on the ground or
+        the surface: a sub that surfaced does not dive again to come home."""
         area = self.store.area()
         up = (area.min_altitude_m + area.max_altitude_m) / 2
+        if area.max_altitude_m <= 0.0:
+            up = area.max_altitude_m
         here = self.driver.position_at(now)
         way = self.airspace.way(here.with_alt(up), self.driver.depot.with_alt(up))
         if way is None:

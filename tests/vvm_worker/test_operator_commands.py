@@ -19,6 +19,7 @@ from vvm_worker.control import (
     LAND,
     MAINTENANCE,
     RETURN_HOME,
+    Area,
     ControlLoop,
     LoopConfig,
     LoopTask,
@@ -263,3 +264,44 @@ def test_a_removed_rv_takes_no_command(db, vvm_factory) -> None:
         vehicle_command(vehicle=heli, command=VehicleCommand.LAND, vvm=vvm)
     heli.refresh_from_db()
     assert (heli.status, heli.command) == (VehicleStatus.REMOVED, "")
+
+
+class LakeStore(CommandStore):
+    """A sub's store: its altitudes are depths, down to 30 m."""
+
+    def area(self) -> Area:
+        return Area(super().area().polygon, -30.0, 0.0)
+
+
+def test_a_sub_sent_home_after_surfacing_comes_home_on_the_surface() -> None:
+    store, clock = LakeStore(), Clock()
+    spec = VehicleSpec(max_speed_mps=2.0, climb_rate_mps=0.5, kind="underwater", dive_rate_mps=0.5)
+    driver = SimVehicle(spec, DEPOT)
+    loop = ControlLoop(
+        name="Sub",
+        driver=driver,
+        planner=make_planner("latency", travel_time=TravelTime(2.0, 0.5, dive_rate_mps=0.5)),
+        store=store,
+        scheduler=clock,
+        clock=lambda: clock.now,
+        config=LoopConfig(standby_s=60.0),
+    )
+    store.open[1] = LoopTask(
+        1, offset(DEPOT, north_m=100.0, east_m=0.0, up_m=-10.0), 1.0, 0.0, vv="vv-1"
+    )
+    loop.wake()
+    _run(clock, 40.0)
+    assert driver.position_at(clock.now).alt < 0, "under way, below the surface"
+    store.give(LAND)
+    loop.wake()
+    _run(clock, clock.now + 60.0)
+    surfaced = driver.position_at(clock.now)
+    assert driver.is_landed_at(clock.now) and surfaced.alt == 0.0
+    store.give(RETURN_HOME)
+    loop.wake()
+    depths = []
+    while not (driver.is_landed_at(clock.now) and driver.position_at(clock.now) == DEPOT):
+        assert clock.now < 600.0, "home within ten minutes"
+        _run(clock, clock.now + 1.0)
+        depths.append(driver.position_at(clock.now).alt)
+    assert max(depths) == 0.0 and min(depths) == 0.0, "on the surface all the way"
