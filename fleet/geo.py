@@ -47,6 +47,18 @@ def ground_distance_m(a: Position, b: Position) -> float:
     return float(dist)
 
 
+def headings_deg(a: Position, b: Position) -> tuple[float, float]:
+    """The heading (degrees clockwise from north, 0..360) leaving ``a`` for ``b`` along the
+    geodesic, and the heading arriving at ``b``."""
+    leave, back, _ = _GEOD.inv(a.lng, a.lat, b.lng, b.lat)
+    return float(leave) % 360.0, (float(back) + 180.0) % 360.0
+
+
+def turn_deg(start_deg: float, end_deg: float) -> float:
+    """The shortest turn from one heading to another, in degrees (-180..180, + clockwise)."""
+    return (end_deg - start_deg + 180.0) % 360.0 - 180.0
+
+
 def distance_m(a: Position, b: Position) -> float:
     """Straight-line distance in space between two positions, in metres."""
     return math.hypot(ground_distance_m(a, b), b.alt - a.alt)

@@ -53,6 +53,11 @@ LIMITS: dict[str, KindLimits] = {
 }
 
 
+def a_vehicle(kind: str) -> str:
+    """ "an aerial vehicle", "a ground vehicle": a kind in an error message."""
+    return f"{'an' if kind[:1] in 'aeiou' else 'a'} {kind} vehicle"
+
+
 def limits_of(kind: str) -> KindLimits:
     """The limits of a kind; ValueError naming the kinds there are when it is not one."""
     try:
@@ -77,23 +82,21 @@ def limit_problems(
     problems: dict[str, str] = {}
     if kind != AERIAL and depot_alt_m != 0:
         problems["depot_alt"] = (
-            f"a{'n' if kind[0] in 'aeiou' else ''} {kind} vehicle's home is at 0 m "
-            "(it parks or docks at ground or water level)"
+            f"{a_vehicle(kind)}'s home is at 0 m (it parks or docks at ground or water level)"
         )
     if limits.lowest_m is not None and min_altitude_m < limits.lowest_m:
         problems["min_altitude_m"] = (
-            f"a{'n' if kind[0] in 'aeiou' else ''} {kind} vehicle goes no lower than "
+            f"{a_vehicle(kind)} goes no lower than "
             f"{limits.lowest_m:g} m" + (" (below 0 is depth)" if limits.lowest_m < 0 else "")
         )
     if limits.highest_m is not None and max_altitude_m > limits.highest_m:
         problems["max_altitude_m"] = (
-            f"a{'n' if kind[0] in 'aeiou' else ''} {kind} vehicle goes no higher than "
+            f"{a_vehicle(kind)} goes no higher than "
             f"{limits.highest_m:g} m"
             + ("" if limits.vertical else ": it moves in the plane and never climbs")
         )
     if math.isfinite(max_speed_mps) and max_speed_mps > limits.max_speed_mps:
         problems["max_speed_mps"] = (
-            f"a{'n' if kind[0] in 'aeiou' else ''} {kind} vehicle moves at "
-            f"{limits.max_speed_mps:g} m/s at most"
+            f"{a_vehicle(kind)} moves at {limits.max_speed_mps:g} m/s at most"
         )
     return problems

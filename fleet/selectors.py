@@ -9,6 +9,7 @@ from typing import Any
 from django.db.models import Q, QuerySet
 
 from fleet.geo import Position
+from fleet.kinds import a_vehicle
 from fleet.models import GroundStation, NoFlyZone, RallyPoint, SensorType, Vehicle, VehicleStatus
 from fleet.service_area import Exclusion, Reach, service_area_geojson
 
@@ -45,8 +46,7 @@ def sensors_not_carried(*, kind: str, sensors: Iterable[SensorType]) -> str | No
     ]
     if not refused:
         return None
-    article = "an" if kind[:1] in "aeiou" else "a"
-    return f"{article} {kind} vehicle cannot carry " + ", ".join(refused)
+    return f"{a_vehicle(kind)} cannot carry " + ", ".join(refused)
 
 
 def sensor_carriers(*, sensor: SensorType) -> QuerySet[Vehicle]:

@@ -58,8 +58,8 @@ from typing import Any, NamedTuple
 import PIL.Image
 
 from fleet.driving import Sample, SensorFailure, SensorRead
-from fleet.geo import Position, distance_m, ground_distance_m
-from fleet.kinds import AERIAL, GROUND, SURFACE, UNDERWATER, limits_of
+from fleet.geo import Position, distance_m, ground_distance_m, headings_deg, turn_deg
+from fleet.kinds import AERIAL, GROUND, SURFACE, UNDERWATER, a_vehicle, limits_of
 from fleet.mavlink.errors import (
     CommandDenied,
     LinkLost,
@@ -137,10 +137,6 @@ _KIND_MODES = {
 _RETURN_MODES = frozenset(
     {"RTL", "LAND", "AUTO.RTL", "AUTO.LAND", "SMART_RTL", "AUTO_RTL", "SURFACE"}
 )
-
-
-def _a(kind: str) -> str:
-    return f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} vehicle"
 
 
 class Fence(NamedTuple):
@@ -326,7 +322,7 @@ class MavlinkDriver:
         configured = self.configured_kind
         if configured is not None and kind != configured:
             raise UnsupportedVehicle(
-                f"{self.name}: configured as {_a(configured)}, but the autopilot reports "
+                f"{self.name}: configured as {a_vehicle(configured)}, but the autopilot reports "
                 f"{KIND_WORDS[kind]}"
             )
         return kind
@@ -913,10 +909,7 @@ class MavlinkDriver:
         rate, heading = self.spec.turning_rate_dps, self._heading_deg
         if rate is None or heading is None or ground_distance_m(here, target) < 0.5:
             return 0.0
-        north = (target.lat - here.lat) * 111_320.0
-        east = (target.lng - here.lng) * 111_320.0 * math.cos(math.radians(here.lat))
-        bearing = math.degrees(math.atan2(east, north)) % 360
-        return abs((bearing - heading + 180.0) % 360.0 - 180.0) / rate
+        return abs(turn_deg(heading, headings_deg(here, target)[0])) / rate
 
     # --- flying ---------------------------------------------------------------------------
 

@@ -24,10 +24,15 @@ import math
 from bisect import bisect_right
 from dataclasses import dataclass
 
-from pyproj import Geod
-
 from fleet.driving import Sample, SensorFailure, SensorRead
-from fleet.geo import Position, distance_m, ground_distance_m, interpolate
+from fleet.geo import (
+    Position,
+    distance_m,
+    ground_distance_m,
+    headings_deg,
+    interpolate,
+    turn_deg,
+)
 from fleet.kinds import AERIAL, UNDERWATER, limits_of
 
 PHASE_LANDED = "landed"
@@ -45,24 +50,10 @@ _TURN_SLACK_DEG = 1e-6
 # Headings where there is none yet: a new vehicle faces north.
 _NORTH_DEG = 0.0
 
-_GEOD = Geod(ellps="WGS84")
-
 
 def _check_positive(name: str, value: float) -> None:
     if not (math.isfinite(value) and value > 0.0):
         raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-
-
-def _headings(a: Position, b: Position) -> tuple[float, float]:
-    """The heading (degrees clockwise from north, 0..360) leaving ``a`` for ``b`` along the
-    geodesic, and the heading arriving at ``b``."""
-    leave, back, _ = _GEOD.inv(a.lng, a.lat, b.lng, b.lat)
-    return float(leave) % 360.0, (float(back) + 180.0) % 360.0
-
-
-def _turn_deg(start_deg: float, end_deg: float) -> float:
-    """The shortest turn from one heading to another, in degrees (-180..180, + clockwise)."""
-    return (end_deg - start_deg + 180.0) % 360.0 - 180.0
 
 
 @dataclass(frozen=True)
@@ -472,7 +463,7 @@ class SimVehicle:
         ``target`` (0 for no horizontal leg)."""
         if here.lat == target.lat and here.lng == target.lng:
             return 0.0
-        turn = abs(_turn_deg(heading_deg, _headings(here, target)[0]))
+        turn = abs(turn_deg(heading_deg, headings_deg(here, target)[0]))
         return 0.0 if turn < _TURN_SLACK_DEG else turn / self._turn_rate()
 
     def _turn(self, start_s: float, here: Position, target: Position) -> float:
@@ -481,7 +472,7 @@ class SimVehicle:
         seconds = self._turn_s(heading, here, target)
         if seconds == 0.0:
             return start_s
-        leave = _headings(here, target)[0]
+        leave = headings_deg(here, target)[0]
         return self._append(
             start_s, here, here, PHASE_TURNING, duration_s=seconds, headings=(heading, leave)
         )
@@ -495,7 +486,7 @@ class SimVehicle:
         step = self._steps[i]
         fraction = self._fraction(step.leg, t)
         start, end = step.heading_from_deg, step.heading_to_deg
-        return (start + _turn_deg(start, end) * fraction) % 360.0
+        return (start + turn_deg(start, end) * fraction) % 360.0
 
     def _index_at(self, t: float) -> int:
         """Index of the last step started at or before t, or -1."""
@@ -575,7 +566,7 @@ class SimVehicle:
             headings = (heading, heading)
             moves = start.lat != end.lat or start.lng != end.lng
             if moves and self.spec.turning_rate_dps is not None:
-                headings = _headings(start, end)
+                headings = headings_deg(start, end)
         self._steps.append(
             _Step(
                 leg=Leg(start_s, end_s, start, end, phase),

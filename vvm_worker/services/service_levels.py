@@ -15,7 +15,7 @@ from typing import Any
 
 from django.db.models import Q
 
-from accounts.models import Customer, ServiceClass
+from accounts.models import ServiceClass
 from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus, WaitReason
 from missions.waiting import duration_text
 from vvm_worker.service_levels import (
@@ -40,11 +40,6 @@ def class_spec(service_class: ServiceClass | None) -> ServiceClassSpec:
     if service_class is None:
         return NO_CLASS
     return ServiceClassSpec(service_class.name, service_class.p95_s, service_class.weight)
-
-
-def customer_class_spec(*, customer: Customer) -> ServiceClassSpec:
-    """The customer's service class (``NO_CLASS`` when it has none)."""
-    return class_spec(customer.service_class)
 
 
 @dataclass(frozen=True)

@@ -137,31 +137,17 @@ ARDUROVER = Flavour(
     unsupported=_NO_FLIGHT,
 )
 ARDUBOAT = replace(ARDUROVER, frame="boat", mav_type=mavlink.MAV_TYPE_SURFACE_BOAT, kind=SURFACE)
-ARDUSUB = Flavour(
-    autopilot=Autopilot.ARDUPILOT,
-    heartbeat_autopilot=mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-    initial_mode="MANUAL",
+ARDUSUB = replace(
+    ARDUROVER,
     armable=frozenset({"MANUAL", "STABILIZE", "ACRO", "ALT_HOLD", "POSHOLD", "GUIDED"}),
     hold=frozenset({"MANUAL", "STABILIZE", "ACRO", "ALT_HOLD", "POSHOLD", "SURFTRAK"}),
-    follows_targets="GUIDED",
     rtl=None,
     land="SURFACE",
-    mission="AUTO",
-    mission_first_seq=1,
-    takeoff_in=None,
-    takeoff_mode=None,
-    after_takeoff=None,
-    takeoff_alt_amsl=False,
-    refusal_prefix="PreArm: ",
-    bytewise_params=False,
-    setpoint_stream=False,
     speed_params=(
         ("WPNAV_SPEED", "max_speed_mps", 0.01),
         ("WPNAV_SPEED_UP", "climb_rate_mps", 0.01),
         ("WPNAV_SPEED_DN", "dive_rate_mps", 0.01),
     ),
-    rtl_alt_param=None,
-    disarm_delay_param=None,
     # ArduSub's FS_GCS_ENABLE says what to do: 1 warn, 2 disarm, 3 depth hold, 4 surface.
     gcs_failsafe_params=("FS_GCS_ENABLE", "FS_GCS_TIMEOUT"),
     frame="sub",
