@@ -19,6 +19,7 @@ from django.conf import settings
 from django.db import transaction
 from django.db.models import F
 
+from accounts.models import Customer
 from cpcc_site.prepared import PreparedRead
 from fleet.airspace import Airspace
 from fleet.driving import Driver, Sample, SensorFailure, SensorRead
@@ -86,6 +87,22 @@ def _loop_task(task: Task, weight: float) -> LoopTask:
     )
 
 
+def _weight_held(task: Task) -> float | None:
+    """The weight of the task's VV's service class as its VV (the one its caller holds, read
+    with its customer and class) has it, or None if it was not read with them."""
+    if not Task.vv.is_cached(task):
+        return None
+    vv = task.vv
+    if not VirtualVehicle.customer.is_cached(vv):
+        return None
+    customer = vv.customer
+    if customer.service_class_id is None:
+        return 1.0
+    if not Customer.service_class.is_cached(customer):
+        return None
+    return float(customer.service_class.weight)
+
+
 class DatabaseStore:
     """An RV's work as the platform keeps it (``vvm_worker.control.Store``)."""
 
@@ -144,6 +161,9 @@ class DatabaseStore:
         if self._tasks is not None and any(t.pk is not None for t in self._added):
             # (One not saved yet is kept for later; the transaction saves it.)
             saved = [t for t in self._added if t.pk is not None]
+            self._weights.update(
+                (t.vv_id, weight) for t in saved if (weight := _weight_held(t)) is not None
+            )
             weights = self._class_weights({t.vv_id for t in saved})
             added = [_loop_task(t, weights.get(t.vv_id, 1.0)) for t in saved]
             self._added = [t for t in self._added if t.pk is None]
@@ -285,10 +305,9 @@ class DatabaseStore:
             if vv not in told or abs(told[vv] - eta_s) > ESTIMATE_SLACK_S
         }
         self._estimates = {vv: changed.get(vv, told.get(vv, eta_s)) for vv, eta_s in etas.items()}
-        if self.ticks:
-            self._etas_waiting.update(changed)
-        else:
-            vvs_record_next_task_eta(etas=changed)
+        self._etas_waiting.update(changed)
+        if not self.ticks:
+            self._write_estimates()
 
     def write_waiting(self) -> None:
         """Write the report that waits, if any (the host's map tick: a row is never more than
@@ -296,9 +315,15 @@ class DatabaseStore:
         answer, which writes it. Then the estimates that wait (see ``estimated``)."""
         if self._waiting is not None:
             self._write(self._waiting, moved=False)
+        self._write_estimates()
+
+    def _write_estimates(self) -> None:
+        """The estimates that wait, in one statement; those whose VV another transaction
+        holds now wait for the next time (unless a newer estimate replaces them)."""
         if self._etas_waiting:
             etas, self._etas_waiting = self._etas_waiting, {}
-            vvs_record_next_task_eta(etas=etas)
+            left = vvs_record_next_task_eta(etas=etas)
+            self._etas_waiting = {**left, **self._etas_waiting}
 
     def seen_aboard(self, vvs: list[dict[str, Any]]) -> None:
         """The VVs aboard as the host read them for the map (see ``read_aboard``)."""

@@ -564,6 +564,12 @@ class GSHost:
         self.vvm = platform_vvm(local=self)
         self._later: collections.deque[uuid.UUID] = collections.deque()
         self._stopping = threading.Event()
+        # The station's work runs on a host thread of its own, as an RV worker's does: Celery's
+        # thread hands it over and waits. The host thread keeps its database connection (and
+        # the statements prepared on it) from one message to the next, where Celery closes
+        # its own thread's connection after every task.
+        self.scheduler = RealTimeScheduler(self.vvm.clock)
+        self._thread = threading.Thread(target=self._run, name="gs-host", daemon=True)
         self._watch = threading.Thread(target=self._watch_leases, name="lease-watch", daemon=True)
         # The sweep's memory (its thread's own). No RV's worker can renew its lease while the
         # database is down: after an outage, each gets a full lease's time to do so before
@@ -585,13 +591,16 @@ class GSHost:
     def wake_later(self, vehicle_id: int) -> None:  # no vehicle is hosted here
         raise AssertionError(f"a ground station's worker hosts no vehicle ({vehicle_id})")
 
-    # --- what Celery tasks ask (one at a time, in Celery's thread) ---------------------------
+    # --- what Celery tasks ask (one at a time, in Celery's thread, done on the host thread) ---
 
     def advance(self, vv_id: uuid.UUID) -> None:
-        self._work(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
+        self._on_host(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
 
     def admit(self, customer_id: int) -> None:
-        self._work(lambda: vv_admit_queued(customer_id=customer_id, vvm=self.vvm))
+        self._on_host(lambda: vv_admit_queued(customer_id=customer_id, vvm=self.vvm))
+
+    def _on_host(self, work: Callable[[], Any], timeout_s: float | None = WAIT_S) -> None:
+        self.scheduler.submit(lambda: self._work(work)).result(timeout_s)
 
     def wake(self, vehicle_id: int) -> None:  # an RV's message that reached a GS: nothing to do
         pass
@@ -631,14 +640,25 @@ class GSHost:
             advance_each(here, vvm=self.vvm, ground_station=self.name)
             _admit_all(self.vvm)
 
-        self._work(recover)
+        self._thread.start()
+        self._on_host(recover, timeout_s=None)  # however many VVs wait on the station
         self._watch.start()
         logger.info("gs worker started", extra={"ground_station": self.name})
 
     def stop(self) -> None:
         self._stopping.set()
-        self._watch.join(timeout=10)
+        self.scheduler.stop()
+        if self._thread.is_alive():
+            self._thread.join(timeout=10)
+        if self._watch.is_alive():
+            self._watch.join(timeout=10)
         self.vvm.announcer.close()
+
+    def _run(self) -> None:
+        try:
+            self.scheduler.run()
+        finally:
+            connection.close()
 
     def _watch_leases(self) -> None:
         vvm = platform_vvm()  # a runtime of this thread's own

@@ -70,10 +70,13 @@ def test_a_ground_stations_worker_advances_the_vvs_it_admits_itself_without_a_me
     vv_cancel(vv_id=first.pk, vvm=platform_vvm())  # its place is free
     assert second.status == "queued"
     host = GSHost(ground_station)
-    host.admit(customer_a.pk)
-    second.refresh_from_db()
-    assert second.status == "finished"
-    assert list(second.log.values_list("message", flat=True)) == ["hello"]
-    sent = queued(broker, gs_queue(ground_station.pk))
-    assert ("cpcc.vv_advance", [str(second.pk)]) not in sent
-    host.vvm.announcer.close()
+    host.start()  # its thread, then what waits for the station
+    try:
+        host.admit(customer_a.pk)  # as the message of the cancel asks (on the host thread)
+        second.refresh_from_db()
+        assert second.status == "finished"
+        assert list(second.log.values_list("message", flat=True)) == ["hello"]
+        sent = queued(broker, gs_queue(ground_station.pk))
+        assert ("cpcc.vv_advance", [str(second.pk)]) not in sent
+    finally:
+        host.stop()

@@ -351,3 +351,37 @@ def test_held_vvs_start_in_the_simulation_when_the_class_catches_up(
     first.refresh_from_db()
     assert first.status == held.status == VVStatus.FINISHED
     assert held.started_s >= Task.objects.get(vv=first).done_s
+
+
+def test_an_rv_weighs_a_task_routed_to_it_by_its_class_without_reading_it_again(
+    customer_a, customer_b, vvm, django_assert_num_queries
+) -> None:
+    # A VV's next task put on an RV's list in a unit of work that holds the VV (read with its
+    # customer and class) reaches the RV's plan with the class's weight, read with the VV.
+    from vvm_worker.executor import DatabaseStore
+    from vvm_worker.services.vvs import _locked_vv
+
+    gold = service_class_save(name="gold", p95_s=30.0, weight=2.5)
+    customer_class_set(customer=customer_a, service_class=gold, vvm=vvm)
+    vehicle = VehicleFactory(name="Heli One")
+    store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, ticks=True)
+    assert store.open_tasks() == []
+    added = []
+    for customer in (customer_a, customer_b):
+        vv = _locked_vv(vv_submit(customer=customer, name="vv", program=PROGRAM, vvm=vvm).pk)
+        task = Task.objects.create(
+            vv=vv,
+            q=9,
+            lat=1.0,
+            lng=2.0,
+            alt=20.0,
+            tolerance_m=5.0,
+            sensors=["temperature"],
+            requested_s=NOW,
+            vehicle=vehicle,
+        )
+        added.append(task)
+    store.add(added)
+    with django_assert_num_queries(0):
+        weights = [t.weight for t in store.open_tasks()]
+    assert weights == [2.5, 1.0]

@@ -508,3 +508,52 @@ def test_an_rv_workers_estimates_wait_for_the_map_tick_and_the_last_one_is_writt
     at_once.estimated({vv.pk: 200.0})
     vv.refresh_from_db()
     assert vv.next_task_eta_s == 200.0
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)  # another connection
+def test_an_estimate_whose_vv_another_worker_holds_waits_for_the_next_tick(
+    vvm_factory, customer_a
+) -> None:
+    # The map tick writes every estimate of an RV in one statement that waits for no row: on
+    # PostgreSQL a VV that another transaction holds (answered elsewhere right now) gets its
+    # estimate at the next tick, the newest one if the plan changed meanwhile; the others at
+    # once. (SQLite has no row locks: its one writer writes them all.)
+    import threading
+
+    from django.db import connection, transaction
+
+    from vvm_worker.executor import DatabaseStore
+
+    vehicle = VehicleFactory(name="Heli One")
+    vvm = vvm_factory()
+    held, free = (vv_submit(customer=customer_a, name=n, program=program(), vvm=vvm) for n in "ab")
+    store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, ticks=True)
+    store.estimated({held.pk: 100.0, free.pk: 110.0})
+    postgres = connection.vendor == "postgresql"
+    holding, release, done = threading.Event(), threading.Event(), threading.Event()
+
+    def hold() -> None:
+        try:
+            with transaction.atomic():
+                VirtualVehicle.objects.select_for_update(no_key=True).get(pk=held.pk)
+                holding.set()
+                release.wait(30)
+        finally:
+            connection.close()
+            done.set()
+
+    if postgres:
+        threading.Thread(target=hold).start()
+        assert holding.wait(30)
+    try:
+        store.write_waiting()  # waits for no held row
+        etas = dict(VirtualVehicle.objects.values_list("pk", "next_task_eta_s"))
+        assert etas == {held.pk: None if postgres else 100.0, free.pk: 110.0}
+    finally:
+        release.set()
+        if postgres:
+            assert done.wait(30)
+    store.estimated({held.pk: 130.0, free.pk: 110.0})
+    store.write_waiting()
+    etas = dict(VirtualVehicle.objects.values_list("pk", "next_task_eta_s"))
+    assert etas == {held.pk: 130.0, free.pk: 110.0}

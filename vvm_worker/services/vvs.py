@@ -623,7 +623,7 @@ def _host_receive(vv: VirtualVehicle, pending: PendingRequest, vvm: VVM) -> bool
 _LOCKED_VV = PreparedRead(
     lambda vv_id: (
         VirtualVehicle.objects.select_for_update(of=("self",), no_key=True)
-        .select_related("customer", "host_gs", "host_rv")
+        .select_related("customer__service_class", "host_gs", "host_rv")
         .filter(pk=vv_id)
     ),
     samples=[("pk", uuid.UUID(int=0))],

@@ -8,8 +8,11 @@ it is read when it is shown (``missions.waiting``).
 
 from __future__ import annotations
 
+import functools
 import uuid
 from collections.abc import Mapping
+
+from django.db import connection
 
 from cpcc_site.prepared import deferred, insert_rows, save_fields, update_row
 from missions.models import LogEntry, Task, VirtualVehicle, WaitReason
@@ -75,10 +78,34 @@ def vv_wait_end(*, vv: VirtualVehicle, vvm: VVM) -> None:
     )
 
 
-def vvs_record_next_task_eta(*, etas: Mapping[uuid.UUID, float]) -> None:
+def vvs_record_next_task_eta(*, etas: Mapping[uuid.UUID, float]) -> dict[uuid.UUID, float]:
     """When the RV that each of these VVs is aboard expects to reach its next task (platform
-    clock seconds), as the RV's control loop just planned it (it tells only the estimates
-    that changed, mostly one). Each VV's row on its own, in the order of their ids: a
-    statement never holds one VV's row while it waits for another's."""
-    for vv_id in sorted(etas):
-        update_row(VirtualVehicle, vv_id, values={"next_task_eta_s": etas[vv_id]})
+    clock seconds), as the RVs' control loops last planned it. Gives back the estimates not
+    written because another transaction holds their VV's row (for the caller to try again):
+    an estimate never waits for a row, so it never holds one VV's row while waiting for
+    another's. On PostgreSQL one statement for all of them; elsewhere (SQLite, where a writer
+    holds the whole database) one per VV, in the order of their ids."""
+    if not etas:
+        return {}
+    if connection.vendor != "postgresql":
+        for vv_id in sorted(etas):
+            update_row(VirtualVehicle, vv_id, values={"next_task_eta_s": etas[vv_id]})
+        return {}
+    ids = sorted(etas)
+    with connection.cursor() as cursor:
+        cursor.execute(_etas_sql(), [ids, [etas[i] for i in ids], ids])
+        written = {row[0] for row in cursor.fetchall()}
+    return {vv_id: eta for vv_id, eta in etas.items() if vv_id not in written}
+
+
+@functools.cache
+def _etas_sql() -> str:
+    """``vvs_record_next_task_eta``'s statement on PostgreSQL: the rows nobody holds."""
+    meta, quote = VirtualVehicle._meta, connection.ops.quote_name
+    table, pk = quote(meta.db_table), quote(meta.pk.column)
+    eta = quote(meta.get_field("next_task_eta_s").column)
+    return (
+        f"UPDATE {table} SET {eta} = e.eta FROM unnest(%s::uuid[], %s::double precision[]) "
+        f"AS e(id, eta) WHERE {table}.{pk} = e.id AND {table}.{pk} IN (SELECT {pk} FROM {table} "
+        f"WHERE {pk} = ANY(%s::uuid[]) FOR NO KEY UPDATE SKIP LOCKED) RETURNING {table}.{pk}"
+    )
