@@ -66,6 +66,31 @@ class PreparedRead(Generic[M]):
         from ``offset`` on, as slicing the queryset gives them."""
         return self._objects(keys, limit, offset, using)
 
+    def first_later(self, *keys: Any, using: str = "default") -> Callable[[], M | None]:
+        """``first``, sent now and read when the function it gives back is called: inside
+        ``pipelined``, the statements sent in between go to the server with it and their
+        answers come back together, in one round trip (the reader must be called before the
+        block ends; outside a pipeline the read is done at once)."""
+        compiler, sql, params = self._bound(keys, using)
+        connection = connections[using]
+        cursor = connection.cursor()
+        try:
+            with deferred(using):  # not waited for: its answer is fetched by the reader
+                cursor.execute(sql, params)
+        except BaseException:
+            cursor.close()
+            raise
+
+        def read() -> M | None:
+            try:
+                row = cursor.fetchone()
+            finally:
+                cursor.close()
+            found = self._build(compiler, [] if row is None else [row], using)
+            return found[0] if found else None
+
+        return read
+
     def _objects(
         self, keys: Sequence[Any], limit: int | None, offset: int, using: str, first: bool = False
     ) -> list[M]:
@@ -81,6 +106,10 @@ class PreparedRead(Generic[M]):
                 rows = [] if row is None else [row]
             else:
                 rows = cursor.fetchall()
+        return self._build(compiler, rows, using)
+
+    def _build(self, compiler: Any, rows: Sequence[Any], using: str) -> list[M]:
+        """Model instances from rows as ``compiler`` selected them."""
         if not rows:
             return []
         select, klass_info = compiler.select, compiler.klass_info

@@ -87,6 +87,14 @@ def _loop_task(task: Task, weight: float) -> LoopTask:
     )
 
 
+def _request_of(task: LoopTask) -> int | None:
+    """The VV's request a task of the loop belongs to, as its group says (``_loop_task``)."""
+    if task.group is None:
+        return None
+    _, _, q = task.group.rpartition(":")
+    return int(q) if q.isdigit() else None
+
+
 def _weight_held(task: Task) -> float | None:
     """The weight of the task's VV's service class as its VV (the one its caller holds, read
     with its customer and class) has it, or None if it was not read with them."""
@@ -260,6 +268,7 @@ class DatabaseStore:
                 vv_id=task.vv,
                 arrival=arrival,
                 failure=failure,
+                q=_request_of(task),
             )
         except BaseException:
             self._arrival = arrival  # rolled back with the answer: still to be recorded

@@ -289,3 +289,35 @@ def test_a_deferred_write_that_fails_rolls_the_unit_of_work_back_with_its_error(
     with pytest.raises(DatabaseError, match="no row to update"):
         missing_row()
     assert not LogEntry.objects.filter(message="rolled back").exists()
+
+
+def test_a_read_sent_ahead_comes_back_with_the_writes_sent_after_it(monkeypatch) -> None:
+    """``first_later`` sends a locking read and lets the unit of work send more before it
+    reads the row: on PostgreSQL no statement waits on its own (the read fetches every answer
+    at once); the row is as it was when the read ran, the writes sent after it land."""
+    postgres = connection.vendor == "postgresql"
+    syncs = _syncs(monkeypatch) if postgres else []
+    read = PreparedRead(
+        lambda key: (
+            VirtualVehicle.objects.select_for_update(no_key=True)
+            .select_related("customer")
+            .filter(pk=key)
+        ),
+        samples=[("pk", uuid.UUID(int=0))],
+    )
+    vv, other = _vv(), _vv()
+    with transaction.atomic(), pipelined():
+        later = read.first_later(vv.pk)
+        missing = read.first_later(uuid.uuid4())
+        with deferred():
+            update_row(VirtualVehicle, vv.pk, values={"steps": 5})
+            update_row(VirtualVehicle, other.pk, values={"steps": 6})
+        got = later()
+        assert missing() is None
+        assert got is not None and (got.pk, got.steps, got.customer.pk) == (
+            vv.pk,
+            0,
+            vv.customer_id,
+        )
+        assert not syncs
+    assert dict(VirtualVehicle.objects.values_list("pk", "steps")) == {vv.pk: 5, other.pk: 6}

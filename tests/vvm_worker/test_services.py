@@ -156,6 +156,40 @@ def test_a_vv_over_its_cpu_quota_is_killed_and_others_finish(
     assert good.status == VVStatus.FINISHED
 
 
+def test_an_answer_sent_with_the_vvs_lock_to_a_request_it_no_longer_waits_for_is_undone(
+    fleet, customer_a, platform
+) -> None:
+    # The RV's loop names the task's request (q): the answer goes to the database with the
+    # VV's lock. A task open for another request than the one the VV waits for (made so by
+    # hand) is left as it was, and so is the VV.
+    vv = vv_submit(
+        customer=customer_a, name="VV", program=program() + program(48.112), vvm=platform.vvm
+    )
+    platform.drain(until=Task.objects.filter(vv=vv).exists)
+    task = Task.objects.get(vv=vv)
+    before = VirtualVehicle.objects.get(pk=vv.pk)
+    stale = Task.objects.create(
+        vv=vv, q=task.q + 1, lat=task.lat, lng=task.lng, alt=task.alt,
+        tolerance_m=task.tolerance_m, sensors=task.sensors, requested_s=task.requested_s,
+        vehicle_id=task.vehicle_id,
+    )  # fmt: skip
+    assert not task_complete(
+        task_id=stale.pk, readings=[{"value": 1}], vvm=platform.vvm,
+        vehicle_id=stale.vehicle_id, vv_id=vv.pk, q=stale.q,
+    )  # fmt: skip
+    stale.refresh_from_db()
+    assert (stale.status, stale.readings, stale.done_s) == (TaskStatus.OPEN, None, None)
+    after = VirtualVehicle.objects.get(pk=vv.pk)
+    assert (after.journal_length, after.pending) == (before.journal_length, before.pending)
+    # The task it waits for, named with its request, is answered as before.
+    stale.delete()
+    assert task_complete(
+        task_id=task.pk, readings=[{"value": 2}], vvm=platform.vvm,
+        vehicle_id=task.vehicle_id, vv_id=vv.pk, q=task.q,
+    )  # fmt: skip
+    assert Task.objects.get(pk=task.pk).status == TaskStatus.DONE
+
+
 def test_completing_a_task_twice_changes_nothing_the_second_time(
     fleet, customer_a, platform
 ) -> None:

@@ -8,7 +8,7 @@ import functools
 import json
 import secrets
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from django.core.exceptions import ValidationError
@@ -119,6 +119,11 @@ MAX_COPIES = 50
 _KEY_CHARS = StorageDocument._meta.get_field("key").max_length or 0
 _SHOWN_KEY_CHARS = 40  # of a key quoted in an error
 _JSON_NULL = Value(None, JSONField())
+
+
+class _NotAnswered(Exception):
+    """A task's answer went to the database with the VV's lock, and the VV turned out not to
+    wait for it: the transaction rolls back."""
 
 
 class _StepBroke(Exception):
@@ -705,6 +710,7 @@ def task_complete(
     vv_id: uuid.UUID | None = None,
     arrival: VehicleState | None = None,
     failure: str | None = None,
+    q: int | None = None,
 ) -> bool:
     """Record an RV's readings as the answer to a task and resume the VV on that RV: one unit
     of work (one transaction) with the VV's step and the routing of its next request, and
@@ -714,6 +720,9 @@ def task_complete(
     ``failure``: the RV could not take the readings (a sensor that did not answer, said in
     words the customer may read): the task ends rejected with it, and so does the VV's
     request (a whole ``executeAll`` batch), which the program sees as a ``TaskRejectedError``.
+
+    ``q``: the VV's request the task belongs to, when the caller knows it: the task's update
+    then goes to the database with the VV's lock, in one round trip.
 
     Returns False (and changes nothing) when the task is no longer open or no longer this
     vehicle's (``vehicle_id``): a duplicate delivery, or a VV that was cancelled or moved on
@@ -726,8 +735,10 @@ def task_complete(
     try:
         with transaction.atomic(), pipelined():
             return _answer_and_advance(
-                task_id, readings, vvm, vehicle_id, vv_id, arrival, failure=failure
+                task_id, readings, vvm, vehicle_id, vv_id, arrival, failure=failure, q=q
             )
+    except _NotAnswered:
+        return False
     except _StepBroke as broke:
         # Retried, the step would break again and again. The transaction is rolled back, so
         # nothing of the step is half-applied: the answer is recorded again on its own, and
@@ -750,25 +761,44 @@ def _answer_and_advance(
     *,
     advance: bool = True,
     failure: str | None = None,
+    q: int | None = None,
 ) -> bool:
     # The VV first (held until the end of the transaction), then its task: the order every
-    # service takes them in, so two workers cannot deadlock.
-    vv = _locked_vv(vv_id)
-    if vv is None or vv.is_ended or vv.status == VVStatus.QUEUED:
-        return False
-    pending = pending_of(vv)
-    if pending is None or (vehicle_id is not None and vv.host_rv_id != vehicle_id):
-        return False
+    # service takes them in, so two workers cannot deadlock. When the caller knows the task's
+    # request (``q``, the RV's loop does), both go to the database at once and their answers
+    # come back together; should the VV then not be waiting for that answer here, the task's
+    # update is rolled back with the transaction.
     now = vvm.clock.now_s()
-    task = _answer_task(
-        task_id,
-        vv,
-        q=pending.q,
-        vehicle_id=vehicle_id,
-        now=now,
-        readings=[] if failure is not None else readings,
-        status=TaskStatus.DONE if failure is None else TaskStatus.REJECTED,
-    )
+
+    def answer(request: int) -> Callable[[], Task | None]:
+        return _answer_task(
+            task_id,
+            vv_id,
+            q=request,
+            vehicle_id=vehicle_id,
+            now=now,
+            readings=[] if failure is not None else readings,
+            status=TaskStatus.DONE if failure is None else TaskStatus.REJECTED,
+        )
+
+    read_vv = _LOCKED_VV.first_later(vv_id)
+    read_task = None if q is None else answer(q)
+    vv = read_vv()
+    pending = None if vv is None else pending_of(vv)
+    if (
+        vv is None
+        or vv.is_ended
+        or vv.status == VVStatus.QUEUED
+        or pending is None
+        or (vehicle_id is not None and vv.host_rv_id != vehicle_id)
+        or (q is not None and pending.q != q)
+    ):
+        if read_task is not None and read_task() is not None:
+            raise _NotAnswered()  # (an answer to a request the VV no longer waits for)
+        return False
+    if read_task is None:
+        read_task = answer(pending.q)
+    task = read_task()
     if task is None:
         return False
     served_by = task.vehicle_id
@@ -838,53 +868,67 @@ def _reading_failed(
 
 def _answer_task(
     task_id: int,
-    vv: VirtualVehicle,
+    vv_id: uuid.UUID,
     *,
     q: int,
     vehicle_id: int | None,
     now: float,
     readings: list[dict[str, Any]],
     status: TaskStatus = TaskStatus.DONE,
-) -> Task | None:
+) -> Callable[[], Task | None]:
     """Mark the task done with its readings, if it is still open, of the VV's request ``q``
     and (``vehicle_id``) on this RV's list: a fenced UPDATE, which gives back what the answer
-    and the map need of the task (no read before or after it). None if it was not so."""
+    and the map need of the task (no read before or after it). Sent now; the function it
+    gives back reads the answer: the task, or None if it was not so (in a ``pipelined`` unit
+    of work, together with what was sent before it)."""
     meta = Task._meta
     fence = [
         task_id,
-        meta.get_field("vv").get_db_prep_value(vv.pk, connection),
+        meta.get_field("vv").get_db_prep_value(vv_id, connection),
         q,
         TaskStatus.OPEN.value,
         *(() if vehicle_id is None else (vehicle_id,)),
     ]
-    with connection.cursor() as cursor:
-        cursor.execute(
-            _answer_sql(connection.vendor, on_vehicle=vehicle_id is not None),
-            [
-                status.value,
-                now,
-                meta.get_field("readings").get_db_prep_save(readings, connection),
-                *fence,
-            ],
+    cursor = connection.cursor()
+    try:
+        with deferred():  # its answer is fetched by the reader
+            cursor.execute(
+                _answer_sql(connection.vendor, on_vehicle=vehicle_id is not None),
+                [
+                    status.value,
+                    now,
+                    meta.get_field("readings").get_db_prep_save(readings, connection),
+                    *fence,
+                ],
+            )
+    except BaseException:
+        cursor.close()
+        raise
+
+    def read() -> Task | None:
+        try:
+            row = cursor.fetchone()
+        finally:
+            cursor.close()
+        if row is None:
+            return None
+        index, served_by, lat, lng, alt, requested_s = row
+        return Task(
+            id=task_id,
+            vv_id=vv_id,
+            q=q,
+            index=index,
+            lat=lat,
+            lng=lng,
+            alt=alt,
+            status=status,
+            vehicle_id=served_by,
+            requested_s=requested_s,
+            done_s=now,
+            readings=readings,
         )
-        row = cursor.fetchone()
-    if row is None:
-        return None
-    index, served_by, lat, lng, alt, requested_s = row
-    return Task(
-        id=task_id,
-        vv_id=vv.pk,
-        q=q,
-        index=index,
-        lat=lat,
-        lng=lng,
-        alt=alt,
-        status=status,
-        vehicle_id=served_by,
-        requested_s=requested_s,
-        done_s=now,
-        readings=readings,
-    )
+
+    return read
 
 
 @functools.cache
