@@ -99,6 +99,41 @@ def test_an_effect_the_database_cannot_store_fails_its_vv_and_applies_nothing_of
     assert good.log.count() == 2
 
 
+def test_a_write_the_database_refuses_after_the_checks_fails_its_vv_and_keeps_its_answer(
+    platform, fleet, customer_a, customer_b, monkeypatch
+) -> None:
+    # A step's storage writes go without waiting for their answers (checked first, they
+    # cannot be refused but by a platform bug): one refused all the same, here because the
+    # platform got its size wrong, fails the VV as a step that cannot be applied does. The
+    # RV's answer to its task is kept; nothing of the step is.
+    from vvm_worker.services import vvs
+
+    bad_id = uuid.uuid4()
+    checked = vvs._storable
+
+    def wrong_size(vv, effects, vvm):
+        final, lines = checked(vv, effects, vvm)
+        if vv.pk == bad_id and vv.journal_length:  # its step on the RV, after the answer
+            for document in final.values():
+                if document is not None:
+                    document.size_bytes = -1
+        return final, lines
+
+    monkeypatch.setattr(vvs, "_storable", wrong_size)
+    bad = vv_submit(
+        customer=customer_a, name="bad", program=ONE_TASK, vvm=platform.vvm, vv_id=bad_id
+    )
+    good = vv_submit(customer=customer_b, name="good", program=ONE_TASK, vvm=platform.vvm)
+    platform.drain()
+    bad.refresh_from_db()
+    good.refresh_from_db()
+    assert bad.status == VVStatus.FAILED
+    assert bad.error == "the platform could not run or apply this VV's step (IntegrityError)"
+    assert bad.tasks.get().status == TaskStatus.DONE
+    assert sorted(bad.storage.values_list("key", flat=True)) == ["before"]
+    assert good.status == VVStatus.FINISHED
+
+
 def test_a_value_at_the_depth_limit_is_stored_and_sizes_count_utf8_bytes(
     platform, fleet, customer_a, customer_b, monkeypatch
 ) -> None:

@@ -3,16 +3,17 @@ and what a user does with their VVs (submit copies, edit while queued, restart, 
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import functools
 import json
 import secrets
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from django.core.exceptions import ValidationError
-from django.db import connection, transaction
+from django.db import DatabaseError, connection, transaction
 from django.db.models import F, JSONField, QuerySet, Value
 from django.db.models.functions import Coalesce
 from django.utils import timezone
@@ -381,19 +382,22 @@ def _apply_effects(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> VVError 
         message = f"the platform could not apply this step: {exc} (nothing of the step was applied)"
         return VVError(ErrorKind.PLATFORM, message)
     stored = [doc for doc in final.values() if doc is not None]
-    if stored:
-        insert_rows(
-            stored,
-            on_conflict="update",
-            unique_fields=["vv", "key"],
-            update_fields=["value", "size_bytes", "updated_s"],
-        )
     removed = [key for key, doc in final.items() if doc is None]
     if removed:
         StorageDocument.objects.filter(vv=vv, key__in=removed).delete()
-    if lines:
-        # A line is numbered by the program: applying it twice would be a duplicate.
-        insert_rows(lines, on_conflict="ignore")
+    # Checked above: the writes go without waiting (their answers are checked by the end of
+    # the unit of work, see _unit_of_work).
+    with deferred():
+        if stored:
+            insert_rows(
+                stored,
+                on_conflict="update",
+                unique_fields=["vv", "key"],
+                update_fields=["value", "size_bytes", "updated_s"],
+            )
+        if lines:
+            # A line is numbered by the program: applying it twice would be a duplicate.
+            insert_rows(lines, on_conflict="ignore")
     vv.effects_applied = max(vv.effects_applied, result.effects_total)
     vv.storage_bytes = result.storage_bytes
     return None
@@ -500,8 +504,9 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
 
     Safe to call twice: a VV that waits for an RV, has ended or is queued is left alone, and
     one that no longer exists (a late message) is ignored. A step the platform cannot run or
-    apply (a bug of the platform, not of the program) is rolled back and the VV ends
-    ``failed`` saying so; a database outage is raised, for the caller to wait out and redo.
+    apply (a bug of the platform, not of the program, or a statement the database refuses)
+    is rolled back and the VV ends ``failed`` saying so; a database outage is raised, for the
+    caller to wait out and redo.
     """
     try:
         _advance(vv_id, vvm)
@@ -511,8 +516,24 @@ def vv_advance(*, vv_id: uuid.UUID, vvm: VVM) -> None:
         _end_broken(vv_id=vv_id, cause=broke.cause, vvm=vvm)
 
 
+@contextlib.contextmanager
+def _unit_of_work() -> Iterator[None]:
+    """A VV's unit of work: one transaction, pipelined. A statement the database refuses
+    (a platform bug: a step's writes are checked before they are sent; a deferred one is
+    refused at the next statement that waits, or when the block ends) raises _StepBroke, as a
+    step the platform cannot apply does; a database outage is raised as it is, for the
+    caller to wait out and redo."""
+    try:
+        with transaction.atomic(), pipelined():
+            yield
+    except DatabaseError as exc:
+        if database.is_outage(exc):
+            raise
+        raise _StepBroke(exc) from exc
+
+
 def _advance(vv_id: uuid.UUID, vvm: VVM) -> None:
-    with transaction.atomic(), pipelined():
+    with _unit_of_work():
         vv = _locked_vv(vv_id)
         if vv is None or vv.is_ended or vv.status == VVStatus.QUEUED:
             return
@@ -733,7 +754,7 @@ def task_complete(
     if vv_id is None:
         vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
     try:
-        with transaction.atomic(), pipelined():
+        with _unit_of_work():
             return _answer_and_advance(
                 task_id, readings, vvm, vehicle_id, vv_id, arrival, failure=failure, q=q
             )
