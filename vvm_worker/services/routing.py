@@ -7,6 +7,7 @@ import dataclasses
 import functools
 import itertools
 import time
+import uuid
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -15,7 +16,7 @@ from django.db.models.signals import m2m_changed, post_delete, post_save
 from shapely import STRtree
 from shapely.geometry import Point
 
-from cpcc_site.prepared import Many, PreparedRead, deferred, insert_rows
+from cpcc_site.prepared import Many, PreparedRead, deferred, insert_rows, update_row
 from fleet.airspace import Airspace
 from fleet.geo import Position
 from fleet.models import GroundStation, NoFlyZone, Vehicle, VehicleStatus
@@ -248,6 +249,14 @@ _STATUSES = PreparedRead(
     samples=[("pk", Many(lambda i: -7_000_000 - i))],
 )
 
+# A VV's open tasks of one request, by index (a VV that arrives with its request made).
+_REQUEST_TASKS = PreparedRead(
+    lambda vv_id, q: Task.objects.filter(vv_id=vv_id, q=q, status=TaskStatus.OPEN).order_by(
+        "index"
+    ),
+    samples=[("vv", uuid.UUID(int=0)), ("q", 7_654_321)],
+)
+
 # The open tasks of some RVs, oldest first, and the rows of RVs another process hosts (with
 # ``online``: whose worker renewed its lease within lease_s, by the database's clock): reads
 # of every routing, compiled once for each number of RVs.
@@ -333,7 +342,7 @@ def _route(
     pending = pending_of(vv)
     assert pending is not None
     if open_tasks is None:
-        open_tasks = list(vv.tasks.filter(q=pending.q, status=TaskStatus.OPEN).order_by("index"))
+        open_tasks = _REQUEST_TASKS.all(vv.pk, pending.q)
     host = vv.host_rv
     mine: list[Task] = []
     shape = _fleet_shape()
@@ -457,9 +466,10 @@ def tasks_assign(*, tasks: Iterable[Task], vehicle: Vehicle, vvm: VVM) -> None:
         return
     for task in moved:
         task.vehicle, task.assigned_s = vehicle, now
-    saved = [t.pk for t in moved if t.pk is not None]
-    if saved:
-        Task.objects.filter(pk__in=saved).update(vehicle=vehicle, assigned_s=now)
+    with deferred():  # nothing in the unit of work reads them back
+        for task in moved:
+            if task.pk is not None:
+                update_row(Task, task.pk, values={"vehicle": vehicle.pk, "assigned_s": now})
     if vvm.local_fleet is None or not vvm.local_fleet.assigned(vehicle.pk, moved):
         vvm.dispatcher.vehicle_changed(vehicle.pk)
 
