@@ -72,20 +72,10 @@ class PreparedRead(Generic[M]):
         answers come back together, in one round trip (the reader must be called before the
         block ends; outside a pipeline the read is done at once)."""
         compiler, sql, params = self._bound(keys, using)
-        connection = connections[using]
-        cursor = connection.cursor()
-        try:
-            with deferred(using):  # not waited for: its answer is fetched by the reader
-                cursor.execute(sql, params)
-        except BaseException:
-            cursor.close()
-            raise
+        row_later = send_later(sql, params, using=using)
 
         def read() -> M | None:
-            try:
-                row = cursor.fetchone()
-            finally:
-                cursor.close()
+            row = row_later()
             found = self._build(compiler, [] if row is None else [row], using)
             return found[0] if found else None
 
@@ -473,6 +463,31 @@ def deferred(using: str = "default") -> Iterator[None]:
         yield
     finally:
         state.deferring = False
+
+
+def send_later(
+    sql: str, params: Sequence[Any], *, using: str = "default"
+) -> Callable[[], tuple[Any, ...] | None]:
+    """Send a statement now and give back the function that reads its first row (None: no
+    row): inside ``pipelined``, the statements sent before that read go to the server with
+    it and their answers come back together, in one round trip (read it before the block
+    ends); outside a pipeline the statement runs at once."""
+    cursor = connections[using].cursor()
+    try:
+        with deferred(using):  # not waited for: the reader fetches its answer
+            cursor.execute(sql, params)
+    except BaseException:
+        cursor.close()
+        raise
+
+    def read() -> tuple[Any, ...] | None:
+        try:
+            row = cursor.fetchone()
+        finally:
+            cursor.close()
+        return None if row is None else tuple(row)
+
+    return read
 
 
 def _execute(

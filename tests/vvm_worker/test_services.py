@@ -156,17 +156,22 @@ def test_a_vv_over_its_cpu_quota_is_killed_and_others_finish(
     assert good.status == VVStatus.FINISHED
 
 
+def vv_at_its_first_task(customer, platform) -> tuple[VirtualVehicle, Task]:
+    """A VV of two tasks, run until the first is on an RV's list: the VV and that task."""
+    vv = vv_submit(
+        customer=customer, name="VV", program=program() + program(48.112), vvm=platform.vvm
+    )
+    platform.drain(until=Task.objects.filter(vv=vv).exists)
+    return vv, Task.objects.get(vv=vv)
+
+
 def test_an_answer_sent_with_the_vvs_lock_to_a_request_it_no_longer_waits_for_is_undone(
     fleet, customer_a, platform
 ) -> None:
     # The RV's loop names the task's request (q): the answer goes to the database with the
     # VV's lock. A task open for another request than the one the VV waits for (made so by
     # hand) is left as it was, and so is the VV.
-    vv = vv_submit(
-        customer=customer_a, name="VV", program=program() + program(48.112), vvm=platform.vvm
-    )
-    platform.drain(until=Task.objects.filter(vv=vv).exists)
-    task = Task.objects.get(vv=vv)
+    vv, task = vv_at_its_first_task(customer_a, platform)
     before = VirtualVehicle.objects.get(pk=vv.pk)
     stale = Task.objects.create(
         vv=vv, q=task.q + 1, lat=task.lat, lng=task.lng, alt=task.alt,
@@ -193,11 +198,7 @@ def test_an_answer_sent_with_the_vvs_lock_to_a_request_it_no_longer_waits_for_is
 def test_completing_a_task_twice_changes_nothing_the_second_time(
     fleet, customer_a, platform
 ) -> None:
-    vv = vv_submit(
-        customer=customer_a, name="VV", program=program() + program(48.112), vvm=platform.vvm
-    )
-    platform.drain(until=Task.objects.filter(vv=vv).exists)
-    task = Task.objects.get(vv=vv)
+    vv, task = vv_at_its_first_task(customer_a, platform)
     assert task_complete(task_id=task.pk, readings=[{"value": 1}], vvm=platform.vvm)
     journal = list(JournalEntry.objects.filter(vv=vv).values_list("entry", flat=True))
     assert not task_complete(task_id=task.pk, readings=[{"value": 2}], vvm=platform.vvm)

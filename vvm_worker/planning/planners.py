@@ -360,9 +360,10 @@ class LatencyPlanner:
     better of the previous plan with the new tasks inserted where they cost least and a greedy
     order, improved by moving stretches of 1-3 tasks and reversing stretches (constant-time
     evaluation of each move; from the previous plan, the search looks first where it changed
-    and then wherever a move it takes leads, not at every task again), then perturbed and repaired `kicks` times (none by default:
-    measured on the demo5 protocol, kicks change the latencies by less than 1 % and triple the
-    planning time, because the plan is redone at every event anyway). When every open task
+    and then wherever a move it takes leads, not at every task again), then perturbed and
+    repaired `kicks` times (none by default: measured on the demo5 protocol, kicks change the
+    latencies by less than 1 % and triple the planning time, because the plan is redone at
+    every event anyway). When every open task
     belongs to one batch (a survey), the objective is the length of the path: iterated
     2-opt/Or-opt with double-bridge kicks (`iterated_local_search`), about 0.5 % above the
     best known tour at 200 points in under a second, planned once: at each stop the rest of the

@@ -21,7 +21,14 @@ from django.utils import timezone
 from accounts.models import Customer, NotifyEvent, User
 from accounts.selectors import customer_catalog
 from cpcc_site import database
-from cpcc_site.prepared import PreparedRead, deferred, insert_rows, pipelined, save_fields
+from cpcc_site.prepared import (
+    PreparedRead,
+    deferred,
+    insert_rows,
+    pipelined,
+    save_fields,
+    send_later,
+)
 from fleet.models import GroundStation, Vehicle
 from missions.events import task_event, vv_event
 from missions.models import (
@@ -910,27 +917,18 @@ def _answer_task(
         TaskStatus.OPEN.value,
         *(() if vehicle_id is None else (vehicle_id,)),
     ]
-    cursor = connection.cursor()
-    try:
-        with deferred():  # its answer is fetched by the reader
-            cursor.execute(
-                _answer_sql(connection.vendor, on_vehicle=vehicle_id is not None),
-                [
-                    status.value,
-                    now,
-                    meta.get_field("readings").get_db_prep_save(readings, connection),
-                    *fence,
-                ],
-            )
-    except BaseException:
-        cursor.close()
-        raise
+    row_later = send_later(
+        _answer_sql(connection.vendor, on_vehicle=vehicle_id is not None),
+        [
+            status.value,
+            now,
+            meta.get_field("readings").get_db_prep_save(readings, connection),
+            *fence,
+        ],
+    )
 
     def read() -> Task | None:
-        try:
-            row = cursor.fetchone()
-        finally:
-            cursor.close()
+        row = row_later()
         if row is None:
             return None
         index, served_by, lat, lng, alt, requested_s = row
