@@ -160,7 +160,7 @@ class RecordingDispatcher:
         self.slots: list[int] = []
         self.wakes: list = []
 
-    def vv_arrived(self, vv_id) -> None:
+    def vv_arrived(self, vv_id, *, on=None) -> None:
         self.arrived.append(vv_id)
 
     def vv_wake_later(self, vv_id, delay_s: float) -> None:

@@ -18,6 +18,7 @@ from vvm_worker.dispatch import (
     SHARED_QUEUE,
     VEHICLE_CHANGED_TASK,
     VV_ADVANCE_TASK,
+    HostRef,
     LocalHost,
     gs_queue,
     rv_queue,
@@ -46,8 +47,8 @@ class CeleryDispatcher:
     def __init__(self, local: LocalHost | None = None) -> None:
         self.local = local
 
-    def vv_arrived(self, vv_id: uuid.UUID) -> None:
-        transaction.on_commit(lambda: _safely(self._send_vv, vv_id))
+    def vv_arrived(self, vv_id: uuid.UUID, *, on: HostRef | None = None) -> None:
+        transaction.on_commit(lambda: _safely(lambda v: self._send_vv(v, on=on), vv_id))
 
     def vv_wake_later(self, vv_id: uuid.UUID, delay_s: float) -> None:
         # Always by message (a local host has no timer of its own), to the host the VV is on
@@ -62,11 +63,19 @@ class CeleryDispatcher:
     def customer_slot_freed(self, customer_id: int) -> None:
         transaction.on_commit(lambda: _safely(_send_admit, customer_id))
 
-    def _send_vv(self, vv_id: uuid.UUID, countdown: float | None = None) -> None:
-        hosts = _HOSTS.rows(vv_id)
-        if not hosts:
-            return
-        ((gs_id, rv_id),) = hosts
+    def _send_vv(
+        self, vv_id: uuid.UUID, countdown: float | None = None, on: HostRef | None = None
+    ) -> None:
+        # Where the transaction that just committed put the VV, when it said so; read
+        # otherwise. (The read, right after that commit, says the same but for a move
+        # committed in between, which sends a message of its own.)
+        if on is None:
+            hosts = _HOSTS.rows(vv_id)
+            if not hosts:
+                return
+            ((gs_id, rv_id),) = hosts
+        else:
+            gs_id, rv_id = on.gs_id, on.rv_id
         local = self.local
         if (
             countdown is None

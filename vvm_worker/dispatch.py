@@ -11,12 +11,23 @@ task names), so the services, the Celery tasks and the dispatcher never import e
 from __future__ import annotations
 
 import uuid
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 
+@dataclass(frozen=True)
+class HostRef:
+    """A host by kind and id: an RV (``rv_id``) or a ground station (``gs_id``)."""
+
+    rv_id: int | None = None
+    gs_id: int | None = None
+
+
 class Dispatcher(Protocol):
-    def vv_arrived(self, vv_id: uuid.UUID) -> None:
-        """The VV is on a new host (or must be looked at again by its host): advance it."""
+    def vv_arrived(self, vv_id: uuid.UUID, *, on: HostRef | None = None) -> None:
+        """The VV is on a new host (or must be looked at again by its host): advance it.
+        ``on``: the host the caller's transaction put it on, when the caller knows it (the
+        dispatcher need not look it up)."""
         ...
 
     def vv_wake_later(self, vv_id: uuid.UUID, delay_s: float) -> None:

@@ -35,6 +35,7 @@ from missions.models import (
 )
 from missions.readings import map_camera_readings
 from vvm_worker.clock import SimulatedClock
+from vvm_worker.dispatch import HostRef
 from vvm_worker.executor import PlatformSensing, RigFleet, VehicleRig, build_rig
 from vvm_worker.planning import DEFAULT_PLANNER, make_planner
 from vvm_worker.runtime import Runtime
@@ -103,7 +104,7 @@ class _QueueDispatcher:
     def __init__(self, sim: Simulation) -> None:
         self.sim = sim
 
-    def vv_arrived(self, vv_id: uuid.UUID) -> None:
+    def vv_arrived(self, vv_id: uuid.UUID, *, on: HostRef | None = None) -> None:
         self.sim.queue.call_now(lambda: vv_advance(vv_id=vv_id, vvm=self.sim.vvm))
 
     def vv_wake_later(self, vv_id: uuid.UUID, delay_s: float) -> None:

@@ -33,7 +33,7 @@ NO_VEHICLE = (
 class Told:
     """A dispatcher that tells no worker: the test itself does what a host would."""
 
-    def vv_arrived(self, vv_id: Any) -> None:
+    def vv_arrived(self, vv_id: Any, *, on: Any = None) -> None:
         pass
 
     def vv_wake_later(self, vv_id: Any, delay_s: float) -> None:

@@ -4,14 +4,18 @@ only once the transaction that made the work commits, and never for a rolled-bac
 from __future__ import annotations
 
 import pytest
-from django.db import transaction
+from django.db import connection, transaction
+from django.db.models.functions import Now
+from django.test.utils import CaptureQueriesContext
 
+from fleet.models import Vehicle
 from missions.models import VirtualVehicle
 from tests.broker import queued
-from vvm_worker.dispatch import SHARED_QUEUE, gs_queue
+from tests.factories import VehicleFactory
+from vvm_worker.dispatch import SHARED_QUEUE, gs_queue, rv_queue
 from vvm_worker.hosts import GSHost
 from vvm_worker.platform import platform_vvm
-from vvm_worker.services import vv_cancel, vv_create_for_user, vv_submit
+from vvm_worker.services import vv_advance, vv_cancel, vv_create_for_user, vv_submit
 
 PROGRAM = "VV.log('hello');"
 
@@ -55,6 +59,32 @@ def test_a_vv_is_sent_to_the_queue_of_the_host_it_is_on(
         vv = vv_submit(customer=customer_a, name="VV", program=PROGRAM, vvm=platform_vvm())
     assert vv.host_gs == ground_station
     assert queued(broker, gs_queue(ground_station.pk)) == [("cpcc.vv_advance", [str(vv.pk)])]
+
+
+def test_a_vv_routed_to_an_rv_is_sent_to_its_queue_without_reading_where_it_went(
+    customer_a, ground_station, broker, django_capture_on_commit_callbacks
+) -> None:
+    """The transaction that moved the VV says where to: the message after its commit costs
+    no read of the VV."""
+    heli = VehicleFactory(name="Heli One")  # its worker (another process) holds its lease
+    Vehicle.objects.filter(pk=heli.pk).update(worker_seen=Now())
+    vvm = platform_vvm()
+    program = (
+        "var co2 = VV.sensor.get('CO2');\n"
+        "VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(48.1111, 12.8619, 50),"
+        " tolerance: 2, sensors: [co2]});"
+    )
+    with django_capture_on_commit_callbacks(execute=True):
+        vv = vv_submit(customer=customer_a, name="VV", program=program, vvm=vvm)
+    with django_capture_on_commit_callbacks(execute=False) as after_commit:
+        vv_advance(vv_id=vv.pk, vvm=vvm)  # its first step, on the station
+    with CaptureQueriesContext(connection) as reads:
+        for callback in after_commit:
+            callback()
+    vv.refresh_from_db()
+    assert vv.host_rv == heli and vv.status == "migrating"
+    assert queued(broker, rv_queue(heli.pk)) == [("cpcc.vv_advance", [str(vv.pk)])]
+    assert reads.captured_queries == []
 
 
 @pytest.mark.django_db(transaction=True, serialized_rollback=True)  # real commits

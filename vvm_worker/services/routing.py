@@ -30,6 +30,7 @@ from missions.models import (
     VirtualVehicle,
     VVStatus,
 )
+from vvm_worker.dispatch import HostRef
 from vvm_worker.mapping import ExclusionZone, MapDecision, VehicleCaps, map_task
 from vvm_worker.runtime import (
     PendingRequest,
@@ -387,7 +388,7 @@ def _route(
             tasks_assign(tasks=_servable(best, open_tasks), vehicle=vehicle, vvm=vvm)
             return False, None
         vv.status = VVStatus.MIGRATING
-        vvm.dispatcher.vv_arrived(vv.id)
+        vvm.dispatcher.vv_arrived(vv.id, on=HostRef(rv_id=vehicle.pk))
         return False, None
     # Only RVs in maintenance could serve it: park on a ground station until one returns.
     if vv.host_rv is not None:
@@ -597,4 +598,4 @@ def vv_migrate_to_ground_station(
     vv_release_tasks(vv=vv, vvm=vvm, open_tasks=open_tasks)
     vv_record_migration(vv=vv, to=gs, reason=reason, vvm=vvm)
     vv.status = VVStatus.MIGRATING
-    vvm.dispatcher.vv_arrived(vv.id)
+    vvm.dispatcher.vv_arrived(vv.id, on=HostRef(gs_id=gs.pk))

@@ -44,6 +44,7 @@ from missions.models import (
 )
 from missions.selectors import vv_get_for_user
 from vvm_worker.control import VehicleState
+from vvm_worker.dispatch import HostRef
 from vvm_worker.runtime import (
     ErrorKind,
     Outcome,
@@ -286,7 +287,7 @@ def _admit(customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
             )
         for vv in admitted:
             vvm.announce(lambda vv=vv: vv_event(vv))
-            vvm.dispatcher.vv_arrived(vv.id)
+            vvm.dispatcher.vv_arrived(vv.id, on=HostRef(gs_id=vv.host_gs_id))
         return admitted
 
 
@@ -621,7 +622,7 @@ def _advance_locked(vv: VirtualVehicle, vvm: VVM, *, before: tuple[Any, ...] | N
         # A program that keeps asking for tasks nobody can serve, or makes call after call:
         # let the host's other work go first, then carry on (the tasks-per-VV quota and the
         # CPU quota bound it).
-        vvm.dispatcher.vv_arrived(vv.pk)
+        vvm.dispatcher.vv_arrived(vv.pk, on=HostRef(rv_id=vv.host_rv_id, gs_id=vv.host_gs_id))
     _save_changed(vv, before)
     vvm.announce(lambda: vv_event(vv))
 
