@@ -585,18 +585,18 @@ class RigFleet:
         self.alone = alone
         self._settled: list[tuple[DatabaseStore, _Waiting]] = []
 
-    def live(self, vehicle_id: int) -> LocalRV | None:
+    def live(self, vehicle_id: int, *, route: bool = True) -> LocalRV | None:
         rig = self.rigs.get(vehicle_id)
         if rig is None:
             return None
         store, state = rig.store, rig.loop.last_state
         if state is None:  # it has reported nothing yet: its row says where it is
             return None
-        items = [(t.id, t.position) for t in store.open_tasks()]
+        items = [(t.id, t.position) for t in store.open_tasks()] if route else []
         return LocalRV(
             status=store.status() if self.alone else None,
             position=state.position,
-            route=planned_order(items, state.planner_state),
+            route=planned_order(items, state.planner_state) if route else (),
         )
 
     def add(self, rig: VehicleRig) -> None:

@@ -592,3 +592,22 @@ def test_an_estimate_whose_vv_another_worker_holds_waits_for_the_next_tick(
     store.write_waiting()
     etas = dict(VirtualVehicle.objects.values_list("pk", "next_task_eta_s"))
     assert etas == {held.pk: 130.0, free.pk: 110.0}
+
+
+def test_a_task_one_rv_covers_goes_to_it_without_reading_any_rvs_open_tasks(
+    customer_a, ground_station, vvm_factory
+) -> None:
+    # Open tasks and plans rank RVs whose areas overlap; where one RV covers the task (the
+    # common case), there is nothing to rank and nothing of that is read.
+    from django.db import connection
+    from django.test.utils import CaptureQueriesContext
+
+    one = VehicleFactory(name="Heli One")
+    VehicleFactory(name="Heli Two", area=AREA_TWO)
+    vvm = vvm_factory()
+    vv = vv_submit(customer=customer_a, name="VV", program=program(), vvm=vvm)
+    with CaptureQueriesContext(connection) as queries:
+        vv_advance(vv_id=vv.pk, vvm=vvm)
+    assert VirtualVehicle.objects.get(pk=vv.pk).host_rv == one
+    task_lists = [q["sql"] for q in queries if 'FROM "missions_task"' in q["sql"]]
+    assert task_lists == []

@@ -58,9 +58,10 @@ class LocalFleet(Protocol):
     """The RVs whose control loops run in this process, which the services ask and tell
     directly instead of through the database and the dispatcher."""
 
-    def live(self, vehicle_id: int) -> LocalRV | None:
+    def live(self, vehicle_id: int, *, route: bool = True) -> LocalRV | None:
         """The RV as it is now, if this process hosts it and its loop has reported (else None:
-        read its row)."""
+        read its row). ``route``: False when the caller does not need its open tasks (the
+        route is then empty)."""
         ...
 
     def settle(self, vehicle_id: int, *, tasks_done: int = 0) -> Settled | None:

@@ -196,14 +196,20 @@ def fleet_caps_and_rows(
     vvm: VVM, requests: Sequence[TaskRequest] | None = None, shape: _FleetShape | None = None
 ) -> tuple[list[VehicleCaps], dict[int, Vehicle]]:
     """``fleet_caps`` and the rows of those RVs as read for it (by id): one read of the RVs,
-    one of their open tasks."""
+    one of their open tasks (none when ``requests`` leave one RV to choose: its caps then
+    say nothing of its open tasks)."""
     shape = shape or _fleet_shape()
     wanted = shape.covering(requests) if requests is not None else set(shape.ids)
     if not wanted:
         return [], {}
+    # An RV's open tasks, in its plan's order, rank it against the others: with one RV to
+    # choose (the common case where areas do not overlap), they are not read.
+    ranked = requests is None or len(wanted) > 1
     # The RVs this process hosts are asked, the others read.
     local = vvm.local_fleet
-    known = {pk: live for pk in wanted if local and (live := local.live(pk)) is not None}
+    known = {
+        pk: live for pk in wanted if local and (live := local.live(pk, route=ranked)) is not None
+    }
     rows: dict[int, Vehicle] = {}
     routes: dict[int, tuple[Position, ...]] = {}
     online: dict[int, bool] = {}
@@ -221,7 +227,8 @@ def fleet_caps_and_rows(
     remote = sorted(wanted - set(known))
     if remote:
         read = {v.pk: v for v in _remote_read(vvm.lease_s).all(remote)}
-        routes.update(planned_routes({pk: v.planner_state for pk, v in read.items()})[0])
+        if ranked:
+            routes.update(planned_routes({pk: v.planner_state for pk, v in read.items()})[0])
         for pk, vehicle in read.items():
             rows[pk] = vehicle
             online[pk] = vvm.lease_s is None or bool(getattr(vehicle, "online", False))
