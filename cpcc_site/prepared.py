@@ -155,6 +155,17 @@ class PreparedRead(Generic[M]):
         with connections[using].cursor() as cursor:
             cursor.execute(sql, params)
             found = cursor.fetchall()
+        return self._converted(compiler, found)
+
+    def rows_later(self, *keys: Any, using: str = "default") -> Callable[[], list[tuple[Any, ...]]]:
+        """``rows``, sent now and read when the function it gives back is called (as
+        ``first_later``)."""
+        compiler, sql, params = self._bound(keys, using)
+        found_later = send_later_rows(sql, params, using=using)
+        return lambda: self._converted(compiler, found_later())
+
+    @staticmethod
+    def _converted(compiler: Any, found: list[Any]) -> list[tuple[Any, ...]]:
         converters = compiler.get_converters([column for column, _, _ in compiler.select])
         if converters:
             found = [tuple(row) for row in compiler.apply_converters(found, converters)]
@@ -472,13 +483,7 @@ def send_later(
     row): inside ``pipelined``, the statements sent before that read go to the server with
     it and their answers come back together, in one round trip (read it before the block
     ends); outside a pipeline the statement runs at once."""
-    cursor = connections[using].cursor()
-    try:
-        with deferred(using):  # not waited for: the reader fetches its answer
-            cursor.execute(sql, params)
-    except BaseException:
-        cursor.close()
-        raise
+    cursor = _sent(sql, params, using)
 
     def read() -> tuple[Any, ...] | None:
         try:
@@ -488,6 +493,32 @@ def send_later(
         return None if row is None else tuple(row)
 
     return read
+
+
+def send_later_rows(
+    sql: str, params: Sequence[Any], *, using: str = "default"
+) -> Callable[[], list[tuple[Any, ...]]]:
+    """``send_later``, whose reader gives every row."""
+    cursor = _sent(sql, params, using)
+
+    def read() -> list[tuple[Any, ...]]:
+        try:
+            return [tuple(row) for row in cursor.fetchall()]
+        finally:
+            cursor.close()
+
+    return read
+
+
+def _sent(sql: str, params: Sequence[Any], using: str) -> Any:
+    cursor = connections[using].cursor()
+    try:
+        with deferred(using):  # not waited for: the reader fetches its answer
+            cursor.execute(sql, params)
+    except BaseException:
+        cursor.close()
+        raise
+    return cursor
 
 
 def _execute(

@@ -611,3 +611,41 @@ def test_a_task_one_rv_covers_goes_to_it_without_reading_any_rvs_open_tasks(
     assert VirtualVehicle.objects.get(pk=vv.pk).host_rv == one
     task_lists = [q["sql"] for q in queries if 'FROM "missions_task"' in q["sql"]]
     assert task_lists == []
+
+
+def test_a_worker_of_several_rvs_reads_their_statuses_with_the_vvs_lock_once_a_unit_of_work(
+    vvm_factory,
+) -> None:
+    # The loops of a worker of several RVs do not know their RVs' statuses (an operator may
+    # change them any time): a unit of work reads them once, sent ahead with its first
+    # statements, however often it routes; a status committed before it starts is seen.
+    from django.db import connection, transaction
+    from django.test.utils import CaptureQueriesContext
+
+    from cpcc_site.prepared import pipelined
+    from fleet.geo import Position
+    from vvm_worker.runtime import TaskRequest
+    from vvm_worker.services.base import LocalRV
+    from vvm_worker.services.routing import fleet_caps, rv_statuses_read_ahead
+
+    one, two = VehicleFactory(name="Heli One"), VehicleFactory(name="Heli Two", area=AREA_TWO)
+    vehicle_set_status(vehicle=two, status=VehicleStatus.MAINTENANCE, vvm=vvm_factory())
+
+    class Loops:  # what the worker's loops say of their RVs: where they are, not their status
+        def live(self, vehicle_id: int, *, route: bool = True) -> LocalRV:
+            return LocalRV(status=None, position=Position(48.111, 12.86, 0), route=())
+
+    vvm = vvm_factory()
+    vvm.local_rvs, vvm.local_fleet = {one.pk, two.pk}, Loops()  # type: ignore[assignment]
+    with (
+        CaptureQueriesContext(connection) as queries,
+        transaction.atomic(),
+        pipelined(),
+        rv_statuses_read_ahead(vvm=vvm),
+    ):
+        first = fleet_caps(vvm)
+        again = fleet_caps(vvm, [TaskRequest(48.1111, 12.8619, 50, 2, ("CO2",))])
+    assert {c.id: c.active for c in first} == {one.pk: True, two.pk: False}
+    assert [c.id for c in again] == [one.pk]
+    statuses = [q for q in queries if '"fleet_vehicle"."status" AS "status"' in q["sql"]]
+    assert len(statuses) == 1

@@ -100,6 +100,9 @@ class VVM:
     local_rvs: set[int] = dataclass_field(default_factory=set)
     # Those RVs' loops, as the services see them (None: ask the database, tell the dispatcher).
     local_fleet: LocalFleet | None = None
+    # Inside a unit of work that read them ahead (``rv_statuses_read_ahead``): the statuses
+    # of the local RVs, as that read gives them.
+    statuses_ahead: Callable[[], dict[int, str]] | None = None
     # Who tells the customers' webhooks and e-mail recipients that a VV ended or a task was
     # done (vvm_worker/services/notifications.py); nobody in `simulate` and in most tests.
     notifier: Notifier = dataclass_field(default_factory=Unheard)

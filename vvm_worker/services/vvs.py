@@ -76,6 +76,7 @@ from vvm_worker.services.fleet import vehicle_record_state
 from vvm_worker.services.journal import JournalView, journal_append, journal_full
 from vvm_worker.services.notifications import ended_event, vv_notify
 from vvm_worker.services.routing import (
+    rv_statuses_read_ahead,
     tasks_reject,
     vv_record_migration,
     vv_release_tasks,
@@ -762,7 +763,9 @@ def task_complete(
     if vv_id is None:
         vv_id = Task.objects.values_list("vv_id", flat=True).get(pk=task_id)
     try:
-        with _unit_of_work():
+        # (The statuses of the RVs of this process go to the database with the VV's lock:
+        # routing the VV's next request needs them.)
+        with _unit_of_work(), rv_statuses_read_ahead(vvm=vvm):
             return _answer_and_advance(
                 task_id, readings, vvm, vehicle_id, vv_id, arrival, failure=failure, q=q
             )
