@@ -70,3 +70,24 @@ def test_the_platforms_lines_show_at_the_default_level() -> None:
         check=True,
     )
     assert out.stdout.split() == ["True", "False"]
+
+
+def test_a_workers_lines_keep_their_format_and_fields_once_celery_starts() -> None:
+    """Celery's worker would put its own format in place when it starts: the lines after
+    it would lose what they are about (and read unlike the lines before)."""
+    probe = (
+        "import django, logging; django.setup(); "
+        "from cpcc_site.celery import app; "
+        "app.log.setup(loglevel='WARNING', hostname='rv@here'); "
+        "logging.getLogger('cpcc.vvm').info('vv ended', extra={'vv': 'ab12'}); "
+        "logging.getLogger('celery').info('a library line')"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        cwd=ROOT,
+        env={**os.environ, "DJANGO_SETTINGS_MODULE": "cpcc_site.settings", "CPCC_LOG_LEVEL": ""},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert re.fullmatch(r"\S+ \S+ INFO cpcc\.vvm vv ended vv=ab12\n", out.stderr), out.stderr

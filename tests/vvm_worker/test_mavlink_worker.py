@@ -285,7 +285,9 @@ def test_a_low_battery_keeps_the_rv_home_until_telemetry_shows_it_charged_and_a_
     wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
     vv = VirtualVehicle.objects.get()
     assert vv.status == VVStatus.FINISHED, vv.error
-    assert log.read_text().count("battery too low for the next task") == 1, "no loop"
+    assert log.read_text().count("battery too low for the next task: home to recharge") == 1, (
+        "no loop"
+    )
     assert Vehicle.objects.get(pk=heli.pk).status_reason == "charged"
 
 
