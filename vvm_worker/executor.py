@@ -592,11 +592,13 @@ class RigFleet:
         store, state = rig.store, rig.loop.last_state
         if state is None:  # it has reported nothing yet: its row says where it is
             return None
-        items = [(t.id, t.position) for t in store.open_tasks()] if route else []
+        planned = (
+            planned_order([(t.id, t.position) for t in store.open_tasks()], state.planner_state)
+            if route
+            else ()
+        )
         return LocalRV(
-            status=store.status() if self.alone else None,
-            position=state.position,
-            route=planned_order(items, state.planner_state) if route else (),
+            status=store.status() if self.alone else None, position=state.position, route=planned
         )
 
     def add(self, rig: VehicleRig) -> None:
