@@ -262,6 +262,10 @@ CPCC_MAP_BATCH_S = env_float("CPCC_MAP_BATCH_S", 0.1, minimum=0.0)
 CELERY_TASK_ACKS_LATE = True
 CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
+# A worker's lines keep the platform's format (LOGGING below) from its start to its stop:
+# Celery would put its own in place when its worker starts, and the lines after that would
+# lose their fields (the VV, the vehicle, the reason). Its --loglevel still sets the root's.
+CELERY_WORKER_HIJACK_ROOT_LOGGER = False
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
 CELERY_TASK_DEFAULT_QUEUE = "vvm"
