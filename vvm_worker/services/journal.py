@@ -7,16 +7,17 @@ import functools
 import json
 import math
 import threading
+import uuid
 from collections import OrderedDict
 from collections.abc import Sequence
 from typing import Any, overload
 
 from django.conf import settings
 from django.db import connection, transaction
-from django.db.models import QuerySet, TextField
+from django.db.models import TextField
 from django.db.models.functions import Cast
 
-from cpcc_site.prepared import deferred
+from cpcc_site.prepared import PreparedRead, deferred
 from missions.models import (
     JournalEntry,
     LogEntry,
@@ -150,6 +151,19 @@ def jsonb_text(value: Any) -> str:
     raise TypeError(f"not a JSON value: {type(value).__name__}")
 
 
+# Entries of one VV from ``start`` to before ``stop``, as JSON text in order: what a context
+# that catches up (or a new one) reads, compiled once.
+_TEXTS = PreparedRead(
+    lambda vv_id, start, stop: (
+        JournalEntry.objects.filter(vv_id=vv_id, seq__gte=start, seq__lt=stop)
+        .annotate(text=Cast("entry", output_field=TextField()))
+        .order_by("seq")
+        .values_list("text")
+    ),
+    samples=[("vv", uuid.UUID(int=0)), ("seq", 2_054_321_001), ("seq", 2_054_321_002)],
+)
+
+
 class JournalView(Sequence[str]):
     """A VV's journal as the runtime reads it, each entry as JSON text: a warm context asks
     only for the entries it does not have (and the last one it has, to check it is the same),
@@ -167,12 +181,8 @@ class JournalView(Sequence[str]):
     def __len__(self) -> int:
         return self.vv.journal_length
 
-    def _texts(self) -> QuerySet[JournalEntry, str]:
-        return (
-            JournalEntry.objects.filter(vv_id=self.vv.pk)
-            .annotate(text=Cast("entry", output_field=TextField()))
-            .values_list("text", flat=True)
-        )
+    def _texts(self, start: int, stop: int) -> list[str]:
+        return [text for (text,) in _TEXTS.rows(self.vv.pk, start, stop)]
 
     @overload
     def __getitem__(self, index: int) -> str: ...
@@ -186,14 +196,15 @@ class JournalView(Sequence[str]):
             assert step == 1
             if all(seq in self._known for seq in range(start, stop)):
                 return [self._known[seq] for seq in range(start, stop)]
-            return list(self._texts().filter(seq__gte=start, seq__lt=stop).order_by("seq"))
+            return self._texts(start, stop)
         if index < 0:
             index += len(self)
         if not 0 <= index < len(self):
             raise IndexError(index)
         if index in self._known:
             return self._known[index]
-        return self._texts().get(seq=index)
+        (text,) = self._texts(index, index + 1)
+        return text
 
 
 def journal_append(vv: VirtualVehicle, entry: dict[str, Any], vvm: VVM) -> None:
