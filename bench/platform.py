@@ -205,6 +205,12 @@ def main() -> None:
         "--group", type=int, default=1, help="RVs one rvworker process hosts (1: one each)"
     )
     parser.add_argument(
+        "--station-in-group",
+        action="store_true",
+        help="the first RV worker hosts the ground station too (rvworker --station) instead "
+        "of a gsworker of its own",
+    )
+    parser.add_argument(
         "--bulk",
         type=int,
         default=1,
@@ -357,12 +363,22 @@ def main() -> None:
         return spent
 
     try:
-        for name in loaded.ground_stations:
-            start(f"gsworker-{name}", ["manage.py", "gsworker", name], extra_env=worker_env)
+        stations = list(loaded.ground_stations)
+        if args.station_in_group:
+            if len(stations) != 1:
+                raise SystemExit("--station-in-group needs a scenario of one ground station")
+        else:
+            for name in stations:
+                start(f"gsworker-{name}", ["manage.py", "gsworker", name], extra_env=worker_env)
         rv_names = list(loaded.vehicles)
         for first in range(0, len(rv_names), args.group):
             group = rv_names[first : first + args.group]
-            start(f"rvworker-{group[0]}", ["manage.py", "rvworker", *group], extra_env=worker_env)
+            station = ["--station", stations[0]] if args.station_in_group and not first else []
+            start(
+                f"rvworker-{group[0]}",
+                ["manage.py", "rvworker", *group, *station],
+                extra_env=worker_env,
+            )
         workers = len(children)
         if args.rest:
             listener = listening_socket(0)
@@ -457,8 +473,13 @@ def main() -> None:
         f"# {machine} · {os.cpu_count()} cores · {engine} · Redis {'external' if settings.REDIS_URL else 'embedded'}"
     )
     workers_rv = -(-args.rvs // args.group)
+    station = (
+        "the GS in the first RV worker (rvworker --station)"
+        if args.station_in_group
+        else "1 GS worker"
+    )
     print(
-        f"{args.rvs} RVs in {workers_rv} RV worker(s) + 1 GS worker, {total} VVs x {args.tasks} "
+        f"{args.rvs} RVs in {workers_rv} RV worker(s) + {station}, {total} VVs x {args.tasks} "
         "tasks, instant flights"
     )
     if args.rest:

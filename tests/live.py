@@ -10,7 +10,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -78,17 +78,23 @@ class Workers:
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
 
     def start(
-        self, kind: str, name: str, *more: str, env: dict[str, str] | None = None
+        self,
+        kind: str,
+        name: str,
+        *more: str,
+        env: dict[str, str] | None = None,
+        options: Sequence[str] = (),
     ) -> subprocess.Popen[bytes]:
         """Start ``manage.py gsworker NAME`` or ``rvworker NAME [NAME ...]`` (one process
         hosting several RVs, known to ``kill`` and ``terminate`` by its first name); returns
-        once it runs. ``env``: more variables (a fault to inject: tests/inject/sitecustomize.py)."""
+        once it runs. ``env``: more variables (a fault to inject: tests/inject/sitecustomize.py);
+        ``options``: the command's options (``--station GS``, say)."""
         names = [name, *more]
         group = f"+{len(more)}" if more else ""  # the file of a group is named by its first
         log = (self.tmp / f"{kind}-{name}{group}.log".replace(" ", "_")).open("ab")
         logged = log.tell()
         process = subprocess.Popen(
-            [sys.executable, "manage.py", kind, *names],
+            [sys.executable, "manage.py", kind, *names, *options],
             cwd=ROOT,
             env={**self.env, "DATABASE_URL": database_url(), **faults(env or {})},
             stdout=log,

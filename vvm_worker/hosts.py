@@ -170,10 +170,21 @@ class RVHost:
     """
 
     def __init__(
-        self, vehicles: Sequence[Vehicle], *, speed: float, planner: str = DEFAULT_PLANNER
+        self,
+        vehicles: Sequence[Vehicle],
+        *,
+        speed: float,
+        planner: str = DEFAULT_PLANNER,
+        station: GroundStation | None = None,
     ) -> None:
         if not vehicles:
             raise ValueError("an RV worker hosts at least one vehicle")
+        # A ground station hosted here too (a server that runs simulated RVs and the station
+        # they start from): its VVs are stepped on the same host thread, in the same runtime,
+        # so a VV that goes from the station to one of these RVs keeps its warm context and
+        # goes over without a message, as between two of the RVs.
+        self.station_id = None if station is None else station.pk
+        self.watch = None if station is None else StationWatch(station)
         self.vvm = platform_vvm(local=self)
         # One runtime for every vehicle here: as many warm contexts per vehicle as a worker
         # of one vehicle keeps, up to what `simulate` keeps for a whole fleet.
@@ -204,7 +215,7 @@ class RVHost:
         return vehicle_id in self.rvs
 
     def is_station(self, station_id: int) -> bool:
-        return False
+        return self.station_id is not None and station_id == self.station_id
 
     def advance_later(self, vv_id: uuid.UUID) -> None:
         self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
@@ -221,6 +232,11 @@ class RVHost:
     def advance(self, vv_id: uuid.UUID) -> None:
         self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm)).result(WAIT_S)
 
+    def admit(self, customer_id: int) -> None:
+        self.scheduler.submit(
+            lambda: vv_admit_queued(customer_id=customer_id, vvm=self.vvm)
+        ).result(WAIT_S)
+
     def wake(self, vehicle_id: int) -> None:
         rv = self.rvs.get(vehicle_id)
         if rv is None:  # a message for a vehicle another process hosts now: not ours to do
@@ -233,11 +249,20 @@ class RVHost:
     def start(self) -> None:
         self._thread.start()
         self.scheduler.submit(self._recover).result(WAIT_S * len(self.rvs))
+        if self.watch is not None:
+            # However many VVs wait on the station (once the RVs are in service).
+            station_id, name = self.watch.station_id, self.watch.name
+            self.scheduler.submit(lambda: take_up_station(station_id, name, self.vvm)).result()
+            self.watch.start()
         logger.info("rv worker started", extra={"vehicle": self.name})
 
     def stop(self) -> None:
+        if self.watch is not None:
+            self.watch.stop()
         self.scheduler.stop()
         self._thread.join(timeout=10)
+        if self.watch is not None:
+            self.watch.join()
 
     def _run(self) -> None:
         try:
@@ -563,19 +588,13 @@ class GSHost:
         self.name = station.name
         self.vvm = platform_vvm(local=self)
         self._later: collections.deque[uuid.UUID] = collections.deque()
-        self._stopping = threading.Event()
         # The station's work runs on a host thread of its own, as an RV worker's does: Celery's
         # thread hands it over and waits. The host thread keeps its database connection (and
         # the statements prepared on it) from one message to the next, where Celery closes
         # its own thread's connection after every task.
         self.scheduler = RealTimeScheduler(self.vvm.clock)
         self._thread = threading.Thread(target=self._run, name="gs-host", daemon=True)
-        self._watch = threading.Thread(target=self._watch_leases, name="lease-watch", daemon=True)
-        # The sweep's memory (its thread's own). No RV's worker can renew its lease while the
-        # database is down: after an outage, each gets a full lease's time to do so before
-        # its VVs are moved off it.
-        self._leases_from = 0.0  # time.monotonic() from which leases are checked
-        self._online: set[int] = set()  # the RVs whose lease was valid at the last sweep
+        self.watch = StationWatch(station)
 
     # --- LocalHost (vvm_worker.dispatch): the VVs this station takes -------------------------
 
@@ -634,24 +653,18 @@ class GSHost:
             self._later.popleft()
 
     def start(self) -> None:
-        here = VirtualVehicle.objects.filter(host_gs_id=self.station_id, status__in=ACTIVE_STATUSES)
-
-        def recover() -> None:
-            advance_each(here, vvm=self.vvm, ground_station=self.name)
-            _admit_all(self.vvm)
-
         self._thread.start()
-        self._on_host(recover, timeout_s=None)  # however many VVs wait on the station
-        self._watch.start()
+        # However many VVs wait on the station.
+        self._on_host(lambda: take_up_station(self.station_id, self.name, self.vvm), timeout_s=None)
+        self.watch.start()
         logger.info("gs worker started", extra={"ground_station": self.name})
 
     def stop(self) -> None:
-        self._stopping.set()
+        self.watch.stop()
         self.scheduler.stop()
         if self._thread.is_alive():
             self._thread.join(timeout=10)
-        if self._watch.is_alive():
-            self._watch.join(timeout=10)
+        self.watch.join()
         self.vvm.announcer.close()
 
     def _run(self) -> None:
@@ -660,7 +673,46 @@ class GSHost:
         finally:
             connection.close()
 
-    def _watch_leases(self) -> None:
+    def sweep_once(self, vvm: VVM) -> None:
+        """``StationWatch.sweep_once`` (what a sweep of this station's worker does)."""
+        self.watch.sweep_once(vvm)
+
+
+def take_up_station(station_id: int, name: str, vvm: VVM) -> None:
+    """What a worker that starts (or starts again) hosting a ground station takes up: the VVs
+    on the station, then the queued VVs of every customer."""
+    here = VirtualVehicle.objects.filter(host_gs_id=station_id, status__in=ACTIVE_STATUSES)
+    advance_each(here, vvm=vvm, ground_station=name)
+    _admit_all(vvm)
+
+
+class StationWatch:
+    """A ground station's watch over the fleet, on a thread of its own with a VVM (and V8
+    runtime) of its own, whichever process hosts the station: the RVs' leases, VVs that a lost
+    message left waiting on the station, queued VVs (``sweep_once``, every ``SWEEP_S``)."""
+
+    def __init__(self, station: GroundStation) -> None:
+        self.station_id = station.pk
+        self.name = station.name
+        self._stopping = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="lease-watch", daemon=True)
+        # The sweep's memory (its thread's own). No RV's worker can renew its lease while the
+        # database is down: after an outage, each gets a full lease's time to do so before
+        # its VVs are moved off it.
+        self._leases_from = 0.0  # time.monotonic() from which leases are checked
+        self._online: set[int] = set()  # the RVs whose lease was valid at the last sweep
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stopping.set()
+
+    def join(self) -> None:
+        if self._thread.is_alive():
+            self._thread.join(timeout=10)
+
+    def _run(self) -> None:
         vvm = platform_vvm()  # a runtime of this thread's own
         try:
             while not self._stopping.wait(min(SWEEP_S, settings.CPCC_RV_LEASE_S / 4)):

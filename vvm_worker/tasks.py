@@ -15,7 +15,7 @@ from celery import shared_task
 
 from cpcc_site import database
 from vvm_worker.dispatch import ADMIT_TASK, VEHICLE_CHANGED_TASK, VV_ADVANCE_TASK
-from vvm_worker.hosts import GSHost, current_host
+from vvm_worker.hosts import current_host
 from vvm_worker.notify import NOTIFY_QUEUE, NOTIFY_TASK, WEBHOOK_DELIVER_TASK
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_admit_queued
@@ -45,8 +45,8 @@ def vehicle_changed(vehicle_id: int) -> None:
 @shared_task(name=ADMIT_TASK, acks_late=True, ignore_result=True)
 def admit(customer_id: int) -> None:
     """Start the customer's queued VVs as far as its quota allows (any ground station)."""
-    host = current_host()
-    if isinstance(host, GSHost):
+    host = current_host()  # a ground station's worker, or an RV worker that hosts one
+    if host is not None:
         database.through_outages(lambda: host.admit(customer_id))
     else:
         database.through_outages(

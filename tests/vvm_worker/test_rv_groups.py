@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from django.core.management import CommandError, call_command
 
-from fleet.models import Vehicle
+from fleet.models import GroundStation, Vehicle
 from missions.models import Migration, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.broker import queued
 from tests.factories import (
@@ -34,7 +34,7 @@ from tests.vvm_worker.test_distributed_faults import (
     outcome,
     visits_logged,
 )
-from vvm_worker.dispatch import rv_queue
+from vvm_worker.dispatch import gs_queue, rv_queue
 from vvm_worker.hosts import RVHost
 from vvm_worker.platform import platform_vvm
 from vvm_worker.runtime import StepInput, StepResult
@@ -114,6 +114,63 @@ def test_a_vv_migrating_between_two_rvs_of_one_process_resumes_its_warm_context(
     assert ("cpcc.vv_advance", [str(vv.pk)]) in queued(broker, rv_queue(one.pk))
 
 
+@pytest.fixture
+def station_and_two_rvs_one_process(broker) -> Iterator[tuple[RVHost, list[StepResult]]]:
+    """GS Base, Heli One and Heli Two hosted by one RV worker's host in this process (``rvworker
+    "Heli One" "Heli Two" --station "GS Base"``, instant flights), every step recorded."""
+    station = GroundStationFactory(name="GS Base")
+    one = VehicleFactory(name="Heli One", area=AREA_ONE)
+    two = VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.866)
+    host = RVHost([one, two], speed=0, station=station)
+    steps: list[StepResult] = []
+    runtime_step = host.vvm.runtime.step
+
+    def step(step: StepInput) -> StepResult:
+        result = runtime_step(step)
+        steps.append(result)
+        return result
+
+    host.vvm.runtime.step = step  # type: ignore[method-assign]
+    host.start()
+    try:
+        yield host, steps
+    finally:
+        host.stop()
+
+
+def test_a_vv_admitted_on_a_station_of_the_rvs_process_keeps_its_warm_context_aboard(
+    station_and_two_rvs_one_process, broker
+) -> None:
+    """The station's work runs on the RVs' host thread: a VV admitted there runs its first
+    step in the process's runtime and goes to Heli One, then to Heli Two, and back to the
+    station, each time resuming where it waited, without a message."""
+    host, steps = station_and_two_rvs_one_process
+    station = GroundStation.objects.get(name="GS Base")
+    assert host.is_station(station.pk) and not host.is_station(station.pk + 1)
+    customer = CustomerFactory(name="Customer A")
+    vv = vv_submit(
+        customer=customer, name="Across", program=ACROSS, vvm=platform_vvm(), seed=1, admit=False
+    )
+    host.admit(customer.pk)  # what the admission message on the shared queue makes it do
+
+    def ended() -> bool:
+        vv.refresh_from_db()
+        return vv.is_ended
+
+    wait_for(ended, timeout=60, what="the VV to end")
+    assert vv.status == VVStatus.FINISHED, vv.error
+    path = list(Migration.objects.filter(vv=vv).values_list("from_name", "to_name"))
+    assert path == [("GS Base", "Heli One"), ("Heli One", "Heli Two"), ("Heli Two", "GS Base")]
+    # Its first step, on the station, ran the program from its first line in a new context
+    # (no answer yet); aboard Heli One, then Heli Two, it resumed where it waited, reading
+    # only the new answer (where a station of another process leaves Heli One to replay).
+    assert [(s.replayed, s.answers_read) for s in steps] == [(True, 0), (False, 1), (False, 1)]
+    assert {d.key: d.value for d in vv.storage.all()} == {"one": 1, "two": 2}
+    # Nothing went through the broker: the station and both RVs are this process's.
+    for queue in (gs_queue(station.pk), rv_queue(Vehicle.objects.get(name="Heli One").pk)):
+        assert queued(broker, queue) == []
+
+
 def test_rvworker_names_every_unknown_vehicle_and_the_known_ones() -> None:
     VehicleFactory(name="Heli One")
     VehicleFactory(name="Heli Two")
@@ -166,6 +223,41 @@ def test_a_worker_of_several_rvs_stopped_with_sigterm_mid_mission_exits_0_and_it
     assert {v.name: v.tasks_done for v in Vehicle.objects.all()} == {"Heli One": 6, "Heli Two": 6}
     assert workers.terminate("Heli One") == 0
     assert workers.terminate("GS Base") == 0
+
+
+def test_a_worker_of_rvs_and_their_station_stopped_with_sigterm_mid_mission_exits_0_and_resumes(
+    workers: Workers, tmp_path: Path, monkeypatch
+) -> None:
+    """Figure 3 with both RVs and the ground station in one process (``rvworker --station``):
+    the station admits the VVs and hands them to its RVs in the process; stopped by SIGTERM
+    mid-mission, the process exits 0, and started again it takes up the station's VVs and
+    its RVs' and finishes the mission."""
+    load("paper-fig3.json", tmp_path, monkeypatch)
+    combined = ("rvworker", "Heli One", "Heli Two")
+    workers.start(*combined, options=["--station", "GS Base"])
+    wait_for(
+        lambda: (
+            Task.objects.filter(status=TaskStatus.DONE).count() >= 2
+            and VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
+        ),
+        timeout=120,
+        what="VVs aboard the RVs, tasks done",
+        details=workers.logs,
+    )
+    status = workers.terminate("Heli One")
+    logs = workers.logs()
+    assert status == 0, logs
+    assert "Fatal Python error" not in logs
+    assert not all_ended(), "the mission ended before the stop: it tested nothing"
+    workers.start(*combined, options=["--station", "GS Base"])
+    wait_for(all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs)
+    assert_paper_results()
+    for vv in VirtualVehicle.objects.all():
+        path = [(m.from_name, m.to_name) for m in Migration.objects.filter(vv=vv)]
+        assert path[0] == ("GS Base", "Heli One") and ("Heli One", "Heli Two") in path, path
+        assert path[-1][1] == "GS Base", path
+    assert {v.name: v.tasks_done for v in Vehicle.objects.all()} == {"Heli One": 6, "Heli Two": 6}
+    assert workers.terminate("Heli One") == 0
 
 
 @pytest.mark.slow
