@@ -7,11 +7,12 @@ recovers everything its hosts are responsible for, and a message delivered twice
 to do.
 
 An RV worker hosts one vehicle (on the vehicle's own computer) or several (simulated vehicles,
-or MAVLink links that reach a server). It does all its VVM work in one thread of its own, the
-host thread: the VV steps (with the warm V8 contexts of the VVs aboard its vehicles, in one
-runtime), and each vehicle's control loop, which needs timers (flights take time). Celery
-tasks hand work to that thread and wait until it is committed, so a message is acknowledged
-only after its checkpoint is in the database.
+or MAVLink links that reach a server), and may host the ground station they start from too.
+It does all its VVM work in one thread of its own, the host thread: the VV steps (with the
+warm V8 contexts of the VVs aboard its vehicles, in one runtime), and each vehicle's control
+loop, which needs timers (flights take time). Celery tasks hand work to that thread and wait
+until it is committed, so a message is acknowledged only after its checkpoint is in the
+database.
 """
 
 from __future__ import annotations
@@ -167,6 +168,11 @@ class RVHost:
     sweep, map beacon) are one timer each for the whole process, which serves every vehicle in
     turn: N idle vehicles wake the thread no more often than one. One vehicle is the worker
     of a vehicle's own computer, as before.
+
+    With ``station`` it hosts that ground station too (``rvworker ... --station GS``): the
+    station's work runs on the same thread with the same VVM, so a new VV's first step is made
+    in this runtime and the VV goes aboard with its warm context, without a message; the
+    station's lease watch runs on a thread of its own (``StationWatch``), as in a gsworker.
     """
 
     def __init__(

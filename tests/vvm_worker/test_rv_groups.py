@@ -185,6 +185,14 @@ def test_rvworker_names_every_unknown_vehicle_and_the_known_ones() -> None:
         call_command("rvworker", "Heli One", "Heli Two", "Heli One")
 
 
+def test_rvworker_names_an_unknown_station_and_the_known_ones() -> None:
+    VehicleFactory(name="Heli One")
+    GroundStationFactory(name="GS Base")
+    with pytest.raises(CommandError) as refused:
+        call_command("rvworker", "Heli One", "--station", "GS Nowhere")
+    assert str(refused.value) == ("no ground station named 'GS Nowhere' (ground stations: GS Base)")
+
+
 @pytest.mark.slow
 def test_a_worker_of_several_rvs_stopped_with_sigterm_mid_mission_exits_0_and_its_vvs_finish(
     workers: Workers, tmp_path: Path, monkeypatch
