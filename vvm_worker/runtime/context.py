@@ -70,6 +70,16 @@ def _entry_text(entry: Mapping[str, Any] | str) -> str:
     return json.dumps(entry, sort_keys=True, separators=(",", ":"))
 
 
+def _over_heap(isolate: v8.Isolate, heap_bytes: int) -> bool:
+    """Whether the isolate's heap is over ``heap_bytes`` now (on the V8 thread)."""
+    if heap_bytes <= 0:
+        return False
+    try:
+        return int(isolate.heap_stats()["used_heap_size"]) > heap_bytes
+    except Exception:  # an isolate V8 cannot tell about: not a reason to kill the VV
+        return False
+
+
 class StaleContext(Exception):
     """The context cannot run the step: its journal is not a prefix of the VV's journal (it
     was rolled back), or a program it kept suspended left what a new run would see."""
@@ -228,6 +238,15 @@ class VVContext:
         if isinstance(state, dict) and state.get("status") == "stale":
             self.usable = False
             raise StaleContext(self.vv_id)
+        if (
+            killed is None
+            and isinstance(state, dict)
+            and state.get("journalLength") != self.journal_length
+        ):
+            # The outcome is an earlier step's: V8 stopped this call before the program took
+            # the answers it was given. A new context replays the step.
+            self.usable = False
+            raise StaleContext(self.vv_id)
         # A context whose isolate lacks an entry this side counts would replay wrongly.
         if (
             not isinstance(state, dict)
@@ -283,7 +302,9 @@ class VVContext:
         except JSOOMException:
             killed_by = "heap"
         except JSEvalException as exc:
-            if isolate.hard_memory_limit_reached():
+            if isolate.hard_memory_limit_reached() or _over_heap(isolate, heap_bytes):
+                # (V8 notes the limit at a garbage collection: a step that filled the heap
+                # without one leaves the next call to fail with the heap over its limit.)
                 killed_by = "heap"
             else:
                 thrown = str(exc)

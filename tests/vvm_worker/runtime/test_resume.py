@@ -444,3 +444,33 @@ def test_a_program_v8_refuses_as_a_generator_runs_the_replay_way(monkeypatch) ->
     assert host.run().outcome is Outcome.FINISHED
     assert [r.answers_read for r in host.results][:4] == [0, 1, 2, 3]
     assert host.storage["seen"] == 60
+
+
+def test_a_call_v8_stops_before_the_program_takes_its_answer_is_replayed_not_taken_as_done(
+    monkeypatch,
+) -> None:
+    """When V8 fails the call of a step before the program took the answer it was given (an
+    isolate a step left with its heap over the limit, say), the outcome the context still
+    holds is the earlier step's: the step must not be taken from it (the VV would ask for the
+    task it was just given again), but run again in a new context, which replays it."""
+    from vvm_worker.runtime import context as context_module
+    from vvm_worker.runtime.v8 import JSEvalException
+
+    host = Host(LOOP)
+    first = host.step()
+    assert first.outcome is Outcome.SUSPENDED and first.pending.q == 0
+    broken = host.runtime.context("vv-r")
+    assert broken is not None
+    real = context_module.VVContext._host_async
+
+    async def failing(self, call: str, *args: str, **kw: Any) -> Any:
+        if self is broken and call in ("stepIfResumes", "step"):
+            raise JSEvalException("null")
+        return await real(self, call, *args, **kw)
+
+    monkeypatch.setattr(context_module.VVContext, "_host_async", failing)
+    second = host.step()
+    assert second.outcome is Outcome.SUSPENDED and second.pending.q == 1
+    assert second.replayed and second.answers_read == 1  # in a new context
+    assert host.runtime.context("vv-r") is not broken
+    assert host.storage == {"pos-0": 0}
