@@ -2,9 +2,10 @@
 
 Starts one ground-station worker and one worker per RV (separate processes, as on separate
 machines; ``--group N``: one process per N RVs; ``--station-in-group``: the first RV worker
-hosts the ground station instead of a worker of its own) on a grid of cells, submits many original-style VVs with instant flights (time
-acceleration 0: what is measured is the software's own limit), waits until every VV has ended
-and reports how the submission went and, from the database, how the VVs ran.
+hosts the ground station instead of a worker of its own) on a grid of cells, submits many
+original-style VVs with instant flights (time acceleration 0: what is measured is the
+software's own limit), waits until every VV has ended and reports how the submission went
+and, from the database, how the VVs ran.
 
 The submission, with ``--rest`` (the default): one daphne web process (DEBUG off, the API's
 throttles raised far above the load, so that no 429 is measured) and ``--clients`` concurrent

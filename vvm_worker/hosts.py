@@ -189,7 +189,6 @@ class RVHost:
         # they start from): its VVs are stepped on the same host thread, in the same runtime,
         # so a VV that goes from the station to one of these RVs keeps its warm context and
         # goes over without a message, as between two of the RVs.
-        self.station_id = None if station is None else station.pk
         self.watch = None if station is None else StationWatch(station)
         self.vvm = platform_vvm(local=self)
         # One runtime for every vehicle here: as many warm contexts per vehicle as a worker
@@ -221,7 +220,7 @@ class RVHost:
         return vehicle_id in self.rvs
 
     def is_station(self, station_id: int) -> bool:
-        return self.station_id is not None and station_id == self.station_id
+        return self.watch is not None and station_id == self.watch.station_id
 
     def advance_later(self, vv_id: uuid.UUID) -> None:
         self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
@@ -257,9 +256,9 @@ class RVHost:
         self.scheduler.submit(self._recover).result(WAIT_S * len(self.rvs))
         if self.watch is not None:
             # However many VVs wait on the station (once the RVs are in service).
-            station_id, name = self.watch.station_id, self.watch.name
-            self.scheduler.submit(lambda: take_up_station(station_id, name, self.vvm)).result()
-            self.watch.start()
+            watch = self.watch
+            self.scheduler.submit(lambda: watch.take_up(self.vvm)).result()
+            watch.start()
         logger.info("rv worker started", extra={"vehicle": self.name})
 
     def stop(self) -> None:
@@ -661,7 +660,7 @@ class GSHost:
     def start(self) -> None:
         self._thread.start()
         # However many VVs wait on the station.
-        self._on_host(lambda: take_up_station(self.station_id, self.name, self.vvm), timeout_s=None)
+        self._on_host(lambda: self.watch.take_up(self.vvm), timeout_s=None)
         self.watch.start()
         logger.info("gs worker started", extra={"ground_station": self.name})
 
@@ -684,14 +683,6 @@ class GSHost:
         self.watch.sweep_once(vvm)
 
 
-def take_up_station(station_id: int, name: str, vvm: VVM) -> None:
-    """What a worker that starts (or starts again) hosting a ground station takes up: the VVs
-    on the station, then the queued VVs of every customer."""
-    here = VirtualVehicle.objects.filter(host_gs_id=station_id, status__in=ACTIVE_STATUSES)
-    advance_each(here, vvm=vvm, ground_station=name)
-    _admit_all(vvm)
-
-
 class StationWatch:
     """A ground station's watch over the fleet, on a thread of its own with a VVM (and V8
     runtime) of its own, whichever process hosts the station: the RVs' leases, VVs that a lost
@@ -707,6 +698,14 @@ class StationWatch:
         # its VVs are moved off it.
         self._leases_from = 0.0  # time.monotonic() from which leases are checked
         self._online: set[int] = set()  # the RVs whose lease was valid at the last sweep
+
+    def take_up(self, vvm: VVM) -> None:
+        """What a worker that starts (or starts again) hosting the station takes up, with its
+        host's ``vvm`` and on its host thread: the VVs on the station, then the queued VVs of
+        every customer."""
+        here = VirtualVehicle.objects.filter(host_gs_id=self.station_id, status__in=ACTIVE_STATUSES)
+        advance_each(here, vvm=vvm, ground_station=self.name)
+        _admit_all(vvm)
 
     def start(self) -> None:
         self._thread.start()

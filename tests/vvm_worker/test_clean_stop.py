@@ -17,7 +17,7 @@ import requests
 from rest_framework.authtoken.models import Token
 
 from fleet.models import Vehicle
-from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus
+from missions.models import VirtualVehicle, VVStatus
 from tests.factories import (
     AREA_ONE,
     CustomerFactory,
@@ -26,7 +26,12 @@ from tests.factories import (
     VehicleFactory,
 )
 from tests.live import Workers, wait_for
-from tests.vvm_worker.test_distributed import all_ended, assert_paper_results, load
+from tests.vvm_worker.test_distributed import (
+    all_ended,
+    assert_paper_results,
+    load,
+    wait_mid_mission,
+)
 from tests.vvm_worker.test_distributed_faults import counter_program, ended, step_under_way
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_submit
@@ -148,15 +153,7 @@ def test_workers_stopped_with_sigterm_mid_mission_exit_0_and_the_vvs_finish_afte
     workers.start("rvworker", "Heli One")
     workers.start("rvworker", "Heli Two")
     workers.start("gsworker", "GS Base")
-    wait_for(
-        lambda: (
-            Task.objects.filter(status=TaskStatus.DONE).count() >= 2
-            and VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
-        ),
-        timeout=120,
-        what="VVs aboard the RVs, tasks done",
-        details=workers.logs,
-    )
+    wait_mid_mission(workers)
     statuses = {name: workers.terminate(name) for name in ("Heli One", "Heli Two", "GS Base")}
     logs = workers.logs()
     assert statuses == {"Heli One": 0, "Heli Two": 0, "GS Base": 0}, logs

@@ -14,7 +14,7 @@ from fleet.models import Vehicle, VehicleStatus
 from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.conftest import SCENARIOS
 from tests.factories import VehicleFactory
-from tests.live import wait_for
+from tests.live import Workers, wait_for
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vehicle_set_status
 
@@ -40,6 +40,20 @@ def all_ended() -> bool:
     return not VirtualVehicle.objects.exclude(
         status__in=[VVStatus.FINISHED, VVStatus.FAILED, VVStatus.KILLED, VVStatus.CANCELLED]
     ).exists()
+
+
+def wait_mid_mission(workers: Workers) -> None:
+    """Until VVs are aboard the RVs and at least two tasks are done (the workers' logs say
+    why, if not)."""
+    wait_for(
+        lambda: (
+            Task.objects.filter(status=TaskStatus.DONE).count() >= 2
+            and VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
+        ),
+        timeout=120,
+        what="VVs aboard the RVs, tasks done",
+        details=workers.logs,
+    )
 
 
 def assert_paper_results() -> None:

@@ -15,7 +15,7 @@ import pytest
 from django.core.management import CommandError, call_command
 
 from fleet.models import GroundStation, Vehicle
-from missions.models import Migration, Task, TaskStatus, VirtualVehicle, VVStatus
+from missions.models import Migration, VirtualVehicle, VVStatus
 from tests.broker import queued
 from tests.factories import (
     AREA_ONE,
@@ -25,7 +25,12 @@ from tests.factories import (
     VehicleFactory,
 )
 from tests.live import Workers, wait_for
-from tests.vvm_worker.test_distributed import all_ended, assert_paper_results, load
+from tests.vvm_worker.test_distributed import (
+    all_ended,
+    assert_paper_results,
+    load,
+    wait_mid_mission,
+)
 from tests.vvm_worker.test_distributed_faults import (
     TASKS,
     TWO_AREAS,
@@ -55,14 +60,13 @@ VV.task.execute(at(12.866), function (d) { visits += 1; VV.storage.store('two', 
 """
 
 
-@pytest.fixture
-def two_rvs_one_process(broker) -> Iterator[tuple[RVHost, list[StepResult]]]:
+def _hosted(*, station: bool) -> Iterator[tuple[RVHost, list[StepResult]]]:
     """Heli One and Heli Two hosted by one RV worker's host in this process (instant flights),
-    with every step its runtime runs recorded."""
-    GroundStationFactory(name="GS Base")
+    with GS Base too when ``station``, and every step its runtime runs recorded."""
+    gs = GroundStationFactory(name="GS Base")
     one = VehicleFactory(name="Heli One", area=AREA_ONE)
     two = VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.866)
-    host = RVHost([one, two], speed=0)
+    host = RVHost([one, two], speed=0, station=gs if station else None)
     steps: list[StepResult] = []
     runtime_step = host.vvm.runtime.step
 
@@ -77,6 +81,12 @@ def two_rvs_one_process(broker) -> Iterator[tuple[RVHost, list[StepResult]]]:
         yield host, steps
     finally:
         host.stop()
+
+
+@pytest.fixture
+def two_rvs_one_process(broker) -> Iterator[tuple[RVHost, list[StepResult]]]:
+    """Heli One and Heli Two in one RV worker's host; GS Base is another process's."""
+    yield from _hosted(station=False)
 
 
 def test_a_vv_migrating_between_two_rvs_of_one_process_resumes_its_warm_context(
@@ -116,26 +126,9 @@ def test_a_vv_migrating_between_two_rvs_of_one_process_resumes_its_warm_context(
 
 @pytest.fixture
 def station_and_two_rvs_one_process(broker) -> Iterator[tuple[RVHost, list[StepResult]]]:
-    """GS Base, Heli One and Heli Two hosted by one RV worker's host in this process (``rvworker
-    "Heli One" "Heli Two" --station "GS Base"``, instant flights), every step recorded."""
-    station = GroundStationFactory(name="GS Base")
-    one = VehicleFactory(name="Heli One", area=AREA_ONE)
-    two = VehicleFactory(name="Heli Two", area=AREA_TWO, depot_lng=12.866)
-    host = RVHost([one, two], speed=0, station=station)
-    steps: list[StepResult] = []
-    runtime_step = host.vvm.runtime.step
-
-    def step(step: StepInput) -> StepResult:
-        result = runtime_step(step)
-        steps.append(result)
-        return result
-
-    host.vvm.runtime.step = step  # type: ignore[method-assign]
-    host.start()
-    try:
-        yield host, steps
-    finally:
-        host.stop()
+    """GS Base, Heli One and Heli Two in one RV worker's host (``rvworker "Heli One" "Heli Two"
+    --station "GS Base"``)."""
+    yield from _hosted(station=True)
 
 
 def test_a_vv_admitted_on_a_station_of_the_rvs_process_keeps_its_warm_context_aboard(
@@ -208,15 +201,7 @@ def test_a_worker_of_several_rvs_stopped_with_sigterm_mid_mission_exits_0_and_it
         details=workers.logs,
     )
     workers.start("gsworker", "GS Base")
-    wait_for(
-        lambda: (
-            Task.objects.filter(status=TaskStatus.DONE).count() >= 2
-            and VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
-        ),
-        timeout=120,
-        what="VVs aboard the RVs, tasks done",
-        details=workers.logs,
-    )
+    wait_mid_mission(workers)
     status = workers.terminate("Heli One")
     logs = workers.logs()
     assert status == 0, logs
@@ -243,15 +228,7 @@ def test_a_worker_of_rvs_and_their_station_stopped_with_sigterm_mid_mission_exit
     load("paper-fig3.json", tmp_path, monkeypatch)
     combined = ("rvworker", "Heli One", "Heli Two")
     workers.start(*combined, options=["--station", "GS Base"])
-    wait_for(
-        lambda: (
-            Task.objects.filter(status=TaskStatus.DONE).count() >= 2
-            and VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
-        ),
-        timeout=120,
-        what="VVs aboard the RVs, tasks done",
-        details=workers.logs,
-    )
+    wait_mid_mission(workers)
     status = workers.terminate("Heli One")
     logs = workers.logs()
     assert status == 0, logs
