@@ -45,6 +45,10 @@ class Traffic:
         self.responses: list[tuple[int, str]] = []
         self.sockets: list[dict[str, Any]] = []
         self.expected: set[tuple[int, str]] = set()
+        # How many documents each page has begun to load, and that count when each request
+        # was sent: a request aborted after its page began loading another document was left.
+        self.navigations: dict[Page, int] = {}
+        self.sent_at: dict[Request, tuple[Page, int]] = {}
         context.on("request", self._request)
         context.on("response", self._response)
         context.on("requestfailed", self._failed)
@@ -88,6 +92,24 @@ class Traffic:
         parts = urlsplit(request.url)
         if parts.scheme in ("http", "https", "ws", "wss") and parts.netloc != self.origin:
             self.problems.append(f"request outside the platform: {request.method} {request.url}")
+        page = self._page_of(request)
+        if page is not None and not request.is_navigation_request():
+            self.sent_at[request] = (page, self.navigations.get(page, 0))
+
+    @staticmethod
+    def _page_of(request: Request) -> Page | None:
+        try:
+            return request.frame.page
+        except Exception:  # a service worker's request, or its frame is gone
+            return None
+
+    def _left(self, request: Request) -> bool:
+        """Its page moved on to another document (or closed) after the request was sent."""
+        sent = self.sent_at.get(request)
+        if sent is None:
+            return False
+        page, navigations = sent
+        return page.is_closed() or self.navigations.get(page, 0) > navigations
 
     def _response(self, response: Response) -> None:
         parts = urlsplit(response.url)
@@ -104,11 +126,15 @@ class Traffic:
         ):
             # A map tile the map dropped on its way: its view changed, or the page was left.
             return
+        if request.failure == "net::ERR_ABORTED" and self._left(request):
+            # A script, style or picture of a page the test left before it came.
+            return
         self.problems.append(f"failed: {request.method} {request.url} ({request.failure})")
 
     def _navigating(self, page: Page, request: Request) -> None:
         """The page leaves its document: its sockets close, whatever they had received."""
         if request.is_navigation_request() and request.frame == page.main_frame:
+            self.navigations[page] = self.navigations.get(page, 0) + 1
             for entry in self.sockets:
                 if entry["page"] is page and not entry["closed"]:
                     entry["left"] = True
