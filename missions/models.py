@@ -87,12 +87,21 @@ class VirtualVehicle(models.Model):
     """
 
     id = models.UUIDField(primary_key=True, default=uuid.uuid4, editable=False)
-    customer = models.ForeignKey(Customer, on_delete=models.CASCADE, related_name="vvs")
+    # A foreign key here and below has no index of its own where a composite index or a unique
+    # constraint starts with it: every index is one more write per row, at every task.
+    customer = models.ForeignKey(
+        Customer, on_delete=models.CASCADE, related_name="vvs", db_index=False
+    )
     name = models.CharField(max_length=120, validators=[validate_vv_name])
     program = models.TextField()
     status = models.CharField(max_length=10, choices=VVStatus.choices, default=VVStatus.QUEUED)
     host_gs = models.ForeignKey(
-        GroundStation, null=True, blank=True, on_delete=models.SET_NULL, related_name="vvs"
+        GroundStation,
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
+        related_name="vvs",
+        db_index=False,
     )
     host_rv = models.ForeignKey(
         Vehicle, null=True, blank=True, on_delete=models.SET_NULL, related_name="vvs"
@@ -187,7 +196,9 @@ class JournalEntry(models.Model):
     Append-only: the journal and the program are the VV's checkpoint, which a new context replays.
     """
 
-    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="journal")
+    vv = models.ForeignKey(
+        VirtualVehicle, on_delete=models.CASCADE, related_name="journal", db_index=False
+    )
     seq = models.PositiveIntegerField()
     entry = models.JSONField()
 
@@ -210,7 +221,9 @@ class TaskStatus(models.TextChoices):
 class Task(models.Model):
     """A point task a VV asked for: go there within the tolerance and read these sensors."""
 
-    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="tasks")
+    vv = models.ForeignKey(
+        VirtualVehicle, on_delete=models.CASCADE, related_name="tasks", db_index=False
+    )
     q = models.PositiveIntegerField(help_text="Ordinal of the VVM-API request.")
     index = models.PositiveIntegerField(default=0, help_text="Index in an executeAll batch.")
     lat = models.FloatField()
@@ -220,7 +233,12 @@ class Task(models.Model):
     sensors = models.JSONField()
     status = models.CharField(max_length=10, choices=TaskStatus.choices, default=TaskStatus.OPEN)
     vehicle = models.ForeignKey(
-        Vehicle, null=True, blank=True, on_delete=models.SET_NULL, related_name="tasks"
+        Vehicle,
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
+        related_name="tasks",
+        db_index=False,
     )
     requested_s = models.FloatField()
     assigned_s = models.FloatField(null=True, blank=True, help_text="When an RV took it on.")
@@ -246,7 +264,9 @@ class Task(models.Model):
 class StorageDocument(models.Model):
     """One key of a VV's private storage and its JSON value."""
 
-    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="storage")
+    vv = models.ForeignKey(
+        VirtualVehicle, on_delete=models.CASCADE, related_name="storage", db_index=False
+    )
     key = models.CharField(max_length=128)
     value = models.JSONField()
     size_bytes = models.PositiveIntegerField()
@@ -263,7 +283,9 @@ class StorageDocument(models.Model):
 class LogEntry(models.Model):
     """A line of a VV's log, shown to its owner."""
 
-    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="log")
+    vv = models.ForeignKey(
+        VirtualVehicle, on_delete=models.CASCADE, related_name="log", db_index=False
+    )
     seq = models.PositiveIntegerField(
         null=True, blank=True, help_text="The program's effect number; empty for the platform's."
     )
@@ -315,7 +337,9 @@ class TrackPoint(models.Model):
     """Where a VV was while an RV carried it: a point at every start and end of a flight leg,
     so the straight legs between them are its path (the map's green line, a mission's replay)."""
 
-    vv = models.ForeignKey(VirtualVehicle, on_delete=models.CASCADE, related_name="track")
+    vv = models.ForeignKey(
+        VirtualVehicle, on_delete=models.CASCADE, related_name="track", db_index=False
+    )
     t_s = models.FloatField()
     lat = models.FloatField()
     lng = models.FloatField()
@@ -348,7 +372,7 @@ class Message(models.Model):
     # The sender's name when it sent it ("" over the API): what the recipient reads as `from`.
     sender_name = models.CharField(max_length=120, blank=True)
     recipient = models.ForeignKey(
-        VirtualVehicle, on_delete=models.CASCADE, related_name="messages_in"
+        VirtualVehicle, on_delete=models.CASCADE, related_name="messages_in", db_index=False
     )
     value = models.TextField(help_text="The value as JSON text.")
     bytes = models.PositiveIntegerField()
