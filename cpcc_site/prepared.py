@@ -102,16 +102,14 @@ class PreparedRead(Generic[M]):
         """Model instances from rows as ``compiler`` selected them."""
         if not rows:
             return []
-        select, klass_info = compiler.select, compiler.klass_info
-        converters = compiler.get_converters([column for column, _, _ in select])
-        if converters:
-            rows = list(compiler.apply_converters(rows, converters))
-        fields = klass_info["select_fields"]
-        start, end = fields[0], fields[-1] + 1
-        names = [column.target.attname for column, _, _ in select[start:end]]
-        populators = get_related_populators(klass_info, select, using)
-        annotations = list(compiler.annotation_col_map.items())
-        model = klass_info["model"]
+        plan = getattr(compiler, _BUILD_PLAN, None)
+        if plan is None:
+            plan = _BuildPlan.of(compiler, using)
+            setattr(compiler, _BUILD_PLAN, plan)  # (read again with this compiler, if cached)
+        if plan.converters:
+            rows = list(compiler.apply_converters(rows, plan.converters))
+        model, names, start, end = plan.model, plan.names, plan.start, plan.end
+        populators, annotations = plan.populators, plan.annotations
         found: list[M] = []
         for row in rows:
             obj: M = model.from_db(using, names, row[start:end])
@@ -166,7 +164,10 @@ class PreparedRead(Generic[M]):
 
     @staticmethod
     def _converted(compiler: Any, found: list[Any]) -> list[tuple[Any, ...]]:
-        converters = compiler.get_converters([column for column, _, _ in compiler.select])
+        converters = getattr(compiler, _CONVERTERS, None)
+        if converters is None:
+            converters = compiler.get_converters([column for column, _, _ in compiler.select])
+            setattr(compiler, _CONVERTERS, converters)
         if converters:
             found = [tuple(row) for row in compiler.apply_converters(found, converters)]
         return found
@@ -201,6 +202,41 @@ class PreparedRead(Generic[M]):
                 where.append(places[0])
             at.append(where)
         return compiler, sql, list(params), at
+
+
+# What a compiled read works out once (kept on its compiler, which is kept with its SQL).
+_BUILD_PLAN = "_cpcc_build_plan"
+_CONVERTERS = "_cpcc_converters"
+
+
+@dataclass(frozen=True)
+class _BuildPlan:
+    """How a compiled read's rows become model instances: what Django works out for each
+    queryset it runs (the columns' converters, the fields' names, the related objects'
+    populators), worked out once per compiled read. Nothing in it changes with the rows."""
+
+    model: type[models.Model]
+    converters: dict[int, Any]
+    names: list[str]
+    start: int
+    end: int
+    populators: list[Any]
+    annotations: list[tuple[str, int]]
+
+    @classmethod
+    def of(cls, compiler: Any, using: str) -> _BuildPlan:
+        select, klass_info = compiler.select, compiler.klass_info
+        fields = klass_info["select_fields"]
+        start, end = fields[0], fields[-1] + 1
+        return cls(
+            model=klass_info["model"],
+            converters=compiler.get_converters([column for column, _, _ in select]),
+            names=[column.target.attname for column, _, _ in select[start:end]],
+            start=start,
+            end=end,
+            populators=get_related_populators(klass_info, select, using),
+            annotations=list(compiler.annotation_col_map.items()),
+        )
 
 
 class PreparedPages(Generic[M]):
