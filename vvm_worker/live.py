@@ -13,6 +13,7 @@ import json
 import logging
 import queue
 import threading
+import time
 from typing import Any
 
 import redis
@@ -28,6 +29,12 @@ from missions.events import (
 )
 
 logger = logging.getLogger("cpcc.live")
+
+# A background publisher sends at most one round trip to Redis this often; what comes in
+# meanwhile waits and goes with the next. A busy RV worker's pieces of work (hundreds a second)
+# then cost Redis, and the worker's other threads, a few dozen wake-ups a second; a map is
+# told 50 ms later at most.
+PUBLISH_INTERVAL_S = 0.05
 
 
 def feed_client() -> redis.Redis:
@@ -49,8 +56,8 @@ class FeedAnnouncer:
 
     ``in_background`` (with ``batched``): ``flush`` hands what committed to a publisher thread
     and returns at once, so the host thread never waits for Redis; the publisher sends all
-    that waits in one pipeline, in the order it committed. ``close`` publishes what is left
-    and stops the thread."""
+    that waits in one pipeline, in the order it committed, at most once every
+    PUBLISH_INTERVAL_S. ``close`` publishes what is left and stops the thread."""
 
     def __init__(
         self,
@@ -101,8 +108,12 @@ class FeedAnnouncer:
 
     def _publish_waiting(self) -> None:
         outbox = self._outbox
+        published_at = float("-inf")
         while True:
             events = outbox.get()
+            pause = published_at + PUBLISH_INTERVAL_S - time.monotonic()
+            if pause > 0 and events is not None:
+                time.sleep(pause)  # what else comes in meanwhile goes in the same round trip
             stop = events is None
             waiting = list(events or [])
             while not stop:  # whatever else waits goes in the same round trip
@@ -116,6 +127,7 @@ class FeedAnnouncer:
                     waiting.extend(more)
             if waiting:
                 self._publish(waiting)
+                published_at = time.monotonic()
             if stop:
                 return
 

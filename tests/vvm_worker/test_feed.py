@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 
 import pytest
 import redis
 from django.db import transaction
 
 from missions.events import EVENTS_STREAM
-from vvm_worker.live import FeedAnnouncer
+from vvm_worker.live import PUBLISH_INTERVAL_S, FeedAnnouncer
 
 pytestmark = pytest.mark.django_db
 
@@ -121,6 +122,23 @@ def test_in_the_background_the_host_thread_never_waits_and_close_publishes_what_
     feed.close()
     assert published(client) == [1, 2, 3, 4, 5]
     assert CountingRedis.pipelines <= 2  # what waited went out together
+
+
+def test_in_the_background_a_burst_of_flushes_goes_out_in_one_round_trip_an_interval(
+    client, django_capture_on_commit_callbacks
+) -> None:
+    """A busy host flushes after every piece of work: Redis gets one round trip per
+    PUBLISH_INTERVAL_S at most (the first at once), with everything in order."""
+    feed = FeedAnnouncer(client, batched=True, in_background=True)
+    started = time.monotonic()
+    for n in range(1, 41):
+        with django_capture_on_commit_callbacks(execute=True), transaction.atomic():
+            feed.announce({"n": n})
+        feed.flush()
+    feed.close()
+    elapsed = time.monotonic() - started
+    assert published(client) == list(range(1, 41))
+    assert CountingRedis.pipelines <= 2 + elapsed / PUBLISH_INTERVAL_S
 
 
 def test_in_the_background_needs_batches() -> None:
