@@ -15,7 +15,13 @@ from tests.factories import VehicleFactory
 from vvm_worker.dispatch import SHARED_QUEUE, gs_queue, rv_queue
 from vvm_worker.hosts import GSHost
 from vvm_worker.platform import platform_vvm
-from vvm_worker.services import vv_advance, vv_cancel, vv_create_for_user, vv_submit
+from vvm_worker.services import (
+    vv_admit_queued,
+    vv_advance,
+    vv_cancel,
+    vv_create_for_user,
+    vv_submit,
+)
 
 PROGRAM = "VV.log('hello');"
 
@@ -110,3 +116,30 @@ def test_a_ground_stations_worker_advances_the_vvs_it_admits_itself_without_a_me
         assert ("cpcc.vv_advance", [str(second.pk)]) not in sent
     finally:
         host.stop()
+
+
+def test_a_vv_that_ends_asks_for_admission_only_when_its_customer_has_one_queued(
+    customer_a, ground_station, broker, django_capture_on_commit_callbacks
+) -> None:
+    """A VV that ends frees a slot: a message asks any station to admit the customer's queued
+    VVs, unless none is queued once the end is committed (most VVs end so: no message, no
+    admission for nothing)."""
+    vvm = platform_vvm()
+    customer_a.max_parallel_vvs = 1
+    customer_a.save()
+    with django_capture_on_commit_callbacks(execute=True):
+        first = vv_submit(customer=customer_a, name="First", program=PROGRAM, vvm=vvm)
+        waiting = vv_submit(customer=customer_a, name="Waiting", program=PROGRAM, vvm=vvm)
+    assert waiting.status == "queued"
+    broker.delete(SHARED_QUEUE)
+    with django_capture_on_commit_callbacks(execute=True):
+        vv_advance(vv_id=first.pk, vvm=vvm)  # its only step: it finishes
+    assert VirtualVehicle.objects.get(pk=first.pk).status == "finished"
+    assert queued(broker, SHARED_QUEUE) == [("cpcc.admit", [customer_a.pk])]
+
+    broker.delete(SHARED_QUEUE)
+    with django_capture_on_commit_callbacks(execute=True):
+        vv_admit_queued(customer_id=customer_a.pk, vvm=vvm)
+        vv_advance(vv_id=waiting.pk, vvm=vvm)  # the last one ends: nothing queued behind it
+    assert VirtualVehicle.objects.get(pk=waiting.pk).status == "finished"
+    assert queued(broker, SHARED_QUEUE) == []
