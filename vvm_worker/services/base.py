@@ -15,6 +15,7 @@ from django.db import transaction
 from django.db.models import Count, DateTimeField, ExpressionWrapper, OuterRef, Subquery
 from django.db.models.functions import Coalesce, Now
 
+from cpcc_site.prepared import PreparedRead
 from fleet.geo import Position, distance_m
 from fleet.models import GroundStation, SensorType
 from fleet.selectors import UnknownSensors, sensors_by_name
@@ -161,11 +162,15 @@ class ProgramRejected(ValueError):
         self.problem = problem
 
 
+# Every ground station (SQL written once: read for every VV that ends on an RV).
+_STATIONS = PreparedRead(lambda: GroundStation.objects.all(), samples=[])
+
+
 def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> GroundStation | None:
     """The ground station for a VV: the nearest to ``near`` (an RV it leaves), else the one
     with the fewest VVs; None when there is none."""
     if near is not None:
-        stations = list(GroundStation.objects.all())
+        stations = _STATIONS.all()
         if not stations:
             return None
         return min(stations, key=lambda gs: (distance_m(near, gs.position), gs.name))

@@ -716,9 +716,16 @@ def _end(vv: VirtualVehicle, result: StepResult, vvm: VVM) -> None:
         vv_notify(vv=vv, event=event, vvm=vvm, at_ms=vvm.clock.epoch_ms(now))
 
 
+# A VV's open tasks (SQL written once: read for every VV that ends).
+_OPEN_TASKS = PreparedRead(
+    lambda vv_id: Task.objects.filter(vv_id=vv_id, status=TaskStatus.OPEN),
+    samples=[("vv_id", uuid.UUID(int=0))],
+)
+
+
 def _cancel_open_tasks(vv: VirtualVehicle, vvm: VVM) -> None:
     """Cancel the VV's open tasks and take them off the RVs they were planned on."""
-    open_tasks = list(vv.tasks.filter(status=TaskStatus.OPEN))
+    open_tasks = _OPEN_TASKS.all(vv.pk)
     if not open_tasks:
         return
     vv_release_tasks(vv=vv, vvm=vvm, open_tasks=open_tasks)
