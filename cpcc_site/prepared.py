@@ -164,10 +164,7 @@ class PreparedRead(Generic[M]):
 
     @staticmethod
     def _converted(compiler: Any, found: list[Any]) -> list[tuple[Any, ...]]:
-        converters = getattr(compiler, _CONVERTERS, None)
-        if converters is None:
-            converters = compiler.get_converters([column for column, _, _ in compiler.select])
-            setattr(compiler, _CONVERTERS, converters)
+        converters = _converters(compiler)
         if converters:
             found = [tuple(row) for row in compiler.apply_converters(found, converters)]
         return found
@@ -209,6 +206,15 @@ _BUILD_PLAN = "_cpcc_build_plan"
 _CONVERTERS = "_cpcc_converters"
 
 
+def _converters(compiler: Any) -> dict[int, Any]:
+    """The converters of the compiled read's columns, worked out at its first read."""
+    converters = getattr(compiler, _CONVERTERS, None)
+    if converters is None:
+        converters = compiler.get_converters([column for column, _, _ in compiler.select])
+        setattr(compiler, _CONVERTERS, converters)
+    return converters
+
+
 @dataclass(frozen=True)
 class _BuildPlan:
     """How a compiled read's rows become model instances: what Django works out for each
@@ -230,7 +236,7 @@ class _BuildPlan:
         start, end = fields[0], fields[-1] + 1
         return cls(
             model=klass_info["model"],
-            converters=compiler.get_converters([column for column, _, _ in select]),
+            converters=_converters(compiler),
             names=[column.target.attname for column, _, _ in select[start:end]],
             start=start,
             end=end,

@@ -28,6 +28,7 @@ from missions.models import (
     TaskStatus,
     TrackPoint,
     VirtualVehicle,
+    VVStatus,
 )
 from missions.readings import IMAGE_FILE, image_file, image_references
 from missions.waiting import with_message_wait
@@ -165,6 +166,20 @@ _CUSTOMERS_VV = PreparedRead(
     lambda pk, customer_id: _with_hosts().order_by().filter(pk=pk, customer_id=customer_id),
     samples=[("pk", uuid.UUID(int=0)), ("customer_id", -1)],
 )
+
+
+_QUEUED = PreparedRead(
+    lambda customer_id: VirtualVehicle.objects.filter(
+        customer_id=customer_id, status=VVStatus.QUEUED
+    ).values_list("pk")[:1],
+    samples=[("customer_id", -5_000_001)],
+)
+
+
+def customer_has_queued_vv(*, customer_id: int) -> bool:
+    """Whether a VV of the customer waits to be admitted (SQL written once: asked whenever a
+    slot may have freed)."""
+    return bool(_QUEUED.rows(customer_id))
 
 
 def vv_get_for_user(*, user: User, vv_id: uuid.UUID | str) -> VirtualVehicle:

@@ -12,7 +12,8 @@ from django.db import transaction
 
 from cpcc_site.celery import app
 from cpcc_site.prepared import PreparedRead
-from missions.models import VirtualVehicle, VVStatus
+from missions.models import VirtualVehicle
+from missions.selectors import customer_has_queued_vv
 from vvm_worker.dispatch import (
     ADMIT_TASK,
     SHARED_QUEUE,
@@ -96,21 +97,12 @@ class CeleryDispatcher:
         app.send_task(VEHICLE_CHANGED_TASK, args=[vehicle_id], queue=rv_queue(vehicle_id))
 
 
-# Whether the customer has a queued VV (SQL written once).
-_QUEUED = PreparedRead(
-    lambda customer_id: VirtualVehicle.objects.filter(
-        customer_id=customer_id, status=VVStatus.QUEUED
-    ).values_list("pk")[:1],
-    samples=[("customer_id", -5_000_001)],
-)
-
-
 def _admit_if_queued(customer_id: int) -> None:
     """Ask for the customer's admission if a VV of it is queued, looked at after the commit
     that freed the slot: a VV queued later asks for its own admission once it is committed,
     which then sees the slot free. (Most VVs that end leave nothing queued behind them: no
     message, no admission unit of work.)"""
-    if _QUEUED.rows(customer_id):
+    if customer_has_queued_vv(customer_id=customer_id):
         app.send_task(ADMIT_TASK, args=[customer_id], queue=SHARED_QUEUE)
 
 

@@ -70,16 +70,6 @@ def _entry_text(entry: Mapping[str, Any] | str) -> str:
     return json.dumps(entry, sort_keys=True, separators=(",", ":"))
 
 
-def _over_heap(isolate: v8.Isolate, heap_bytes: int) -> bool:
-    """Whether the isolate's heap is over ``heap_bytes`` now (on the V8 thread)."""
-    if heap_bytes <= 0:
-        return False
-    try:
-        return int(isolate.heap_stats()["used_heap_size"]) > heap_bytes
-    except Exception:  # an isolate V8 cannot tell about: not a reason to kill the VV
-        return False
-
-
 class StaleContext(Exception):
     """The context cannot run the step: its journal is not a prefix of the VV's journal (it
     was rolled back), or a program it kept suspended left what a new run would see."""
@@ -142,6 +132,15 @@ class VVContext:
     def heap_bytes(self) -> int:
         """Bytes of V8 heap this context uses now."""
         return int(self._isolate.heap_stats()["used_heap_size"])
+
+    def _over_heap(self, limit: int) -> bool:
+        """Whether the heap is over ``limit`` bytes now (0: no limit)."""
+        if limit <= 0:
+            return False
+        try:
+            return self.heap_bytes() > limit
+        except Exception:  # an isolate V8 cannot tell about: not a reason to kill the VV
+            return False
 
     def close(self) -> None:
         self.usable = False
@@ -302,7 +301,7 @@ class VVContext:
         except JSOOMException:
             killed_by = "heap"
         except JSEvalException as exc:
-            if isolate.hard_memory_limit_reached() or _over_heap(isolate, heap_bytes):
+            if isolate.hard_memory_limit_reached() or self._over_heap(heap_bytes):
                 # (V8 notes the limit at a garbage collection: a step that filled the heap
                 # without one leaves the next call to fail with the heap over its limit.)
                 killed_by = "heap"

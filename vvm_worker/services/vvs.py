@@ -42,7 +42,7 @@ from missions.models import (
     WaitReason,
     vv_name_problem,
 )
-from missions.selectors import vv_get_for_user
+from missions.selectors import customer_has_queued_vv, vv_get_for_user
 from vvm_worker.control import VehicleState
 from vvm_worker.dispatch import HostRef
 from vvm_worker.runtime import (
@@ -248,7 +248,7 @@ def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
     unless the fleet misses its service class's target now: then none starts and each says
     why it is held (``WaitReason.SERVICE_LEVEL``) until a later pass finds the class within
     its target (one of its tasks ends: ``class_held_nudge``; a ground station's sweep)."""
-    if not VirtualVehicle.objects.filter(customer_id=customer_id, status=VVStatus.QUEUED).exists():
+    if not customer_has_queued_vv(customer_id=customer_id):
         return []  # nothing waits (a VV that is queued later asks again)
     return _admit(customer_id, vvm)
 
