@@ -7,6 +7,8 @@ so the tests run their work in a fresh Python process and judge it by its exit s
 
 from __future__ import annotations
 
+import asyncio
+import logging
 import subprocess
 import sys
 import textwrap
@@ -268,6 +270,58 @@ def test_a_pool_filled_ahead_gives_isolates_without_preparing_them_when_taken(
     assert len({id(p.isolate) for p in taken}) == 3
     for prepared in taken:
         prepared.isolate.close()
+
+
+def test_a_pool_prepares_isolates_side_by_side_and_keeps_those_made_when_one_fails(
+    monkeypatch, caplog
+) -> None:
+    """A burst of new VVs takes isolates faster than one preparation after the other makes
+    them: the pool prepares FILL_AT_ONCE at a time. One that fails loses only itself."""
+    from vvm_worker.runtime import pool as pool_module
+
+    real = pool_module.prepare
+    calls, running, most = 0, 0, 0
+    together: list[asyncio.Event] = []
+
+    async def prepare() -> pool_module.Prepared:
+        nonlocal calls, running, most
+        calls += 1
+        call = calls
+        running += 1
+        most = max(most, running)
+        if not together:
+            together.append(asyncio.Event())
+        if running == pool_module.FILL_AT_ONCE:
+            together[0].set()
+        try:
+            # The first preparations wait for each other: made one at a time, they never meet.
+            await asyncio.wait_for(together[0].wait(), 10)
+            if call == 3:
+                raise RuntimeError("this one fails")
+            return await real()
+        finally:
+            running -= 1
+
+    monkeypatch.setattr(pool_module, "prepare", prepare)
+    pool = pool_module.IsolatePool(4)
+    with caplog.at_level(logging.ERROR, logger="vvm_worker.runtime.pool"):
+        pool.fill()
+        deadline = time.monotonic() + 30
+        while v8.call(lambda: _filling(pool)):
+            assert time.monotonic() < deadline, "the pool did not stop filling"
+            time.sleep(0.05)
+    assert pool_module.FILL_AT_ONCE >= 2 and most == pool_module.FILL_AT_ONCE
+    ready = v8.call(lambda: _count(pool))
+    assert (calls, ready) == (4, 3)  # the second pair: one failed, the other is kept
+    assert "isolates could not be prepared ahead of time" in caplog.text
+    monkeypatch.setattr(pool_module, "prepare", real)
+    pool.size = 0
+    for _ in range(ready):
+        pool.take().isolate.close()
+
+
+async def _filling(pool) -> bool:  # type: ignore[no-untyped-def]
+    return pool._filling is not None
 
 
 async def _count(pool) -> int:  # type: ignore[no-untyped-def]
