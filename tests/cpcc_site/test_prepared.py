@@ -321,3 +321,79 @@ def test_a_read_sent_ahead_comes_back_with_the_writes_sent_after_it(monkeypatch)
         )
         assert not syncs
     assert dict(VirtualVehicle.objects.values_list("pk", "steps")) == {vv.pk: 5, other.pk: 6}
+
+
+def _commits(monkeypatch) -> list[str]:
+    """What the server's transaction was when Django asked psycopg to commit: ``idle`` means
+    it was committed already (with the unit's last writes), so the commit sent nothing."""
+    import psycopg
+    from psycopg import pq
+
+    seen: list[str] = []
+    real = psycopg.Connection.commit
+
+    def spied(self):  # type: ignore[no-untyped-def]
+        status = self.pgconn.transaction_status
+        seen.append("idle" if status == pq.TransactionStatus.IDLE else "open")
+        return real(self)
+
+    monkeypatch.setattr(psycopg.Connection, "commit", spied)
+    return seen
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
+def test_a_unit_of_work_of_its_own_commits_with_its_last_writes(monkeypatch) -> None:
+    """``pipelined_transaction``: the writes and the COMMIT go to PostgreSQL together; what
+    waits for the commit (``on_commit``) runs once it is done, and a write that fails leaves
+    nothing behind, as a transaction of its own does on any database."""
+    from cpcc_site.prepared import pipelined_transaction
+
+    postgres = connection.vendor == "postgresql"
+    commits = _commits(monkeypatch) if postgres else []
+    vv = _vv()
+    commits.clear()  # (making the VV committed by itself)
+    done: list[int] = []
+    with pipelined_transaction():
+        transaction.on_commit(lambda: done.append(VirtualVehicle.objects.get(pk=vv.pk).steps))
+        with deferred():
+            vv.steps = 4
+            save_fields(vv, ["steps"])
+            tasks = [_task(vv, 3)]
+            insert_rows(tasks)
+        assert not done
+    assert done == [4] and tasks[0].pk is not None
+    assert Task.objects.get(pk=tasks[0].pk).vv_id == vv.pk
+    if postgres:
+        assert commits == ["idle"]  # nothing was left for a round trip of its own
+
+    def duplicate() -> None:
+        with pipelined_transaction(), deferred():
+            vv.steps = 5
+            save_fields(vv, ["steps"])
+            insert_rows([_task(vv, 3)])  # a second task of request 3, index 0
+
+    with pytest.raises(IntegrityError):
+        duplicate()
+    assert VirtualVehicle.objects.get(pk=vv.pk).steps == 4
+    assert Task.objects.filter(vv=vv).count() == 1
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
+def test_a_unit_of_work_inside_another_transaction_commits_nothing_of_its_own() -> None:
+    """Inside an outer transaction the unit is a savepoint: its writes stand or fall with the
+    outer transaction, which alone commits."""
+    from cpcc_site.prepared import pipelined_transaction
+
+    vv = _vv()
+
+    def outer() -> None:
+        with transaction.atomic():
+            with pipelined_transaction(), deferred():
+                vv.steps = 9
+                save_fields(vv, ["steps"])
+            assert VirtualVehicle.objects.get(pk=vv.pk).steps == 9  # in the outer transaction
+            raise RuntimeError("the outer transaction fails")
+
+    with pytest.raises(RuntimeError):
+        outer()
+    assert VirtualVehicle.objects.get(pk=vv.pk).steps == 0
