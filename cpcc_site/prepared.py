@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
-from django.db import DatabaseError, connections, models, transaction
+from django.db import DatabaseError, connections, models
 from django.db.models.query import get_related_populators
 
 M = TypeVar("M", bound=models.Model)
@@ -477,16 +477,13 @@ _PIPELINE = "_cpcc_pipeline"
 
 
 @contextlib.contextmanager
-def pipelined(using: str = "default", *, commits: bool = False) -> Iterator[None]:
+def pipelined(using: str = "default") -> Iterator[None]:
     """Run a unit of work (inside its transaction) with its ``deferred`` writes pipelined:
     sent to PostgreSQL at once, their answers read with the next statement that waits. When
     the block ends every answer is in, and what the deferred writes check (a row that was
     there to update, the keys of new rows) is done: a failure is raised there, inside the
     transaction, which then rolls back as it would have. On SQLite, or inside another
-    ``pipelined``, it changes nothing.
-
-    ``commits`` (see ``pipelined_transaction``): the block is all of the outermost
-    transaction's work, which commits when it ends."""
+    ``pipelined``, it changes nothing."""
     connection = connections[using]
     if connection.vendor != "postgresql" or getattr(connection, _PIPELINE, None) is not None:
         yield
@@ -498,36 +495,10 @@ def pipelined(using: str = "default", *, commits: bool = False) -> Iterator[None
         try:
             with connection.execute_wrapper(state.wait_unless_deferred):
                 yield
-            if commits and _outermost(connection):
-                # The COMMIT goes with the block's last writes and is answered in the same
-                # round trip, the pipeline's last. Should a write have failed, the server
-                # skips it and the error is raised here, inside the transaction, as it would
-                # have been. Django's commit then finds nothing left to commit.
-                connection.connection.execute("COMMIT", prepare=False)
         finally:
             setattr(connection, _PIPELINE, None)
     for then in state.then:
         then()
-
-
-def _outermost(connection: Any) -> bool:
-    """Whether the block runs directly in the outermost transaction, which is to commit."""
-    return (
-        connection.in_atomic_block
-        and len(connection.atomic_blocks) == 1
-        and not connection.savepoint_ids
-        and not connection.needs_rollback
-    )
-
-
-@contextlib.contextmanager
-def pipelined_transaction(using: str = "default") -> Iterator[None]:
-    """A unit of work that is a transaction of its own: ``transaction.atomic()`` with
-    ``pipelined`` inside. On PostgreSQL its COMMIT is sent with its last writes and answered
-    with them, one round trip a unit fewer; inside another transaction it is a savepoint, as
-    ``atomic`` makes it, and commits nothing."""
-    with transaction.atomic(using=using), pipelined(using, commits=True):
-        yield
 
 
 @contextlib.contextmanager

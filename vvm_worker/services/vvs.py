@@ -25,7 +25,7 @@ from cpcc_site.prepared import (
     PreparedRead,
     deferred,
     insert_rows,
-    pipelined_transaction,
+    pipelined,
     save_fields,
     send_later,
 )
@@ -533,7 +533,7 @@ def _unit_of_work() -> Iterator[None]:
     step the platform cannot apply does; a database outage is raised as it is, for the
     caller to wait out and redo."""
     try:
-        with pipelined_transaction():
+        with transaction.atomic(), pipelined():
             yield
     except DatabaseError as exc:
         if database.is_outage(exc):
