@@ -72,6 +72,18 @@ WEB_ENV = {
 TARGET_VVS, TARGET_S = 200, 2.0  # issues 13 and 23: 200 VVs submitted over REST in under 2 s
 
 
+SPEED_WORK = "10 million additions in a Python loop"
+# At a module's level (global names), as docs/benchmarks.md has measured it since 2026-11-30.
+_SPEED_CODE = compile("s = 0\nfor i in range(10_000_000):\n    s += i\n", "<speed>", "exec")
+
+
+def machine_speed_s() -> float:
+    """Seconds this process takes for SPEED_WORK: how fast the machine's CPU is right now."""
+    started = time.perf_counter()
+    exec(_SPEED_CODE, {})  # the bench's own constant code
+    return time.perf_counter() - started
+
+
 def _pcts(values: list[float]) -> str:
     if not values:
         return "no samples"
@@ -330,6 +342,7 @@ def main() -> None:
     children: list[subprocess.Popen[bytes]] = []
     logs = []
     posts: list[Post] = []
+    speed_before = machine_speed_s()
 
     def start(
         label: str,
@@ -442,6 +455,7 @@ def main() -> None:
         if redis is not None:
             redis.stop()
 
+    speed_after = machine_speed_s()
     finished = VirtualVehicle.objects.filter(status=VVStatus.FINISHED).count()
     done = Task.objects.filter(status=TaskStatus.DONE).count()
     request: list[float] = []
@@ -478,6 +492,10 @@ def main() -> None:
     engine = "PostgreSQL" if database.startswith("postgres") else "SQLite"
     print(
         f"# {machine} · {os.cpu_count()} cores · {engine} · Redis {'external' if settings.REDIS_URL else 'embedded'}"
+    )
+    print(
+        f"machine speed: {SPEED_WORK} in {speed_before:.2f} s before the run, "
+        f"{speed_after:.2f} s after (a VM's speed drifts: compare runs of similar speed)"
     )
     workers_rv = -(-args.rvs // args.group)
     station = (
