@@ -78,7 +78,7 @@ class IsolatePool:
     """Isolates with the prelude installed, made ahead of time on the V8 thread.
 
     A new isolate, the prelude's freezing of the built-ins and the warm-up run cost 10 to
-    17 ms (measured 2026-12-01); taking a prepared one makes a VV's first step on a host cost
+    17 ms (measured 2026-12-02); taking a prepared one makes a VV's first step on a host cost
     little more than its program. The pool prepares FILL_AT_ONCE isolates at a time.
     ``size`` 0 prepares every isolate when it is needed. The pool's state lives on the V8
     thread (no lock): ``take`` is a call to it.
