@@ -219,3 +219,17 @@ def test_the_demo_runs_the_examples_of_messages_and_pictures_only_next_to_its_de
         str(DEFAULT_SCENARIO),
         "a.json",
     ]
+
+
+def test_the_simulated_copters_of_one_start_get_ports_of_their_own() -> None:
+    """``demo --mavlink`` starts a simulated copter per RV, each on a loopback UDP port chosen
+    before it binds: two given the same port share it, and each RV's worker talks to both
+    (a fence uploaded to the wrong copter, which then refuses every flight)."""
+    from vvm_worker.management.commands.demo import _free_udp_ports
+
+    for _ in range(20):
+        ports = _free_udp_ports(4)
+        assert len(set(ports)) == 4, ports
+        for port in ports:  # free to bind once the probes are gone
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as copter:
+                copter.bind(("127.0.0.1", port))

@@ -336,11 +336,10 @@ class Command(BaseCommand):
         if not vehicles:
             return 0
         names = []
+        ports = iter(_free_udp_ports(len(vehicles) if self.mavlink else 0))
         for vehicle in vehicles:
             if self.mavlink:
-                with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-                    probe.bind(("127.0.0.1", 0))
-                    port = probe.getsockname()[1]
+                port = next(ports)
                 # Every reading over MAVLink too, as mavsim publishes it (from the same
                 # simulated world the platform would read otherwise).
                 sources = {
@@ -368,3 +367,17 @@ class Command(BaseCommand):
 
         vehicle = scenario_event_apply(event=event, vvm=platform_vvm(), on_added=start_worker)
         self.stdout.write(f"  event: {vehicle.name} {event.action}")
+
+
+def _free_udp_ports(count: int) -> list[int]:
+    """``count`` different loopback UDP ports free now. The probes stay bound until all are
+    chosen: one closed before the next is taken could give its port again, and two simulated
+    copters would share it (each vehicle's worker would then talk to both)."""
+    with contextlib.ExitStack() as stack:
+        probes = [
+            stack.enter_context(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
+            for _ in range(count)
+        ]
+        for probe in probes:
+            probe.bind(("127.0.0.1", 0))
+        return [probe.getsockname()[1] for probe in probes]
