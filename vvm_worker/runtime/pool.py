@@ -20,7 +20,9 @@ PRELUDE_SOURCE = (Path(__file__).with_name("prelude.js")).read_text(encoding="ut
 # How long the platform's own calls into an isolate may take (installing the prelude,
 # compiling a program, reading an outcome).
 HOST_TIMEOUT_S = 5.0
-# How many isolates a pool prepares at once (see ``IsolatePool._fill``).
+# How many isolates a pool prepares at once: the owner's maker thread makes isolates one after
+# the other, but each one's prelude and warm-up run on its own native thread, so a burst of
+# new VVs (a worker's start, a bulk submission) waits less for its isolates.
 FILL_AT_ONCE = 2
 
 _WARM_UP_CATALOG = json.dumps(
@@ -79,7 +81,7 @@ class IsolatePool:
 
     A new isolate, the prelude's freezing of the built-ins and the warm-up run cost 10 to
     17 ms (measured 2026-12-02); taking a prepared one makes a VV's first step on a host cost
-    little more than its program. The pool prepares FILL_AT_ONCE isolates at a time.
+    little more than its program. It prepares FILL_AT_ONCE isolates at a time.
     ``size`` 0 prepares every isolate when it is needed. The pool's state lives on the V8
     thread (no lock): ``take`` is a call to it.
     """
@@ -119,19 +121,17 @@ class IsolatePool:
             self._filling = asyncio.get_running_loop().create_task(self._fill())
 
     async def _fill(self) -> None:
-        # FILL_AT_ONCE at a time: the isolates are made one after the other (by the owner's
-        # maker thread), but their prelude runs on each isolate's own native thread, so a
-        # burst of new VVs (a worker's start, a bulk submission) waits less for its isolates.
         try:
             while (wanted := self.size - len(self._ready)) > 0:
                 made = await asyncio.gather(
                     *(prepare() for _ in range(min(wanted, FILL_AT_ONCE))),
                     return_exceptions=True,
                 )
+                # Those made are kept even when another failed: that one alone is lost.
                 self._ready.extend(m for m in made if isinstance(m, Prepared))
-                failed = [m for m in made if not isinstance(m, Prepared)]
-                if failed:
-                    raise failed[0]
+                for failure in made:
+                    if isinstance(failure, BaseException):
+                        raise failure
         except Exception:
             logger.exception("isolates could not be prepared ahead of time")
         finally:
