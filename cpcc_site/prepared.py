@@ -11,7 +11,9 @@ models whose save signals nobody listens to.
 
 On PostgreSQL a unit of work may run ``pipelined``: the writes it marks ``deferred`` go to the
 server without waiting for their answers, which come back with the next statement that waits
-(every other one does, as outside a pipeline), and their checks run when the block ends.
+(every other one does, as outside a pipeline), and their checks run when the block ends. A
+unit that is a transaction of its own (``pipelined_transaction``) sends its COMMIT with its
+last writes when no check waits for their answers, one round trip fewer.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
-from django.db import DatabaseError, connections, models
+from django.db import DatabaseError, connections, models, transaction
 from django.db.models.query import get_related_populators
 
 M = TypeVar("M", bound=models.Model)
@@ -285,11 +287,17 @@ class PreparedPages(Generic[M]):
 _UPDATES: dict[tuple[Any, ...], tuple[str, list[Any]]] = {}
 
 
-def save_fields(obj: models.Model, fields: Sequence[str], *, using: str = "default") -> None:
+def save_fields(
+    obj: models.Model, fields: Sequence[str], *, held: bool = False, using: str = "default"
+) -> None:
     """``obj.save(update_fields=fields)`` for a model without save signals that anyone
     listens to, with its SQL compiled once per model and set of fields: one ``UPDATE`` by the
     primary key. Fields that set themselves (``auto_now``) do so as in ``save``. Raises
-    ``DatabaseError``, as ``save`` does, if the row is not there."""
+    ``DatabaseError``, as ``save`` does, if the row is not there.
+
+    ``held``: the caller's transaction holds the row locked (``select_for_update``), so it is
+    there: a deferred write then waits for no check, and lets its unit of work commit with
+    it (``pipelined_transaction``)."""
     connection = connections[using]
     model = type(obj)
     key = (model, tuple(fields), connection.vendor)
@@ -304,11 +312,15 @@ def save_fields(obj: models.Model, fields: Sequence[str], *, using: str = "defau
     params = [field.get_db_prep_save(field.pre_save(obj, False), connection) for field in targets]
     params.append(model._meta.pk.get_db_prep_value(obj.pk, connection))
 
-    def check(rowcount: int) -> None:
-        if rowcount != 1:
+    def check(cursor: Any) -> None:
+        if cursor.rowcount != 1:
             raise DatabaseError(f"{model.__name__} {obj.pk}: no row to update")
 
-    _execute(connection, sql, params, lambda cursor: check(cursor.rowcount))
+    state: _Pipeline | None = getattr(connection, _PIPELINE, None)
+    if held and state is not None and state.deferring:
+        _execute(connection, sql, params, None)
+    else:
+        _execute(connection, sql, params, check, checks=True)
 
 
 def update_row(
@@ -460,6 +472,7 @@ class _Pipeline:
     pipeline: Any
     deferring: bool = False
     then: list[Callable[[], None]] = field(default_factory=list)
+    checks: int = 0  # of the ``then``: those that may raise (the write did not do its part)
 
     def wait_unless_deferred(
         self, execute: Callable[..., Any], sql: str, params: Any, many: bool, context: Any
@@ -477,13 +490,16 @@ _PIPELINE = "_cpcc_pipeline"
 
 
 @contextlib.contextmanager
-def pipelined(using: str = "default") -> Iterator[None]:
+def pipelined(using: str = "default", *, commits: bool = False) -> Iterator[None]:
     """Run a unit of work (inside its transaction) with its ``deferred`` writes pipelined:
     sent to PostgreSQL at once, their answers read with the next statement that waits. When
     the block ends every answer is in, and what the deferred writes check (a row that was
     there to update, the keys of new rows) is done: a failure is raised there, inside the
     transaction, which then rolls back as it would have. On SQLite, or inside another
-    ``pipelined``, it changes nothing."""
+    ``pipelined``, it changes nothing.
+
+    ``commits`` (``pipelined_transaction``): the block is all the work of the outermost
+    transaction, which commits when it ends."""
     connection = connections[using]
     if connection.vendor != "postgresql" or getattr(connection, _PIPELINE, None) is not None:
         yield
@@ -495,10 +511,38 @@ def pipelined(using: str = "default") -> Iterator[None]:
         try:
             with connection.execute_wrapper(state.wait_unless_deferred):
                 yield
+            if commits and not state.checks and _outermost(connection):
+                # No check waits for the last writes' answers: the COMMIT goes with them and
+                # is answered in the same round trip. A write that fails makes the server
+                # skip it (the transaction rolls back) and is raised here, as it would have
+                # been; Django's commit then finds nothing left to send. A check that waits
+                # could still have to roll the writes back: then the COMMIT waits too.
+                connection.connection.execute("COMMIT", prepare=False)
         finally:
             setattr(connection, _PIPELINE, None)
     for then in state.then:
         then()
+
+
+def _outermost(connection: Any) -> bool:
+    """Whether the block runs directly in the outermost transaction, which is to commit."""
+    return (
+        connection.in_atomic_block
+        and len(connection.atomic_blocks) == 1
+        and not connection.savepoint_ids
+        and not connection.needs_rollback
+    )
+
+
+@contextlib.contextmanager
+def pipelined_transaction(using: str = "default") -> Iterator[None]:
+    """A unit of work that is a transaction of its own: ``transaction.atomic()`` with
+    ``pipelined`` inside. On PostgreSQL its COMMIT goes with its last writes when no check
+    waits for their answers (``save_fields`` of a row it holds, ``held``), one round trip a
+    unit fewer; inside another transaction it is a savepoint, as ``atomic`` makes it, and
+    commits nothing."""
+    with transaction.atomic(using=using), pipelined(using, commits=True):
+        yield
 
 
 @contextlib.contextmanager
@@ -564,10 +608,16 @@ def _sent(sql: str, params: Sequence[Any], using: str) -> Any:
 
 
 def _execute(
-    connection: Any, sql: str, params: list[Any], answer: Callable[[Any], None] | None
+    connection: Any,
+    sql: str,
+    params: list[Any],
+    answer: Callable[[Any], None] | None,
+    *,
+    checks: bool = False,
 ) -> None:
     """Run a write; ``answer(cursor)`` reads what it needs of its answer: at once, or, when
-    the write is deferred, at the end of the ``pipelined`` block."""
+    the write is deferred, at the end of the ``pipelined`` block. ``checks``: ``answer`` may
+    raise (the write did not do its part), which must roll back the unit's writes."""
     state: _Pipeline | None = getattr(connection, _PIPELINE, None)
     if state is None or not state.deferring or answer is None:
         with connection.cursor() as cursor:
@@ -585,3 +635,4 @@ def _execute(
             cursor.close()
 
     state.then.append(read)
+    state.checks += checks

@@ -14,6 +14,7 @@ from cpcc_site.prepared import (
     deferred,
     insert_rows,
     pipelined,
+    pipelined_transaction,
     save_fields,
     update_row,
 )
@@ -321,3 +322,118 @@ def test_a_read_sent_ahead_comes_back_with_the_writes_sent_after_it(monkeypatch)
         )
         assert not syncs
     assert dict(VirtualVehicle.objects.values_list("pk", "steps")) == {vv.pk: 5, other.pk: 6}
+
+
+def _commits(monkeypatch) -> list[str]:
+    """What the server's transaction was when Django asked psycopg to commit: ``idle`` means
+    it was committed already (with the unit's last writes), so the commit sent nothing."""
+    import psycopg
+    from psycopg import pq
+
+    seen: list[str] = []
+    real = psycopg.Connection.commit
+
+    def spied(self):  # type: ignore[no-untyped-def]
+        status = self.pgconn.transaction_status
+        seen.append("idle" if status == pq.TransactionStatus.IDLE else "open")
+        return real(self)
+
+    monkeypatch.setattr(psycopg.Connection, "commit", spied)
+    return seen
+
+
+def _locked(vv: VirtualVehicle) -> VirtualVehicle:
+    return VirtualVehicle.objects.select_for_update(no_key=True).get(pk=vv.pk)
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
+def test_a_unit_of_work_of_its_own_commits_with_its_last_writes(monkeypatch) -> None:
+    """``pipelined_transaction`` whose deferred writes wait for no check (the row it updates
+    is one it holds): the writes and the COMMIT go to PostgreSQL together; what waits for
+    the commit (``on_commit``) runs once it is done, and a write that fails leaves nothing
+    behind, as a transaction of its own does on any database."""
+    postgres = connection.vendor == "postgresql"
+    commits = _commits(monkeypatch) if postgres else []
+    vv = _vv()
+    commits.clear()  # (making the VV committed by itself)
+    done: list[int] = []
+    with pipelined_transaction():
+        held = _locked(vv)
+        transaction.on_commit(lambda: done.append(VirtualVehicle.objects.get(pk=vv.pk).steps))
+        with deferred():
+            held.steps = 4
+            save_fields(held, ["steps"], held=True)
+            tasks = [_task(vv, 3)]
+            insert_rows(tasks)
+        assert not done
+    assert done == [4] and tasks[0].pk is not None
+    assert Task.objects.get(pk=tasks[0].pk).vv_id == vv.pk
+    if postgres:
+        assert commits == ["idle"]  # nothing was left for a round trip of its own
+
+    def duplicate() -> None:
+        with pipelined_transaction():
+            held = _locked(vv)
+            with deferred():
+                held.steps = 5
+                save_fields(held, ["steps"], held=True)
+                insert_rows([_task(vv, 3)])  # a second task of request 3, index 0
+
+    with pytest.raises(IntegrityError):
+        duplicate()
+    assert VirtualVehicle.objects.get(pk=vv.pk).steps == 4
+    assert Task.objects.filter(vv=vv).count() == 1
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
+def test_a_unit_whose_write_waits_for_its_check_commits_only_once_the_check_passed(
+    monkeypatch,
+) -> None:
+    """A deferred write of a row the unit does not hold is checked when its answer is in:
+    the COMMIT waits for that check, and a row that was gone rolls back every write of the
+    unit, those sent before it included."""
+    postgres = connection.vendor == "postgresql"
+    commits = _commits(monkeypatch) if postgres else []
+    vv, gone = _vv(), _vv()
+    stale = VirtualVehicle.objects.get(pk=gone.pk)
+    commits.clear()
+    with pipelined_transaction(), deferred():
+        vv.steps = 2
+        save_fields(vv, ["steps"])
+    assert VirtualVehicle.objects.get(pk=vv.pk).steps == 2
+    if postgres:
+        assert commits == ["open"]  # committed after the check, in a round trip of its own
+    VirtualVehicle.objects.filter(pk=gone.pk).delete()
+
+    def missing_row() -> None:
+        with pipelined_transaction(), deferred():
+            insert_rows([LogEntry(vv=vv, seq=1, at_s=1.0, message="rolled back")])
+            vv.steps = 3
+            save_fields(vv, ["steps"], held=True)
+            save_fields(stale, ["steps"])
+
+    with pytest.raises(DatabaseError, match="no row to update"):
+        missing_row()
+    assert not LogEntry.objects.filter(message="rolled back").exists()
+    assert VirtualVehicle.objects.get(pk=vv.pk).steps == 2
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
+def test_a_unit_of_work_inside_another_transaction_commits_nothing_of_its_own() -> None:
+    """Inside an outer transaction the unit is a savepoint: its writes stand or fall with the
+    outer transaction, which alone commits."""
+    vv = _vv()
+
+    def outer() -> None:
+        with transaction.atomic():
+            with pipelined_transaction():
+                held = _locked(vv)
+                with deferred():
+                    held.steps = 9
+                    save_fields(held, ["steps"], held=True)
+            assert VirtualVehicle.objects.get(pk=vv.pk).steps == 9  # in the outer transaction
+            raise RuntimeError("the outer transaction fails")
+
+    with pytest.raises(RuntimeError):
+        outer()
+    assert VirtualVehicle.objects.get(pk=vv.pk).steps == 0

@@ -25,7 +25,7 @@ from cpcc_site.prepared import (
     PreparedRead,
     deferred,
     insert_rows,
-    pipelined,
+    pipelined_transaction,
     save_fields,
     send_later,
 )
@@ -533,7 +533,7 @@ def _unit_of_work() -> Iterator[None]:
     step the platform cannot apply does; a database outage is raised as it is, for the
     caller to wait out and redo."""
     try:
-        with transaction.atomic(), pipelined():
+        with pipelined_transaction():
             yield
     except DatabaseError as exc:
         if database.is_outage(exc):
@@ -581,8 +581,8 @@ def _save_changed(vv: VirtualVehicle, before: tuple[Any, ...]) -> None:
         for name, old, new in zip(_ADVANCED_FIELDS, before, _row(vv), strict=True)
         if old != new
     ]
-    with deferred():  # checked by the end of the unit of work
-        save_fields(vv, [*changed, "updated"])  # no VV signals: compiled once
+    with deferred():  # the unit holds the row: nothing to check, it may commit at once
+        save_fields(vv, [*changed, "updated"], held=True)  # no VV signals: compiled once
 
 
 def _advance_locked(vv: VirtualVehicle, vvm: VVM, *, before: tuple[Any, ...] | None = None) -> None:

@@ -49,7 +49,7 @@ def vv_wait_start(*, vv: VirtualVehicle, task: Task, vvm: VVM) -> None:
         vv.waiting_since_s = now
     vv.waiting_reason, vv.waiting_message = WaitReason.NO_VEHICLE, message
     with deferred():
-        save_fields(vv, WAITING_FIELDS)
+        save_fields(vv, WAITING_FIELDS, held=True)
         insert_rows([LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"waiting: {message}")])
     logger.info(
         "vv waits: no vehicle in service covers its next task",
@@ -67,7 +67,7 @@ def vv_wait_end(*, vv: VirtualVehicle, vvm: VVM) -> None:
     waited = duration_text(now - (vv.waiting_since_s if vv.waiting_since_s is not None else now))
     vv.waiting_reason, vv.waiting_message, vv.waiting_since_s = "", "", None
     with deferred():
-        save_fields(vv, WAITING_FIELDS)
+        save_fields(vv, WAITING_FIELDS, held=True)
         insert_rows(
             [LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"continues: waited {waited}")]
         )
