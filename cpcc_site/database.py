@@ -4,7 +4,9 @@ An outage is the database server unreachable (refused, reset, timed out), no con
 the process's pool in time, or, with SQLite, the file locked past its busy timeout. Work that
 meets one is not wrong: a worker waits until the database answers and does it again (the work
 is transactional, and what it committed before stays committed); the web answers 503 with
-Retry-After (cpcc_site.errors).
+Retry-After (cpcc_site.errors). A conflict is an outage of one transaction: PostgreSQL ended
+it to break a deadlock with another (or it could not be serialized); nothing of it was
+committed and the work is done again at once.
 
 Whether the database answers is asked on a connection of its own, opened past the process's
 connection pool (PostgreSQL with CPCC_DB_POOL_SIZE): the pool would hand out a connection it
@@ -31,6 +33,9 @@ _FIRST_WAIT_S = 0.1
 _LONGEST_WAIT_S = 2.0
 # SQLite's words for a lock held past the busy timeout (the database is there, but not to us).
 _LOCKED = ("database is locked", "database table is locked", "database is busy")
+# PostgreSQL's SQLSTATEs for a transaction ended so that another may go on: deadlock detected
+# (two transactions took the same rows in opposite orders), serialization failure.
+_CONFLICTS = frozenset({"40P01", "40001"})
 
 
 def answers(alias: str = DEFAULT_DB_ALIAS) -> bool:
@@ -68,7 +73,16 @@ def is_outage(exc: BaseException, alias: str = DEFAULT_DB_ALIAS) -> bool:
         return False
     if any(words in str(exc).lower() for words in _LOCKED) or _pool_timeout(exc):
         return True
-    return not answers(alias)
+    return is_conflict(exc) or not answers(alias)
+
+
+def is_conflict(exc: BaseException) -> bool:
+    """Whether the server ended the transaction to let another go on (a deadlock between
+    two, a serialization failure): nothing of it was committed, and doing it again succeeds
+    once the other has finished."""
+    return isinstance(exc, OperationalError) and (
+        getattr(exc.__cause__, "sqlstate", None) in _CONFLICTS
+    )
 
 
 def _pool_timeout(exc: BaseException) -> bool:
@@ -98,17 +112,28 @@ def wait_until_available(
 def through_outages(work: Callable[[], T], stopping: threading.Event | None = None) -> T:
     """Do ``work``; if it meets a database outage, wait until the database is back and do it
     again (it must be safe to redo: each piece of the platform's work re-reads the state it
-    needs, and what it committed stays committed). Any other error, or an outage met while
-    ``stopping`` is set, is raised."""
+    needs, and what it committed stays committed); work that met a conflict is done again at
+    once. Any other error, or an outage met while ``stopping`` is set, is raised."""
     while True:
         try:
             return work()
         except Exception as exc:
             if not is_outage(exc):
                 raise
+            if is_conflict(exc):
+                if stopping is not None and stopping.is_set():
+                    raise
+                # (Not the server: the connection is sound, and the other transaction is
+                # done or nearly so.)
+                logger.warning("database conflict, doing the work again: %s", _first_line(exc))
+                continue
             logger.warning("database unavailable: waiting to do the work again")
             if not wait_until_available(stopping):
                 raise
+
+
+def _first_line(exc: BaseException) -> str:
+    return str(exc).partition("\n")[0]
 
 
 def _drop_connection(alias: str) -> None:
