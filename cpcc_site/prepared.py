@@ -296,8 +296,8 @@ def save_fields(
     ``DatabaseError``, as ``save`` does, if the row is not there.
 
     ``held``: the caller's transaction holds the row locked (``select_for_update``), so it is
-    there: a deferred write then waits for no check, and lets its unit of work commit with
-    it (``pipelined_transaction``)."""
+    there: nothing to check, and a deferred write waits for no answer, which lets its unit of
+    work commit with it (``pipelined_transaction``)."""
     connection = connections[using]
     model = type(obj)
     key = (model, tuple(fields), connection.vendor)
@@ -316,11 +316,7 @@ def save_fields(
         if cursor.rowcount != 1:
             raise DatabaseError(f"{model.__name__} {obj.pk}: no row to update")
 
-    state: _Pipeline | None = getattr(connection, _PIPELINE, None)
-    if held and state is not None and state.deferring:
-        _execute(connection, sql, params, None)
-    else:
-        _execute(connection, sql, params, check, checks=True)
+    _execute(connection, sql, params, None if held else check, checks=not held)
 
 
 def update_row(
