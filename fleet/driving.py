@@ -28,6 +28,19 @@ class DriverError(Exception):
             self.permanent = permanent
 
 
+LINK_LOST = "link lost"
+"""The reason an RV whose link died is offline for, whoever sees it first: the driver's link
+watch or the control loop, whose command found the link down."""
+
+
+class LinkDown(DriverError):
+    """The vehicle does not answer: its link is gone (not permanent, a radio link often comes
+    back). The loop takes the vehicle offline for ``LINK_LOST``, as the link watch does, so that
+    the reason does not depend on which of them saw it first."""
+
+    permanent = False
+
+
 class SensorFailure(Exception):
     """A reading the vehicle did not give: its sensor did not answer in time, its link is
     gone, its camera refused. ``reason`` says why in words a customer may read (no port, no

@@ -32,7 +32,7 @@ from typing import Any, Protocol
 from shapely.geometry import Polygon
 
 from fleet.airspace import NO_ZONES, Airspace
-from fleet.driving import Driver, DriverError, SensorFailure
+from fleet.driving import LINK_LOST, Driver, DriverError, LinkDown, SensorFailure
 from fleet.geo import Position, within_m
 from vvm_worker.planning import Planner, PlanTask, standby_position
 
@@ -729,10 +729,12 @@ class ControlLoop:
     def _failed(self, exc: DriverError) -> None:
         """The vehicle cannot be flown (its link, its autopilot refused, a pilot took over):
         it goes offline so that its VVs move on (a person's decision, maintenance, stays as
-        it is); the operator returns it to service (or its worker, once the link is back)."""
+        it is); the operator returns it to service (or its worker, once the link is back).
+        A link that is down gives the link watch's reason, whichever of the two saw it first."""
         logger.error("vehicle %s out of service: %s", self.name, exc, extra=self._log())
         self.target = None
-        self.store.set_status(OFFLINE, expected=ACTIVE, reason=str(exc))
+        reason = LINK_LOST if isinstance(exc, LinkDown) else str(exc)
+        self.store.set_status(OFFLINE, expected=ACTIVE, reason=reason)
         self.status = self.store.status()
 
     # --- what the vehicle reports -------------------------------------------------------------

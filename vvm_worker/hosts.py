@@ -33,6 +33,7 @@ from django.db import close_old_connections, connection, transaction
 from django.db.models import Exists, OuterRef, Q, QuerySet
 
 from cpcc_site import database
+from fleet.driving import LINK_LOST
 from fleet.mavlink.driver import Fence, MavlinkDriver
 from fleet.mavlink.errors import MavlinkError
 from fleet.models import Driver, GroundStation, Vehicle, VehicleStatus
@@ -469,7 +470,7 @@ class HostedRV:
             vehicle=Vehicle(pk=self.vehicle_id),
             status=VehicleStatus.OFFLINE,
             vvm=self.host.vvm,
-            reason="link lost",
+            reason=LINK_LOST,
             expected=VehicleStatus.ACTIVE,
         )
 

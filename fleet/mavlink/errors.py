@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from fleet.driving import DriverError
+from fleet.driving import DriverError, LinkDown
 from fleet.mavlink.wire import mavlink
 
 # MAV_RESULT names for messages (the dialect's enum table has them, but a plain dict keeps
@@ -57,7 +57,7 @@ class LinkError(MavlinkError):
     permanent = True
 
 
-class LinkLost(MavlinkError):
+class LinkLost(MavlinkError, LinkDown):
     """No heartbeat from the vehicle within the link timeout (or none at all on connecting).
 
     Not permanent: a radio link often comes back.

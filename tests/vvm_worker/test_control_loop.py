@@ -10,11 +10,15 @@ from typing import Any
 from shapely.geometry import Polygon
 
 from fleet.airspace import Airspace, ExclusionZone
+from fleet.driving import LINK_LOST
 from fleet.geo import Position, offset
+from fleet.mavlink.errors import LinkLost, PreArmFailed
+from fleet.mavlink.wire import mavlink
 from fleet.simulation import SimVehicle, VehicleSpec
 from vvm_worker.control import (
     ACTIVE,
     NO_WAY,
+    OFFLINE,
     Area,
     ControlLoop,
     LoopConfig,
@@ -218,3 +222,54 @@ def test_a_task_no_way_reaches_fails_with_the_reason_and_the_next_is_served() ->
     _fly_all(clock)
     assert [task for task, _ in store.served] == [2]
     assert store.failed == [(1, NO_WAY)]
+
+
+class StatusStore(Store):
+    def __init__(self) -> None:
+        super().__init__()
+        self.statuses: list[tuple[str, str | None, str]] = []
+
+    def status(self) -> str:
+        return self.statuses[-1][0] if self.statuses else ACTIVE
+
+    def set_status(self, status: str, *, expected: str | None = None, reason: str = "") -> None:
+        self.statuses.append((status, expected, reason))
+
+
+class BrokenVehicle(SimVehicle):
+    def __init__(self, error: Exception) -> None:
+        super().__init__(VehicleSpec(max_speed_mps=10.0, climb_rate_mps=3.0), DEPOT)
+        self.error = error
+
+    def fly_to(self, target: Position, now: float) -> float:
+        raise self.error
+
+
+def _failing_flight(error: Exception) -> StatusStore:
+    store, clock = StatusStore(), Clock()
+    loop = ControlLoop(
+        name="RV",
+        driver=BrokenVehicle(error),
+        planner=make_planner("latency", travel_time=TravelTime(10.0, 3.0)),
+        store=store,
+        scheduler=clock,
+        clock=lambda: clock.now,
+    )
+    store.open[1] = _task(1, 100.0)
+    loop.wake()
+    assert loop.target is None and store.open  # nothing flown, the task still open
+    return store
+
+
+def test_a_command_that_finds_the_link_down_takes_the_rv_offline_for_link_lost() -> None:
+    # The MAVLink driver's own error, with its own words: the RV's reason is the link
+    # watch's, whichever of the two sees the dead link first.
+    store = _failing_flight(LinkLost("Heli One: the link to the vehicle is down"))
+    assert store.statuses == [(OFFLINE, ACTIVE, LINK_LOST)]
+
+
+def test_a_command_the_autopilot_refuses_takes_the_rv_offline_for_its_words() -> None:
+    refusal = PreArmFailed(mavlink.MAV_RESULT_FAILED, ["PreArm: Compass not calibrated"])
+    store = _failing_flight(refusal)
+    assert store.statuses == [(OFFLINE, ACTIVE, str(refusal))]
+    assert "PreArm: Compass not calibrated" in str(refusal)
