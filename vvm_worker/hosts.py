@@ -46,6 +46,7 @@ from vvm_worker.live import publish_vehicle
 from vvm_worker.planning import DEFAULT_PLANNER
 from vvm_worker.platform import platform_vvm
 from vvm_worker.runtime import Runtime
+from vvm_worker.runtime.pool import POOL
 from vvm_worker.services import (
     VVM,
     LeasesUnsure,
@@ -76,13 +77,21 @@ MAX_CONTEXTS = 512
 BEACON_KEYFRAME_S = VEHICLE_STALE_S / 3
 
 
+class NotYet(Exception):
+    """Raised by a piece of work that would have to wait for something not there yet (a
+    prepared isolate for a new VV's context), having arranged for ``resume_parked`` to be
+    called once it is: the scheduler keeps the work, with its future, and goes on with other
+    work meanwhile."""
+
+
 class RealTimeScheduler:
     """Timers on the platform clock and work from other threads, run in one thread.
 
     ``call_at`` is for the host thread itself (the vehicles' control loops, the worker's own
     timers); ``submit`` for any thread, which gets a future for the result. Between two pieces
     of work the thread sleeps until the next timer is due or work comes in (0.5 s at most):
-    idle, it wakes for timers only, however many vehicles it serves.
+    idle, it wakes for timers only, however many vehicles it serves. Work that raises
+    ``NotYet`` is parked, in order, until ``resume_parked``.
     """
 
     def __init__(self, clock: Clock, *, after_each: Callable[[], None] | None = None) -> None:
@@ -94,6 +103,9 @@ class RealTimeScheduler:
             queue.SimpleQueue()
         )
         self._stopping = threading.Event()
+        self._parked: collections.deque[
+            tuple[Callable[[], Any], concurrent.futures.Future[Any] | None]
+        ] = collections.deque()
 
     def call_at(self, t_s: float, fn: Callable[[], None]) -> None:
         self._seq += 1
@@ -103,6 +115,19 @@ class RealTimeScheduler:
         future: concurrent.futures.Future[Any] = concurrent.futures.Future()
         self._inbox.put((fn, future))
         return future
+
+    def resume_parked(self) -> None:
+        """From any thread: run the parked work again, in its order (what it waited for may
+        be there now)."""
+        self._inbox.put((self._resume, concurrent.futures.Future()))
+
+    def _resume(self) -> None:
+        parked, self._parked = self._parked, collections.deque()
+        while parked:
+            fn, future = parked.popleft()
+            if not self._run(fn, future):
+                self._parked.extend(parked)  # behind the one that still waits, in order
+                return
 
     def stop(self) -> None:
         self._stopping.set()
@@ -121,8 +146,11 @@ class RealTimeScheduler:
             except queue.Empty:
                 pass
             else:
+                # What came in before this look; what that work sends here waits for the
+                # next one, after a timer (a chain of VV starts would hold every arrival up).
+                waiting = self._inbox.qsize()
                 self._run(fn, future)
-                while True:
+                for _ in range(waiting):
                     try:
                         fn, future = self._inbox.get_nowait()
                     except queue.Empty:
@@ -132,12 +160,16 @@ class RealTimeScheduler:
                 _, _, timer = heapq.heappop(self._timers)
                 self._run(timer, None)
 
-    def _run(self, fn: Callable[[], Any], future: concurrent.futures.Future[Any] | None) -> None:
-        """Run one piece of work. A database outage is waited out and the work done again, so
-        that no timer of the vehicle's control loop is lost to it."""
+    def _run(self, fn: Callable[[], Any], future: concurrent.futures.Future[Any] | None) -> bool:
+        """Run one piece of work; False when it is parked (``NotYet``). A database outage is
+        waited out and the work done again, so that no timer of the vehicle's control loop is
+        lost to it."""
         close_old_connections()
         try:
             result = database.through_outages(fn, self._stopping)
+        except NotYet:
+            self._parked.append((fn, future))
+            return False
         except Exception as exc:
             logger.exception("host work failed")
             if future is not None:
@@ -147,6 +179,7 @@ class RealTimeScheduler:
                 future.set_result(result)
         if self._after_each is not None:
             self._after_each()
+        return True
 
 
 class CannotFly(Exception):
@@ -224,7 +257,22 @@ class RVHost:
         return self.watch is not None and station_id == self.watch.station_id
 
     def advance_later(self, vv_id: uuid.UUID) -> None:
-        self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm))
+        self.scheduler.submit(self._advancing(vv_id))
+
+    def _advancing(self, vv_id: uuid.UUID) -> Callable[[], None]:
+        """The work of advancing the VV on the host thread. A VV without a warm context here
+        (a new one, or one from another process) needs an isolate: while none is prepared it
+        waits parked, and the vehicles' timers and the other VVs go on, rather than the host
+        thread waiting for V8 to make one (a burst of new VVs held up every VV aboard)."""
+
+        def advance() -> None:
+            if self.vvm.runtime.context(str(vv_id)) is None and POOL.notify_when_ready(
+                self.scheduler.resume_parked
+            ):
+                raise NotYet(f"VV {vv_id}: no isolate prepared yet")
+            vv_advance(vv_id=vv_id, vvm=self.vvm)
+
+        return advance
 
     def wake_later(self, vehicle_id: int) -> None:
         # A vehicle here whose work this process changed (a VV it advanced, one that moved
@@ -236,7 +284,7 @@ class RVHost:
     # --- what Celery tasks ask -----------------------------------------------------------------
 
     def advance(self, vv_id: uuid.UUID) -> None:
-        self.scheduler.submit(lambda: vv_advance(vv_id=vv_id, vvm=self.vvm)).result(WAIT_S)
+        self.scheduler.submit(self._advancing(vv_id)).result(WAIT_S)
 
     def admit(self, customer_id: int) -> None:
         self.scheduler.submit(

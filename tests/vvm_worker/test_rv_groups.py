@@ -8,6 +8,8 @@ started again. Run on SQLite and on PostgreSQL (CI's second pass).
 
 from __future__ import annotations
 
+import asyncio
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -301,3 +303,49 @@ def test_a_worker_of_several_rvs_stopped_with_sigterm_in_the_middle_of_steps_exi
         assert set(vv.storage.values_list("key", flat=True)) == {"p0", "p1"}
         path = list(Migration.objects.filter(vv=vv).values_list("from_name", "to_name"))
         assert ("Heli One", "Heli Two") in path, path
+
+
+def test_a_vv_that_waits_for_an_isolate_does_not_hold_up_the_host_thread(
+    two_rvs_one_process, broker, monkeypatch
+) -> None:
+    """A VV without a warm context here needs an isolate: while V8 makes one, the host
+    thread goes on with the other VVs and the vehicles' timers (a burst of new VVs used to
+    hold up every VV aboard), and the VV goes on once the isolate is there."""
+    from vvm_worker.runtime import pool as pool_module
+
+    host, steps = two_rvs_one_process
+    pool = pool_module.IsolatePool(1)  # none prepared yet
+    monkeypatch.setattr("vvm_worker.hosts.POOL", pool)
+    monkeypatch.setattr("vvm_worker.runtime.context.POOL", pool)
+    preparing, made = threading.Event(), threading.Event()
+    real = pool_module.prepare
+
+    async def slow() -> pool_module.Prepared:
+        preparing.set()
+        await asyncio.get_running_loop().run_in_executor(None, made.wait, 60)
+        return await real()
+
+    monkeypatch.setattr(pool_module, "prepare", slow)
+    customer = CustomerFactory(name="Customer A")
+    ground = platform_vvm()
+    vv = vv_submit(customer=customer, name="Across", program=ACROSS, vvm=ground, seed=1)
+    vv_advance(vv_id=vv.pk, vvm=ground)  # routed to Heli One, in this host's process
+    advancing = threading.Thread(target=host.advance, args=(vv.pk,))
+    advancing.start()
+    try:
+        assert preparing.wait(30), "no isolate asked for"
+        # The host thread is free while the isolate is made.
+        assert host.scheduler.submit(lambda: "free").result(10) == "free"
+        assert steps == [] and advancing.is_alive()
+    finally:
+        made.set()
+        advancing.join(60)
+
+    def ended() -> bool:
+        vv.refresh_from_db()
+        return vv.is_ended
+
+    wait_for(ended, timeout=60, what="the VV to end")
+    assert vv.status == VVStatus.FINISHED, vv.error
+    assert [(s.replayed, s.answers_read) for s in steps] == [(True, 1), (False, 1)]
+    assert {d.key: d.value for d in vv.storage.all()} == {"one": 1, "two": 2}

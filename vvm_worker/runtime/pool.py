@@ -7,6 +7,7 @@ import contextlib
 import json
 import logging
 import secrets
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -91,9 +92,38 @@ class IsolatePool:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._ready: list[Prepared] = []
         self._filling: asyncio.Task[None] | None = None
+        # Called once isolates are prepared (a dict: each once however often it asked).
+        self._waiters: dict[Callable[[], None], None] = {}
+        self._failing = False  # the last preparation ahead failed: nobody waits for the next
 
     def take(self) -> Prepared:
         return v8.call(self._take)
+
+    def notify_when_ready(self, then: Callable[[], None]) -> bool:
+        """Whether work that needs a new isolate should wait for one rather than make it
+        itself: True when none is prepared now, and ``then()`` will be called (on the V8
+        thread: it must be quick and safe from any thread) once one is, or once preparing
+        failed; False when one is prepared (take it), when this pool prepares none ahead, or
+        when its last preparation failed (a take makes its own, and meets the error)."""
+        if self.size == 0 or self._ready:  # a glance from another thread: len() is atomic
+            return False
+        return v8.call(lambda: self._wait_for_one(then))
+
+    async def _wait_for_one(self, then: Callable[[], None]) -> bool:
+        self._on_this_loop()
+        if self._ready or self._failing:
+            return False
+        self._waiters[then] = None
+        self._fill_soon()
+        return True
+
+    def _wake_waiters(self) -> None:
+        waiters, self._waiters = self._waiters, {}
+        for then in waiters:
+            try:
+                then()
+            except Exception:
+                logger.exception("a wait for a prepared isolate could not be ended")
 
     def fill(self) -> None:
         """Start preparing isolates up to ``size`` now, in the background (a worker that
@@ -113,7 +143,8 @@ class IsolatePool:
     def _on_this_loop(self) -> None:
         loop = asyncio.get_running_loop()
         if self._loop is not loop:  # first use, or a new owner (after a fork)
-            self._loop, self._ready, self._filling = loop, [], None
+            self._loop, self._ready, self._filling, self._waiters = loop, [], None, {}
+            self._failing = False
 
     def _fill_soon(self) -> None:
         """On the owner's loop: prepare isolates up to ``size`` in a background task."""
@@ -129,13 +160,20 @@ class IsolatePool:
                 )
                 # Those made are kept even when another failed: that one alone is lost.
                 self._ready.extend(m for m in made if isinstance(m, Prepared))
+                if self._ready:
+                    self._wake_waiters()
                 for failure in made:
                     if isinstance(failure, BaseException):
                         raise failure
+                self._failing = False
         except Exception:
+            self._failing = True
             logger.exception("isolates could not be prepared ahead of time")
         finally:
             self._filling = None
+            # Whoever still waits takes its turn (and makes its own isolate, or meets the
+            # error that stopped this one).
+            self._wake_waiters()
 
 
 # The process's pool; vvm_worker's app sets its size from the settings (CPCC_ISOLATE_POOL).

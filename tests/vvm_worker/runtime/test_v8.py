@@ -326,3 +326,49 @@ async def _filling(pool) -> bool:  # type: ignore[no-untyped-def]
 
 async def _count(pool) -> int:  # type: ignore[no-untyped-def]
     return len(pool._ready)
+
+
+def test_work_that_needs_an_isolate_is_told_when_one_is_prepared(monkeypatch) -> None:
+    """A host thread does not wait for V8 to make an isolate: it is told once one is."""
+    from vvm_worker.runtime import pool as pool_module
+
+    assert not pool_module.IsolatePool(0).notify_when_ready(lambda: None)  # none ahead
+    pool = pool_module.IsolatePool(2)
+    told = threading.Event()
+    assert pool.notify_when_ready(told.set)  # none prepared: it prepares one
+    assert told.wait(30), "not told"
+    assert v8.call(lambda: _count(pool)) >= 1
+    assert not pool.notify_when_ready(lambda: None)  # one is there: take it
+
+    async def refused() -> pool_module.Prepared:
+        raise AssertionError("prepared when taken")
+
+    monkeypatch.setattr(pool_module, "prepare", refused)
+    pool.size = 0
+    pool.take().isolate.close()
+    for _ in range(v8.call(lambda: _count(pool))):
+        pool.take().isolate.close()
+
+
+def test_work_told_that_preparing_failed_makes_its_own_isolate_and_meets_the_error(
+    monkeypatch, caplog
+) -> None:
+    from vvm_worker.runtime import pool as pool_module
+
+    async def broken() -> pool_module.Prepared:
+        raise RuntimeError("V8 is out of memory")
+
+    monkeypatch.setattr(pool_module, "prepare", broken)
+    pool = pool_module.IsolatePool(2)
+    told = threading.Event()
+    with caplog.at_level(logging.ERROR, logger="vvm_worker.runtime.pool"):
+        assert pool.notify_when_ready(told.set)
+        assert told.wait(30), "not told that preparing failed"
+        deadline = time.monotonic() + 30
+        while v8.call(lambda: _filling(pool)):
+            assert time.monotonic() < deadline, "the pool did not stop filling"
+            time.sleep(0.05)
+    # Nothing to wait for: the work goes on, and its own preparation gives it the error.
+    assert not pool.notify_when_ready(lambda: None)
+    with pytest.raises(RuntimeError, match="out of memory"):
+        pool.take()

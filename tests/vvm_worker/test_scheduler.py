@@ -1,0 +1,100 @@
+"""The host thread's scheduler: work from other threads, timers, and work that must wait."""
+
+from __future__ import annotations
+
+import concurrent.futures
+import threading
+from collections.abc import Iterator
+
+import pytest
+
+from vvm_worker.clock import SystemClock
+from vvm_worker.hosts import NotYet, RealTimeScheduler
+
+
+@pytest.fixture
+def scheduler() -> Iterator[RealTimeScheduler]:
+    scheduler = RealTimeScheduler(SystemClock())
+    yield scheduler
+    scheduler.stop()
+
+
+def _start(scheduler: RealTimeScheduler) -> threading.Thread:
+    thread = threading.Thread(target=scheduler.run, daemon=True)
+    thread.start()
+    return thread
+
+
+def test_work_that_cannot_be_done_yet_waits_parked_while_other_work_goes_on(scheduler) -> None:
+    isolates = 0
+    done: list[str] = []
+
+    def start(name: str):  # type: ignore[no-untyped-def]
+        def work() -> str:
+            nonlocal isolates
+            if not isolates:
+                raise NotYet(f"{name}: no isolate")
+            isolates -= 1
+            done.append(name)
+            return name
+
+        return work
+
+    _start(scheduler)
+    first, second = scheduler.submit(start("first")), scheduler.submit(start("second"))
+    assert scheduler.submit(lambda: "other work").result(5) == "other work"
+    assert not first.done() and not second.done() and done == []
+    isolates = 1
+    scheduler.resume_parked()
+    assert first.result(5) == "first"
+    # The second still waits, behind nothing now, and it is not lost.
+    assert scheduler.submit(lambda: done.copy()).result(5) == ["first"]
+    assert not second.done()
+    isolates = 1
+    scheduler.resume_parked()
+    assert second.result(5) == "second" and done == ["first", "second"]
+
+
+def test_parked_work_resumes_in_the_order_it_came(scheduler) -> None:
+    ready = False
+    done: list[int] = []
+
+    def work(n: int):  # type: ignore[no-untyped-def]
+        def run() -> None:
+            if not ready:
+                raise NotYet("wait")
+            done.append(n)
+
+        return run
+
+    _start(scheduler)
+    futures = [scheduler.submit(work(n)) for n in range(5)]
+    scheduler.submit(lambda: None).result(5)
+    ready = True
+    scheduler.resume_parked()
+    for future in futures:
+        future.result(5)
+    assert done == [0, 1, 2, 3, 4]
+
+
+def test_work_sent_by_work_waits_for_a_due_timer() -> None:
+    """A chain of work (a VV's start sends its next piece) must not hold up the vehicles'
+    timers: what the work sends to the host runs after the next due timer."""
+    scheduler = RealTimeScheduler(SystemClock())
+    order: list[str] = []
+    scheduler.call_at(0.0, lambda: order.append("timer"))  # due at once
+
+    sent: list[concurrent.futures.Future[None]] = []
+
+    def first() -> None:
+        order.append("first")
+        sent.append(scheduler.submit(lambda: order.append("sent by first")))
+
+    started = scheduler.submit(first)
+    _start(scheduler)
+    try:
+        started.result(5)
+        sent[0].result(5)
+        assert order == ["first", "timer", "sent by first"]
+    finally:
+        scheduler.stop()
