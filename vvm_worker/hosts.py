@@ -84,6 +84,10 @@ class NotYet(Exception):
     work meanwhile."""
 
 
+class HostStopped(Exception):
+    """Work the host thread had parked when it stopped: not done."""
+
+
 class RealTimeScheduler:
     """Timers on the platform clock and work from other threads, run in one thread.
 
@@ -159,6 +163,12 @@ class RealTimeScheduler:
             if self._timers and self._timers[0][0] <= self.clock.now_s():
                 _, _, timer = heapq.heappop(self._timers)
                 self._run(timer, None)
+        # Whoever waits for parked work learns at once that it was not done (the database
+        # says where its VV is, and the next start takes it up).
+        while self._parked:
+            _, future = self._parked.popleft()
+            if future is not None:
+                future.set_exception(HostStopped("the host stopped before this work was done"))
 
     def _run(self, fn: Callable[[], Any], future: concurrent.futures.Future[Any] | None) -> bool:
         """Run one piece of work; False when it is parked (``NotYet``). A database outage is

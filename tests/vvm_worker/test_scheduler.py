@@ -9,7 +9,7 @@ from collections.abc import Iterator
 import pytest
 
 from vvm_worker.clock import SystemClock
-from vvm_worker.hosts import NotYet, RealTimeScheduler
+from vvm_worker.hosts import HostStopped, NotYet, RealTimeScheduler
 
 
 @pytest.fixture
@@ -98,3 +98,18 @@ def test_work_sent_by_work_waits_for_a_due_timer() -> None:
         assert order == ["first", "timer", "sent by first"]
     finally:
         scheduler.stop()
+
+
+def test_parked_work_is_not_done_when_the_host_stops_and_its_waiter_learns_it_at_once() -> None:
+    scheduler = RealTimeScheduler(SystemClock())
+    thread = _start(scheduler)
+
+    def never() -> None:
+        raise NotYet("no isolate")
+
+    parked = scheduler.submit(never)
+    scheduler.submit(lambda: None).result(5)
+    scheduler.stop()
+    thread.join(5)
+    with pytest.raises(HostStopped):
+        parked.result(5)

@@ -111,7 +111,7 @@ class IsolatePool:
 
     async def _wait_for_one(self, then: Callable[[], None]) -> bool:
         self._on_this_loop()
-        if self._ready or self._failing:
+        if self._ready or self._failing or self.size == 0:
             return False
         self._waiters[then] = None
         self._fill_soon()
