@@ -123,7 +123,7 @@ class RealTimeScheduler:
     def resume_parked(self) -> None:
         """From any thread: run the parked work again, in its order (what it waited for may
         be there now)."""
-        self._inbox.put((self._resume, concurrent.futures.Future()))
+        self.submit(self._resume)
 
     def _resume(self) -> None:
         parked, self._parked = self._parked, collections.deque()
