@@ -138,9 +138,10 @@ class RealTimeScheduler:
         self.submit(lambda: None)  # wake the thread up
 
     def run(self) -> None:
-        # Work from other threads (a VV arriving, say) goes before the next timer, and one
-        # timer runs between two looks at the inbox: with instant flights a vehicle always has
-        # a timer due, which must not keep arriving VVs waiting.
+        # Work from other threads (a VV arriving, say) goes before the next timers, and the
+        # timers due at a look run before the next look, each vehicle's in turn: with instant
+        # flights a vehicle always has a timer due, which must not keep arriving VVs waiting,
+        # and a burst of arriving VVs must not keep the VVs aboard the vehicles waiting.
         while not self._stopping.is_set():
             wait = 0.5
             if self._timers:
@@ -151,7 +152,8 @@ class RealTimeScheduler:
                 pass
             else:
                 # What came in before this look; what that work sends here waits for the
-                # next one, after a timer (a chain of VV starts would hold every arrival up).
+                # next one, after the due timers (a chain of VV starts would hold every
+                # arrival up).
                 waiting = self._inbox.qsize()
                 self._run(fn, future)
                 for _ in range(waiting):
@@ -160,7 +162,9 @@ class RealTimeScheduler:
                     except queue.Empty:
                         break
                     self._run(fn, future)
-            if self._timers and self._timers[0][0] <= self.clock.now_s():
+            # Every timer due now (those they set wait for the next look).
+            now, last = self.clock.now_s(), self._seq
+            while self._timers and self._timers[0][0] <= now and self._timers[0][1] <= last:
                 _, _, timer = heapq.heappop(self._timers)
                 self._run(timer, None)
         # Whoever waits for parked work learns at once that it was not done (the database

@@ -113,3 +113,38 @@ def test_parked_work_is_not_done_when_the_host_stops_and_its_waiter_learns_it_at
     thread.join(5)
     with pytest.raises(HostStopped):
         parked.result(5)
+
+
+def test_every_vehicles_due_timer_runs_between_two_looks_at_the_inbox() -> None:
+    """A burst of work (new VVs) must not hold up the VVs aboard: between two looks at the
+    inbox every timer due runs, one per vehicle, not one for all of them; a timer that a
+    timer sets for now (an instant flight's next arrival) waits for the next look, so that
+    the work that came in meanwhile is not held up either."""
+    scheduler = RealTimeScheduler(SystemClock())
+    order: list[str] = []
+
+    def arrival(rv: str, again: bool):  # type: ignore[no-untyped-def]
+        def run() -> None:
+            order.append(rv)
+            if again:  # the vehicle flies on to its next point at once
+                scheduler.call_at(0.0, arrival(f"{rv} again", False))
+
+        return run
+
+    for rv in ("rv1", "rv2", "rv3"):
+        scheduler.call_at(0.0, arrival(rv, True))  # due at once
+    sent: list[concurrent.futures.Future[None]] = []
+
+    def start() -> None:
+        order.append("start")
+        sent.append(scheduler.submit(lambda: order.append("sent by start")))
+
+    started = scheduler.submit(start)
+    _start(scheduler)
+    try:
+        started.result(5)
+        sent[0].result(5)
+        scheduler.submit(lambda: None).result(5)
+        assert order[:6] == ["start", "rv1", "rv2", "rv3", "sent by start", "rv1 again"]
+    finally:
+        scheduler.stop()
