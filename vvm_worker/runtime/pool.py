@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import logging
 import secrets
@@ -13,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 from vvm_worker.runtime import v8
-from vvm_worker.runtime.v8 import JSEvalException
 
 logger = logging.getLogger(__name__)
 
@@ -22,29 +20,9 @@ PRELUDE_SOURCE = (Path(__file__).with_name("prelude.js")).read_text(encoding="ut
 # compiling a program, reading an outcome).
 HOST_TIMEOUT_S = 5.0
 # How many isolates a pool prepares at once: the owner's maker thread makes isolates one after
-# the other, but each one's prelude and warm-up run on its own native thread, so a burst of
-# new VVs (a worker's start, a bulk submission) waits less for its isolates.
+# the other, but each one's prelude runs on its own native thread, so a burst of new VVs (a
+# worker's start, a bulk submission) waits less for its isolates.
 FILL_AT_ONCE = 2
-
-_WARM_UP_CATALOG = json.dumps(
-    json.dumps([{"name": "GPS", "kind": "gps", "unit": "", "params": {}}])
-)
-_WARM_UP_PROGRAM = (
-    "var g = VV.sensor.get('GPS'); VV.storage.store('k', 1); VV.storage.load('k'); VV.log('x');"
-    " VV.task.execute({type: 'point', position: new VV.types.LatLngAlt(1, 2, 3), sensors: [g]});"
-)
-_WARM_UP_RUN = json.dumps(
-    json.dumps(
-        {
-            "vvId": "",
-            "vvName": "",
-            "seed": 1,
-            "startMs": 0,
-            "effectsApplied": 0,
-            "limits": {"maxTasks": 10, "storageBytes": 1000, "allowedCalls": None},
-        }
-    )
-)
 
 
 @dataclass
@@ -65,12 +43,6 @@ async def prepare() -> Prepared:
 
     try:
         await run(f"{PRELUDE_SOURCE}({key});\n//# sourceURL=cpcc-prelude.js")
-        # One throw-away run compiles the prelude's functions now rather than in a VV's step.
-        await run(f"__cpcc_host.setCatalog({key}, {_WARM_UP_CATALOG})")
-        await run(f"__cpcc_host.setProgram({key}, function () {{ {_WARM_UP_PROGRAM} }})")
-        with contextlib.suppress(JSEvalException):
-            await run(f"__cpcc_host.step({key}, {_WARM_UP_RUN})")
-        await run(f"__cpcc_host.outcome({key})")
     except BaseException:
         isolate.close()
         raise
@@ -80,9 +52,9 @@ async def prepare() -> Prepared:
 class IsolatePool:
     """Isolates with the prelude installed, made ahead of time on the V8 thread.
 
-    A new isolate, the prelude's freezing of the built-ins and the warm-up run cost 10 to
-    17 ms (measured 2026-12-02); taking a prepared one makes a VV's first step on a host cost
-    little more than its program. It prepares FILL_AT_ONCE isolates at a time.
+    A new isolate and the prelude's freezing of the built-ins cost 5 to 10 ms (measured
+    2026-12-02); taking a prepared one makes a VV's first step on a host cost little more
+    than its program. It prepares FILL_AT_ONCE isolates at a time.
     ``size`` 0 prepares every isolate when it is needed. The pool's state lives on the V8
     thread (no lock): ``take`` is a call to it.
     """
