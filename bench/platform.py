@@ -15,7 +15,9 @@ second and each request's latency; any other answer stops the bench with its bod
 ``--direct`` submits the same VVs in this process instead (``scenario_submit_all``), no HTTP.
 
 - throughput: tasks done per second of wall time, from the first submission (the first POST)
-  to the last end (the last VV's ``finished_s``, which the bench looks for every 0.5 s);
+  to the last end (the last VV's ``finished_s``, which the bench looks for every 0.5 s); and
+  its two parts: the start phase, until every VV has asked for its first task (the tasks done
+  meanwhile), and the tasks a second after it;
 - completion to the VV's next request: from a task's answer to the program's next blocking call
   (the RV that took the reading resumes the VV itself: a step, no message);
 - completion to next task on the same RV: from a task's answer to the VV's next task being
@@ -279,7 +281,7 @@ def main() -> None:
     django.setup()
     from django.conf import settings
     from django.core.management import call_command
-    from django.db.models import Max
+    from django.db.models import Max, Min
     from rest_framework.authtoken.models import Token
 
     from accounts.models import User
@@ -533,6 +535,14 @@ def main() -> None:
         f"(the last VV's end; the bench saw it {seen - ended:.2f} s later)"
     )
     print(f"throughput                               {done / (ended - started):8.1f} tasks/s")
+    firsts = Task.objects.values("vv_id").annotate(first=Min("requested_s"))
+    starts_end = max((row["first"] for row in firsts), default=ended)
+    during = Task.objects.filter(status=TaskStatus.DONE, done_s__lte=starts_end).count()
+    print(
+        f"  start phase (to the last VV's first task) {starts_end - started:6.2f} s, "
+        f"{during} tasks done; after it {(done - during) / max(ended - starts_end, 1e-9):.1f} "
+        "tasks/s"
+    )
     print(f"completion -> the VV's next request      {_pcts(request)}")
     print(f"completion -> next task, same RV         {_pcts(same)}")
     print(f"completion -> next task, another RV      {_pcts(other)}")
