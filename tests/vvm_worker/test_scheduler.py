@@ -25,6 +25,21 @@ def _start(scheduler: RealTimeScheduler) -> threading.Thread:
     return thread
 
 
+def _work_that_sends_work(
+    scheduler: RealTimeScheduler, order: list[str], name: str
+) -> tuple[concurrent.futures.Future[None], list[concurrent.futures.Future[None]]]:
+    """Submit work (a VV's start) that notes ``name`` and sends the host a piece of work of
+    its own, which notes "sent by <name>": the work's future, and the list that gets the
+    sent piece's future."""
+    sent: list[concurrent.futures.Future[None]] = []
+
+    def work() -> None:
+        order.append(name)
+        sent.append(scheduler.submit(lambda: order.append(f"sent by {name}")))
+
+    return scheduler.submit(work), sent
+
+
 def test_work_that_cannot_be_done_yet_waits_parked_while_other_work_goes_on(scheduler) -> None:
     isolates = 0
     done: list[str] = []
@@ -83,14 +98,7 @@ def test_work_sent_by_work_waits_for_a_due_timer() -> None:
     scheduler = RealTimeScheduler(SystemClock())
     order: list[str] = []
     scheduler.call_at(0.0, lambda: order.append("timer"))  # due at once
-
-    sent: list[concurrent.futures.Future[None]] = []
-
-    def first() -> None:
-        order.append("first")
-        sent.append(scheduler.submit(lambda: order.append("sent by first")))
-
-    started = scheduler.submit(first)
+    started, sent = _work_that_sends_work(scheduler, order, "first")
     _start(scheduler)
     try:
         started.result(5)
@@ -133,13 +141,7 @@ def test_every_vehicles_due_timer_runs_between_two_looks_at_the_inbox() -> None:
 
     for rv in ("rv1", "rv2", "rv3"):
         scheduler.call_at(0.0, arrival(rv, True))  # due at once
-    sent: list[concurrent.futures.Future[None]] = []
-
-    def start() -> None:
-        order.append("start")
-        sent.append(scheduler.submit(lambda: order.append("sent by start")))
-
-    started = scheduler.submit(start)
+    started, sent = _work_that_sends_work(scheduler, order, "start")
     _start(scheduler)
     try:
         started.result(5)

@@ -9,7 +9,6 @@ import secrets
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from vvm_worker.runtime import v8
 
@@ -38,11 +37,10 @@ async def prepare() -> Prepared:
     isolate = await v8.adopt()
     key = json.dumps(secrets.token_hex(16))
 
-    async def run(code: str) -> Any:
-        return await isolate.eval_async(code, timeout_s=HOST_TIMEOUT_S)
-
     try:
-        await run(f"{PRELUDE_SOURCE}({key});\n//# sourceURL=cpcc-prelude.js")
+        await isolate.eval_async(
+            f"{PRELUDE_SOURCE}({key});\n//# sourceURL=cpcc-prelude.js", timeout_s=HOST_TIMEOUT_S
+        )
     except BaseException:
         isolate.close()
         raise
