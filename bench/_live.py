@@ -92,6 +92,17 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / TICK
 
 
+def children_of(pid: int) -> list[int]:
+    """The processes ``pid`` started that still run (an RV worker's planner process)."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            with contextlib.suppress(OSError):
+                if int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    found.append(int(proc.name))
+    return found
+
+
 def pids_of(comm: str, in_cmdline: str) -> list[int]:
     """Processes of that name whose command line has ``in_cmdline`` (a server's port)."""
     found = []

@@ -3,7 +3,7 @@
 Starts one ground-station worker and one RV worker hosting ``--rvs`` simulated RVs (a grid of
 2 x RVS/2 cells, ``manage.py rvworker NAME [NAME ...]``), as in production (DEBUG off), on a
 fresh database with no VV, lets them settle, and measures the RV worker's CPU time (user +
-system, all its threads, from /proc) over ``--seconds``: the CPU a hosted RV costs when idle
+system, all its threads and its planner process's, from /proc) over ``--seconds``: the CPU a hosted RV costs when idle
 (issue 23: floor < 0.1 % of a core per RV, goal < 0.02 %). Also reported: how often the
 worker's threads wake up (context switches), and the GS worker's CPU for comparison.
 ``--per-process`` starts one RV worker per RV instead (the shape before issue 23). The
@@ -26,6 +26,8 @@ import tempfile
 import time
 from datetime import date
 from pathlib import Path
+
+from bench._live import children_of
 
 ROOT = Path(__file__).resolve().parents[1]
 TICK = os.sysconf("SC_CLK_TCK")
@@ -157,6 +159,7 @@ def main() -> None:
                 time.sleep(0.2)
         time.sleep(args.settle)
         rv_pids = [p.pid for label, p in children.items() if label.startswith("rvworker")]
+        rv_pids += [pid for worker in list(rv_pids) for pid in children_of(worker)]  # planners
         gs_pids = [p.pid for label, p in children.items() if label.startswith("gsworker")]
         before = [cpu_s(pid) for pid in rv_pids], [cpu_s(pid) for pid in gs_pids]
         woken = sum(switches(pid) for pid in rv_pids)

@@ -54,6 +54,7 @@ from typing import Any
 from bench._live import (
     REQUEST_TIMEOUT_S,
     START_TIMEOUT_S,
+    children_of,
     cpu_s,
     fresh_postgres,
     listening_socket,
@@ -371,12 +372,13 @@ def main() -> None:
     cpu: dict[str, float] = {}
 
     def cpu_by_role() -> dict[str, float]:
-        """CPU seconds so far by role (a server's processes that have exited, such as a
-        connection's backend, no longer count)."""
+        """CPU seconds so far by role, a worker's with its planner process's (a server's
+        processes that have exited, such as a connection's backend, no longer count)."""
         spent = {role: sum(cpu_s(p) for p in pids_of(*what)) for role, what in servers.items()}
         for child in children:
             role = child.args[2] if child.args[1] == "manage.py" else "web (daphne)"
-            spent[role] = spent.get(role, 0.0) + cpu_s(child.pid)
+            own = [child.pid, *children_of(child.pid)]  # an RV worker's planner process too
+            spent[role] = spent.get(role, 0.0) + sum(cpu_s(pid) for pid in own)
         spent["this benchmark"] = time.process_time()
         return spent
 

@@ -164,6 +164,24 @@ class Scheduler(Protocol):
         ...
 
 
+class PlanElsewhere(Protocol):
+    def __call__(
+        self,
+        vehicle: str,
+        planner: Planner,
+        current: Position,
+        tasks: list[PlanTask],
+        now_s: float,
+        then: Callable[[list[PlanTask]], None],
+    ) -> None:
+        """Have ``planner.plan(current, tasks, now_s)`` made away from the loop's thread (the
+        planner's time is another core's, not the loop's), with ``planner``'s state as it is
+        now, and then run ``then`` with the route, on the loop's thread, as a piece of work of
+        its own (where the planner raises, that piece of work raises). Afterwards the
+        planner's ``state()`` is the state after that plan."""
+        ...
+
+
 class Sensing(Protocol):
     def __call__(
         self, task: LoopTask, position: Position, now_s: float, battery: float | None
@@ -216,6 +234,7 @@ class ControlLoop:
         plan_timer: Callable[[], float] | None = None,
         airspace: Airspace = NO_ZONES,
         on_estimates: Callable[[dict[Any, float]], None] | None = None,
+        plan_elsewhere: PlanElsewhere | None = None,
     ) -> None:
         self.name = name
         self.driver = driver
@@ -257,6 +276,10 @@ class ControlLoop:
         # Wall time of each planner call, when `plan_timer` is given (the arena's sweeps).
         self.plan_timer = plan_timer
         self.planning_s: list[float] = []
+        # Where a retargeting planner's plans are made (None: here, at once; see PlanElsewhere)
+        # and which request is the latest: an answer to an older one is dropped.
+        self.plan_elsewhere = plan_elsewhere if planner.retargets else None
+        self._plan_request = 0
 
     def _log(self) -> dict[str, Any]:
         return {"vehicle": self.name}
@@ -454,21 +477,49 @@ class ControlLoop:
     # --- planning ------------------------------------------------------------------------------
 
     def _plan(self, now: float) -> None:
+        self._plan_request += 1  # whatever was asked for before is out of date now
         if self._obey_command(now):
             return
         self._planned_at_change = self._changes
         self.status = self.store.status()
         tasks = list(self.store.open_tasks()) if self.status == ACTIVE else []
+        if tasks and self.plan_elsewhere is not None:
+            request = self._plan_request
+            here = self.driver.position_at(now)
+            plan = [t.as_plan_task() for t in tasks]
+            self.plan_elsewhere(
+                self.name,
+                self.planner,
+                here,
+                plan,
+                now,
+                lambda route: self._planned(request, tasks, route),
+            )
+            return
+        route: list[PlanTask] = []
+        if tasks:
+            here = self.driver.position_at(now)
+            started = self.plan_timer() if self.plan_timer is not None else 0.0
+            route = self.planner.plan(here, [t.as_plan_task() for t in tasks], now)
+            if self.plan_timer is not None:
+                self.planning_s.append(self.plan_timer() - started)
+        self._follow(now, tasks, route)
+
+    def _planned(self, request: int, tasks: list[LoopTask], route: list[PlanTask]) -> None:
+        """A plan made elsewhere is back: follow it, unless the loop has asked for a newer one
+        (or obeyed a command) meanwhile."""
+        if request == self._plan_request:
+            self._follow(self.clock(), tasks, route)
+
+    def _follow(self, now: float, tasks: list[LoopTask], route: list[PlanTask]) -> None:
+        """Fly the plan ``route`` over ``tasks``: to its first task, as far as the battery
+        allows; with none, stand by, go home or land."""
         here = self.driver.position_at(now)
         choice: LoopTask | None = None
         way: list[Position] | None = None  # to the choice, round the no-fly zones
-        self.route = []
-        if tasks:
-            started = self.plan_timer() if self.plan_timer is not None else 0.0
-            self.route = self.planner.plan(here, [t.as_plan_task() for t in tasks], now)
-            if self.plan_timer is not None:
-                self.planning_s.append(self.plan_timer() - started)
-            first = self.route[0].id if self.route else None
+        self.route = route
+        if route:
+            first = route[0].id
             choice = next((t for t in tasks if t.id == first), None)
             if choice is not None:
                 way = self.airspace.way(here, choice.position)

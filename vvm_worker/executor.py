@@ -39,6 +39,7 @@ from vvm_worker.control import (
     LoopConfig,
     LoopTask,
     OperatorCommand,
+    PlanElsewhere,
     Scheduler,
     VehicleState,
 )
@@ -663,6 +664,7 @@ def build_rig(
     defer_reports: bool = False,
     sensing: PlatformSensing | None = None,
     wake_defers_to_arrival: bool = False,
+    plan_elsewhere: PlanElsewhere | None = None,
 ) -> VehicleRig:
     """An RV's control loop over the database: for ``simulate`` (one per RV, one queue) and
     for the RV workers (real time). ``driver``: the vehicle's (a MAVLink autopilot), else a
@@ -703,5 +705,6 @@ def build_rig(
             wake_defers_to_arrival=wake_defers_to_arrival,
         ),
         on_estimates=store.estimated,
+        plan_elsewhere=plan_elsewhere,
     )
     return VehicleRig(vehicle.pk, vehicle.name, driver, store, loop, readings, planner_for)

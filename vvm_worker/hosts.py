@@ -20,8 +20,10 @@ from __future__ import annotations
 import collections
 import concurrent.futures
 import heapq
+import itertools
 import logging
 import queue
+import signal
 import threading
 import time
 import uuid
@@ -34,6 +36,7 @@ from django.db.models import Exists, OuterRef, Q, QuerySet
 
 from cpcc_site import database
 from fleet.driving import LINK_LOST
+from fleet.geo import Position
 from fleet.mavlink.driver import Fence, MavlinkDriver
 from fleet.mavlink.errors import MavlinkError
 from fleet.models import Driver, GroundStation, Vehicle, VehicleStatus
@@ -43,7 +46,8 @@ from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle, V
 from vvm_worker.clock import Clock
 from vvm_worker.executor import RigFleet, build_rig, kinematics, read_aboard, time_scale
 from vvm_worker.live import publish_vehicle
-from vvm_worker.planning import DEFAULT_PLANNER
+from vvm_worker.planning import DEFAULT_PLANNER, Planner, PlanTask
+from vvm_worker.planning.remote import PlanAnswer, PlannerProcess
 from vvm_worker.platform import platform_vvm
 from vvm_worker.runtime import Runtime
 from vvm_worker.runtime.pool import POOL
@@ -206,6 +210,109 @@ class CannotFly(Exception):
         self.vehicle_name = vehicle.name
 
 
+class HostPlanning:
+    """The vehicles' plans of an RV worker (``control.PlanElsewhere``), made in its planner
+    process (``planning.remote``) and followed on the host thread.
+
+    The host thread sends each vehicle's planner once and then its requests; a thread of its
+    own reads the answers and hands each back to the host thread. Should the process end (it
+    was killed, it ran out of memory), the host thread makes the plans asked for and not
+    answered itself, and a new process is started, unless the last one ended within
+    ``RESTART_AFTER_S`` of its start: then the host thread plans from then on (logged), as
+    it does when the process was stopped with SIGTERM (the worker's whole process group was:
+    the worker is stopping too).
+    """
+
+    RESTART_AFTER_S = 60.0
+
+    def __init__(self, scheduler: RealTimeScheduler) -> None:
+        self.scheduler = scheduler
+        self.process: PlannerProcess | None = None
+        self._started_s = 0.0
+        self._closing = False
+        self._sent: dict[str, Planner] = {}  # each vehicle's planner the process has
+        self._requests = itertools.count(1)
+        # Each request not answered yet: its vehicle, planner, arguments and continuation.
+        self._waiting: dict[
+            int,
+            tuple[str, Planner, Position, list[PlanTask], float, Callable[[list[PlanTask]], None]],
+        ] = {}
+
+    def start(self) -> None:
+        process = PlannerProcess()
+        self.process, self._started_s, self._sent = process, time.monotonic(), {}
+        threading.Thread(target=self._read, args=(process,), name="cpcc-plans", daemon=True).start()
+
+    def plan(
+        self,
+        vehicle: str,
+        planner: Planner,
+        current: Position,
+        tasks: list[PlanTask],
+        now_s: float,
+        then: Callable[[list[PlanTask]], None],
+    ) -> None:
+        if self.process is None:
+            then(planner.plan(current, tasks, now_s))
+            return
+        request = next(self._requests)
+        self._waiting[request] = (vehicle, planner, current, tasks, now_s, then)
+        try:
+            if self._sent.get(vehicle) is not planner:
+                self.process.send_planner(vehicle, planner)
+                self._sent[vehicle] = planner
+            self.process.ask(request, vehicle, planner.state(), current, tasks, now_s)
+        except OSError:
+            pass  # the process has ended: its reader hands the request back (`_ended`)
+
+    def close(self) -> None:
+        """Stop the planner process (without waiting: it ends when it reads the request)."""
+        self._closing = True
+        if self.process is not None:
+            self.process.stop()
+
+    def _read(self, process: PlannerProcess) -> None:
+        for answer in process.answers():
+            self.scheduler.submit(lambda answer=answer: self._answered(answer))
+        self.scheduler.submit(lambda: self._ended(process))
+
+    def _answered(self, answer: PlanAnswer) -> None:
+        waiting = self._waiting.pop(answer.request, None)
+        if waiting is None:
+            return  # planned here meanwhile (`_ended`)
+        vehicle, planner, _, tasks, _, then = waiting
+        if answer.task_ids is None:
+            raise PlanFailed(f"{vehicle}: the planner failed: {answer.error}")
+        planner.restore(answer.state)
+        by_id = {task.id: task for task in tasks}
+        then([by_id[task_id] for task_id in answer.task_ids])
+
+    def _ended(self, process: PlannerProcess) -> None:
+        if self._closing or process is not self.process:
+            return
+        lived_s = time.monotonic() - self._started_s
+        process.join(1.0)
+        self.process = None
+        if process.exitcode == -signal.SIGTERM:  # stopped with its worker's process group
+            logger.info("the planner process was stopped: the vehicles are planned here")
+        elif lived_s >= self.RESTART_AFTER_S:
+            logger.error("the planner process ended: started again")
+            self.start()
+        else:
+            logger.error(
+                "the planner process ended %.0f s after its start: the vehicles are planned "
+                "on the host thread from now on",
+                lived_s,
+            )
+        waiting, self._waiting = self._waiting, {}
+        for vehicle, planner, current, tasks, now_s, then in waiting.values():
+            self.plan(vehicle, planner, current, tasks, now_s, then)
+
+
+class PlanFailed(Exception):
+    """A vehicle's planner raised in the planner process (the message says what)."""
+
+
 class RVHost:
     """The worker of one or more real vehicles in one process: the VVs aboard them and their
     control loops, all on one host thread with one VVM (one V8 runtime and its warm contexts).
@@ -245,6 +352,9 @@ class RVHost:
         self.vvm.local_rvs = {vehicle.pk for vehicle in vehicles}
         self.clock = self.vvm.clock
         self.scheduler = RealTimeScheduler(self.clock, after_each=self.vvm.announcer.flush)
+        # The vehicles' plans, made in a process of their own (planning.remote) while this
+        # one serves the other vehicles; here, on the host thread, should that process end.
+        self.planning = HostPlanning(self.scheduler)
         # The loops here, as the services tell them of work routed to them (no message).
         self.fleet = RigFleet(lambda rig, wake: self.scheduler.submit(wake), alone=False)
         self.vvm.local_fleet = self.fleet
@@ -315,6 +425,7 @@ class RVHost:
     # --- life ---------------------------------------------------------------------------------
 
     def start(self) -> None:
+        self.planning.start()
         self._thread.start()
         self.scheduler.submit(self._recover).result(WAIT_S * len(self.rvs))
         if self.watch is not None:
@@ -344,6 +455,7 @@ class RVHost:
                 logger.warning("the vehicles' last reports are lost: the database is away")
             self.vvm.announcer.close()
         finally:
+            self.planning.close()
             self.vvm.runtime.close()
             self._close_drivers()
             connection.close()
@@ -471,6 +583,7 @@ class HostedRV:
             live=vvm.listened,
             ticks=True,
             wake_defers_to_arrival=True,
+            plan_elsewhere=host.planning.plan,
         )
         self.driver = self.rig.driver
         self.loop = self.rig.loop

@@ -273,3 +273,83 @@ def test_a_command_the_autopilot_refuses_takes_the_rv_offline_for_its_words() ->
     store = _failing_flight(refusal)
     assert store.statuses == [(OFFLINE, ACTIVE, str(refusal))]
     assert "PreArm: Compass not calibrated" in str(refusal)
+
+
+class Elsewhere:
+    """Plans asked for and not made yet (the test makes them when it says)."""
+
+    def __init__(self) -> None:
+        self.asked: list[tuple[Any, Position, list[PlanTask], float, Callable[..., None]]] = []
+
+    def __call__(
+        self,
+        vehicle: str,
+        planner: Any,
+        current: Position,
+        tasks: list[PlanTask],
+        now_s: float,
+        then: Callable[[list[PlanTask]], None],
+    ) -> None:
+        self.asked.append((planner, current, tasks, now_s, then))
+
+    def make(self, index: int) -> None:
+        planner, current, tasks, now_s, then = self.asked[index]
+        then(planner.plan(current, tasks, now_s))
+
+
+def _loop_planning_elsewhere() -> tuple[ControlLoop, Store, Clock, Elsewhere]:
+    store, clock, elsewhere = Store(), Clock(), Elsewhere()
+    loop = ControlLoop(
+        name="RV",
+        driver=SimVehicle(VehicleSpec(max_speed_mps=10.0, climb_rate_mps=3.0), DEPOT),
+        planner=make_planner("latency", travel_time=TravelTime(10.0, 3.0)),
+        store=store,
+        scheduler=clock,
+        clock=lambda: clock.now,
+        plan_elsewhere=elsewhere,
+    )
+    return loop, store, clock, elsewhere
+
+
+def test_a_plan_made_elsewhere_is_flown_when_it_is_back() -> None:
+    loop, store, clock, elsewhere = _loop_planning_elsewhere()
+    store.open[1] = _task(1, 100.0)
+    loop.wake()
+    assert len(elsewhere.asked) == 1
+    assert (loop.target, clock.timers) == (None, [])  # nothing flown before the plan is back
+    elsewhere.make(0)
+    assert loop.target == 1
+    assert [task.id for task in loop.route] == [1]
+    assert loop.planner.state() == {"route": [1]}
+    _fly_all(clock)
+    assert [task_id for task_id, _ in store.served] == [1]
+    assert len(elsewhere.asked) == 1  # (nothing open after it: no plan to ask for)
+
+
+def test_a_plan_that_comes_back_after_a_newer_one_was_asked_for_is_dropped() -> None:
+    loop, store, clock, elsewhere = _loop_planning_elsewhere()
+    store.open[1] = _task(1, 100.0)
+    loop.wake()
+    store.open[2] = _task(2, -50.0)  # nearer, on the other side
+    loop.wake()
+    elsewhere.make(0)  # the first plan knew task 1 only: out of date
+    assert (loop.target, clock.timers) == (None, [])
+    elsewhere.make(1)
+    assert loop.target == 2
+    assert [task.id for task in loop.route] == [2, 1]
+
+
+def test_a_planner_that_does_not_retarget_plans_on_the_loops_thread() -> None:
+    store, clock, elsewhere = Store(), Clock(), Elsewhere()
+    loop = ControlLoop(
+        name="RV",
+        driver=SimVehicle(VehicleSpec(max_speed_mps=10.0, climb_rate_mps=3.0), DEPOT),
+        planner=make_planner("nearest"),
+        store=store,
+        scheduler=clock,
+        clock=lambda: clock.now,
+        plan_elsewhere=elsewhere,
+    )
+    store.open[1] = _task(1, 100.0)
+    loop.wake()
+    assert (loop.target, elsewhere.asked) == (1, [])

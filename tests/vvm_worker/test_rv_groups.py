@@ -314,6 +314,12 @@ def test_a_vv_that_waits_for_an_isolate_does_not_hold_up_the_host_thread(
     from vvm_worker.runtime import pool as pool_module
 
     host, steps = two_rvs_one_process
+    customer = CustomerFactory(name="Customer A")
+    ground = platform_vvm()
+    vv = vv_submit(customer=customer, name="Across", program=ACROSS, vvm=ground, seed=1)
+    vv_advance(vv_id=vv.pk, vvm=ground)  # routed to Heli One, in this host's process
+    # From here on, isolates are made only when the test says (the station's first step
+    # above took one as usual).
     pool = pool_module.IsolatePool(1)  # none prepared yet
     monkeypatch.setattr("vvm_worker.hosts.POOL", pool)
     monkeypatch.setattr("vvm_worker.runtime.context.POOL", pool)
@@ -326,10 +332,6 @@ def test_a_vv_that_waits_for_an_isolate_does_not_hold_up_the_host_thread(
         return await real()
 
     monkeypatch.setattr(pool_module, "prepare", slow)
-    customer = CustomerFactory(name="Customer A")
-    ground = platform_vvm()
-    vv = vv_submit(customer=customer, name="Across", program=ACROSS, vvm=ground, seed=1)
-    vv_advance(vv_id=vv.pk, vvm=ground)  # routed to Heli One, in this host's process
     advancing = threading.Thread(target=host.advance, args=(vv.pk,))
     advancing.start()
     try:
