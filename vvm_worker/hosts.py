@@ -45,7 +45,7 @@ from missions.events import VEHICLE_STALE_S
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle, VVStatus
 from vvm_worker.clock import Clock
 from vvm_worker.executor import RigFleet, build_rig, kinematics, read_aboard, time_scale
-from vvm_worker.live import publish_vehicle
+from vvm_worker.live import FeedAnnouncer, publish_vehicle
 from vvm_worker.planning import DEFAULT_PLANNER, Planner, PlanTask
 from vvm_worker.planning.remote import PlanAnswer, PlannerProcess
 from vvm_worker.platform import platform_vvm
@@ -358,6 +358,10 @@ class RVHost:
         # The loops here, as the services tell them of work routed to them (no message).
         self.fleet = RigFleet(lambda rig, wake: self.scheduler.submit(wake), alone=False)
         self.vvm.local_fleet = self.fleet
+        # What the map tick last read of the VVs aboard: at which count of the changes this
+        # process published, and when it reads again anyway (`_aboard_may_have_changed`).
+        self._aboard_seen: int | None = None
+        self._aboard_due = 0.0
         self.rvs: dict[int, HostedRV] = {}
         for vehicle in vehicles:
             try:
@@ -525,12 +529,25 @@ class RVHost:
         self._each(lambda rv: rv.look_again(*seen.get(rv.vehicle_id, (None, True))), "sweep")
         self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
 
+    def _aboard_may_have_changed(self, now: float) -> bool:
+        """Whether the map tick reads the VVs aboard the vehicles again: after work of this
+        process that changed something (a VV that boards, leaves or ends here announces it),
+        else every BEACON_KEYFRAME_S (what another process changed alone, such as a VV
+        cancelled on the web while it waits aboard). An idle worker then reads nothing at its
+        ticks (on SQLite, a connection opened and closed for each)."""
+        announcer = self.vvm.announcer
+        published = announcer.published if isinstance(announcer, FeedAnnouncer) else None
+        if published is not None and published == self._aboard_seen and now < self._aboard_due:
+            return False
+        self._aboard_seen, self._aboard_due = published, now + BEACON_KEYFRAME_S
+        return True
+
     def _beacon(self) -> None:
         """The map tick: the reports that wait are written, then the live maps are told
         where each vehicle is and what it carries."""
         now = self.clock.now_s()
         self._each(lambda rv: rv.rig.store.write_waiting(), "report")
-        if self.vvm.listened:
+        if self.vvm.listened and self._aboard_may_have_changed(now):
             aboard = read_aboard(list(self.rvs))
             self._each(lambda rv: rv.rig.store.seen_aboard(aboard[rv.vehicle_id]), "map")
         self._each(lambda rv: rv.beacon(now), "map beacon")

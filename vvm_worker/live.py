@@ -74,6 +74,7 @@ class FeedAnnouncer:
             raise ValueError("a feed published in the background is batched")
         self._outbox: queue.SimpleQueue[list[str] | None] = queue.SimpleQueue()
         self._publisher: threading.Thread | None = None  # started with the first flush
+        self._published = 0
 
     def announce(self, event: dict[str, Any]) -> None:
         data = json.dumps(event, separators=(",", ":"))
@@ -83,11 +84,18 @@ class FeedAnnouncer:
         else:
             transaction.on_commit(lambda: self._publish([data]), robust=True)
 
+    @property
+    def published(self) -> int:
+        """How many changes were handed to Redis so far (a host's look at whether anything
+        changed since it last looked)."""
+        return self._published
+
     def flush(self) -> None:
         """Publish the changes that committed since the last flush, in one pipeline."""
         if not self._committed:
             return
         committed, self._committed = self._committed, []
+        self._published += len(committed)
         if not self._in_background:
             self._publish(committed)
             return
@@ -132,6 +140,8 @@ class FeedAnnouncer:
                 return
 
     def _publish(self, events: list[str]) -> None:
+        if not self._batched:
+            self._published += len(events)
         pipe = (self._client or feed_client()).pipeline(transaction=False)
         for data in events:
             pipe.xadd(EVENTS_STREAM, {"e": data}, maxlen=STREAM_MAXLEN, approximate=True)

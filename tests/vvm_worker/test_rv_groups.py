@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 from django.core.management import CommandError, call_command
+from django.db import transaction
 
 from fleet.models import GroundStation, Vehicle
 from missions.models import Migration, VirtualVehicle, VVStatus
@@ -42,7 +43,7 @@ from tests.vvm_worker.test_distributed_faults import (
     visits_logged,
 )
 from vvm_worker.dispatch import gs_queue, rv_queue
-from vvm_worker.hosts import RVHost
+from vvm_worker.hosts import BEACON_KEYFRAME_S, RVHost
 from vvm_worker.platform import platform_vvm
 from vvm_worker.runtime import StepInput, StepResult
 from vvm_worker.services import vv_advance, vv_submit
@@ -351,3 +352,27 @@ def test_a_vv_that_waits_for_an_isolate_does_not_hold_up_the_host_thread(
     assert vv.status == VVStatus.FINISHED, vv.error
     assert [(s.replayed, s.answers_read) for s in steps] == [(True, 1), (False, 1)]
     assert {d.key: d.value for d in vv.storage.all()} == {"one": 1, "two": 2}
+
+
+def test_the_map_tick_reads_the_vvs_aboard_after_a_change_here_or_at_a_keyframe(
+    two_rvs_one_process, broker
+) -> None:
+    """An idle worker's map tick reads nothing from the database: it reads the VVs aboard its
+    vehicles again once work here changed something (announced it), else every keyframe."""
+    host, _ = two_rvs_one_process
+    later = host.clock.now_s() + 3600.0  # (the worker's own ticks, before it, read nothing)
+
+    def reads_at(now: float) -> bool:  # asked on the host thread, as the tick asks it
+        return host.scheduler.submit(lambda: host._aboard_may_have_changed(now)).result(10)
+
+    def change_here() -> None:
+        with transaction.atomic():
+            host.vvm.announce(lambda: {"type": "vv", "id": "a change of this process's"})
+
+    assert reads_at(later)  # a keyframe due
+    assert not reads_at(later)
+    assert not reads_at(later + 1.0)
+    host.scheduler.submit(change_here).result(10)  # published after its piece of work
+    assert reads_at(later + 1.0)
+    assert not reads_at(later + 2.0)
+    assert reads_at(later + 1.0 + BEACON_KEYFRAME_S)
