@@ -1,8 +1,8 @@
 """One VV's warm V8 isolate: the prelude, its SDC entries, its compiled program and the
 journal entries it has seen (``VVContext``).
 
-A step runs in one call into the isolate on the V8 thread (``v8.call``): the new journal
-entries go with it and the outcome comes back. Where the program was compiled as a generator
+A step runs in one call into the isolate, from the thread that steps the VV (``v8.direct``):
+the new journal entries go with it and the outcome comes back. Where the program was compiled as a generator
 (instrument.py) it stays suspended at its waiting call between steps and the next step resumes
 it there, reading only the new answer; otherwise, and in a new context, the step replays the
 program from its first line, answering each VVM-API call from the journal (prelude.js says
@@ -123,11 +123,8 @@ class VVContext:
         arguments = ", ".join([self._key, *(json.dumps(a) for a in args)])
         return f"__cpcc_host.{call}({arguments})"
 
-    def _host(self, call: str, *args: str) -> Any:
-        return self._isolate.eval(self._host_script(call, *args), timeout_s=HOST_TIMEOUT_S)
-
-    async def _host_async(self, call: str, *args: str, timeout: float = HOST_TIMEOUT_S) -> Any:
-        return await self._isolate.eval_async(self._host_script(call, *args), timeout_s=timeout)
+    def _host(self, call: str, *args: str, timeout: float = HOST_TIMEOUT_S) -> Any:
+        return self._isolate.eval(self._host_script(call, *args), timeout_s=timeout)
 
     def heap_bytes(self) -> int:
         """Bytes of V8 heap this context uses now."""
@@ -205,7 +202,7 @@ class VVContext:
         replay_timeout = replay if len(step.journal) else allowance
         # A context that never ran a step has nowhere to resume: it replays.
         resume_timeout = replay if catches_up else allowance
-        raw, thrown, killed_by, duration = v8.call(
+        raw, thrown, killed_by, duration = v8.direct(
             lambda: self._run(
                 arguments,
                 run_json,
@@ -271,7 +268,7 @@ class VVContext:
             )
         return self._interpret(state, thrown, duration)
 
-    async def _run(
+    def _run(
         self,
         arguments: tuple[str, ...],
         run_json: str,
@@ -280,7 +277,7 @@ class VVContext:
         resume_timeout: float,
         replay_timeout: float,
     ) -> tuple[Any, str | None, str | None, float]:
-        """The step's work in V8, on the V8 thread: the outcome's text (when there is one), the
+        """The step's work in V8 (each call from this thread to the isolate's): the outcome's text (when there is one), the
         text of what the program threw, what stopped it (``cpu``, ``heap``) and how long it
         ran."""
         isolate = self._isolate
@@ -292,10 +289,10 @@ class VVContext:
         try:
             if resume_timeout != replay_timeout:
                 # A step that resumes has the CPU quota, one that replays its allowance too.
-                raw = await self._host_async("stepIfResumes", *arguments, timeout=resume_timeout)
+                raw = self._host("stepIfResumes", *arguments, timeout=resume_timeout)
             if resume_timeout == replay_timeout or raw == _REPLAY:
                 raw, started = None, time.perf_counter()  # (None again if the step throws)
-                raw = await self._host_async("step", *arguments, timeout=replay_timeout)
+                raw = self._host("step", *arguments, timeout=replay_timeout)
         except JSTimeoutException:
             killed_by = "cpu"
         except JSOOMException:
@@ -316,10 +313,10 @@ class VVContext:
         if killed_by is not None:
             isolate.set_hard_memory_limit(0)
             with contextlib.suppress(JSEvalException):
-                await self._host_async("abort")
+                self._host("abort")
         if not isinstance(raw, str):
             with contextlib.suppress(JSEvalException):
-                raw = await self._host_async("outcome")
+                raw = self._host("outcome")
         return raw, thrown, killed_by, duration
 
     @staticmethod

@@ -461,14 +461,14 @@ def test_a_call_v8_stops_before_the_program_takes_its_answer_is_replayed_not_tak
     assert first.outcome is Outcome.SUSPENDED and first.pending.q == 0
     broken = host.runtime.context("vv-r")
     assert broken is not None
-    real = context_module.VVContext._host_async
+    real = context_module.VVContext._host
 
-    async def failing(self, call: str, *args: str, **kw: Any) -> Any:
+    def failing(self, call: str, *args: str, **kw: Any) -> Any:
         if self is broken and call in ("stepIfResumes", "step"):
             raise JSEvalException("null")
-        return await real(self, call, *args, **kw)
+        return real(self, call, *args, **kw)
 
-    monkeypatch.setattr(context_module.VVContext, "_host_async", failing)
+    monkeypatch.setattr(context_module.VVContext, "_host", failing)
     second = host.step()
     assert second.outcome is Outcome.SUSPENDED and second.pending.q == 1
     assert second.replayed and second.answers_read == 1  # in a new context

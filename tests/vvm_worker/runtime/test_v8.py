@@ -1,6 +1,8 @@
 """V8 from many threads, and a process that stops while V8 works (issue 20).
 
-Every isolate of a process is made, used and closed by one thread (vvm_worker/runtime/v8.py).
+Every isolate of a process is made and closed by one thread (vvm_worker/runtime/v8.py); a
+step's scripts are evaluated from the thread that steps the VV, as work a stopping process
+waits for.
 The crashes this prevents happen in a new process (V8's process-wide set-up) and at its exit,
 so the tests run their work in a fresh Python process and judge it by its exit status.
 """
@@ -240,9 +242,40 @@ def test_closing_an_isolate_from_another_thread_does_not_wait_for_the_v8_thread(
     assert isolate.closed and v8.open_isolates() == before
     release.set()
     holder.join(10)
-    assert other.eval("1 + 1", timeout_s=5) == 2  # after the close, on the same loop
+    assert other.eval("1 + 1", timeout_s=5) == 2
+
+    async def nothing() -> None:
+        pass
+
+    v8.call(nothing)  # after the close queued before it, on the same loop
     assert v8.open_isolates() == before - 1
     other.close()
+
+
+def test_a_script_over_its_time_is_stopped_and_its_isolate_answers_the_next_one() -> None:
+    """Scripts run from the caller's thread: one over its time is terminated by V8 (the
+    caller learns it at its timeout), while a script of another isolate, from another thread,
+    is answered meanwhile; the stopped isolate's next script gets its own value."""
+    looping, other = v8.new_isolate(), v8.new_isolate()
+    answered: list[object] = []
+
+    def meanwhile() -> None:
+        answered.extend(other.eval(f"{n} * 2", timeout_s=5) for n in range(20))
+
+    try:
+        helper = threading.Thread(target=meanwhile)
+        started = time.perf_counter()
+        helper.start()
+        with pytest.raises(v8.JSTimeoutException):
+            looping.eval("var x = 0; while (true) { x++; }", timeout_s=0.3)
+        assert time.perf_counter() - started >= 0.3
+        helper.join(10)
+        assert answered == [n * 2 for n in range(20)]
+        assert looping.eval("'next ' + 1", timeout_s=5) == "next 1"
+        assert looping.eval("x > 0", timeout_s=5) is True  # the stopped script's global
+    finally:
+        looping.close()
+        other.close()
 
 
 def test_a_pool_filled_ahead_gives_isolates_without_preparing_them_when_taken(
