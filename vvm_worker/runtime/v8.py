@@ -80,6 +80,8 @@ V8_FLAGS = (*DEFAULT_V8_FLAGS, "--disallow-code-generation-from-strings")
 # How long a stopping process waits for the V8 work in progress: longer than any one call's
 # timeout (a step's CPU quota and its replay allowance).
 SHUTDOWN_WAIT_S = 60.0
+# How long a script cancelled at its timeout may take to stop (V8's termination is at once).
+TERMINATION_WAIT_S = 5.0
 
 T = TypeVar("T")
 
@@ -103,6 +105,7 @@ class Isolate:
         self._manager: contextlib.AbstractContextManager[MiniRacer] | None = manager
         self._mr: MiniRacer | None = None
         self._closing = False  # closed by its user: the owner frees it next
+        self._stuck = False  # a script V8 did not stop when cancelled still runs in it
 
     # --- on the owner's loop ------------------------------------------------------------------
 
@@ -142,6 +145,8 @@ class Isolate:
         return self._owner.direct(lambda: self._eval_here(code, timeout_s))
 
     def _eval_here(self, code: str, timeout_s: float) -> Any:
+        if self._stuck:  # its next value would be the stuck script's
+            raise JSTimeoutException()
         context = self._racer()._ctx
         assert context is not None
         results = context._non_cancelable_mr_task_results_queue
@@ -151,7 +156,12 @@ class Isolate:
             value = results.get(timeout=timeout_s)
         except queue.Empty:
             context._dll.mr_cancel_task(context._ctx, task)
-            value = results.get()  # the terminated script's, at once (or its own value)
+            try:  # the terminated script's value, at once (or its own, had it just ended)
+                value = results.get(timeout=TERMINATION_WAIT_S)
+            except queue.Empty:
+                self._stuck = True
+                logger.error("a script V8 was told to stop still runs: its isolate is not used")
+                raise JSTimeoutException() from None
             try:
                 return context._value_handle_to_python(value)
             except JSTerminatedException:
