@@ -2,11 +2,11 @@
 journal entries it has seen (``VVContext``).
 
 A step runs in one call into the isolate, from the thread that steps the VV (``v8.direct``):
-the new journal entries go with it and the outcome comes back. Where the program was compiled as a generator
-(instrument.py) it stays suspended at its waiting call between steps and the next step resumes
-it there, reading only the new answer; otherwise, and in a new context, the step replays the
-program from its first line, answering each VVM-API call from the journal (prelude.js says
-when resuming would not be exact).
+the new journal entries go with it and the outcome comes back. Where the program was compiled
+as a generator (instrument.py) it stays suspended at its waiting call between steps and the
+next step resumes it there, reading only the new answer; otherwise, and in a new context, the
+step replays the program from its first line, answering each VVM-API call from the journal
+(prelude.js says when resuming would not be exact).
 """
 
 from __future__ import annotations
@@ -277,9 +277,9 @@ class VVContext:
         resume_timeout: float,
         replay_timeout: float,
     ) -> tuple[Any, str | None, str | None, float]:
-        """The step's work in V8 (each call from this thread to the isolate's): the outcome's text (when there is one), the
-        text of what the program threw, what stopped it (``cpu``, ``heap``) and how long it
-        ran."""
+        """The step's work in V8, each call from this thread to the isolate's: the outcome's
+        text (when there is one), the text of what the program threw, what stopped it
+        (``cpu``, ``heap``) and how long it ran."""
         isolate = self._isolate
         isolate.set_hard_memory_limit(heap_bytes)
         raw: Any = None  # the outcome, when the step returns it

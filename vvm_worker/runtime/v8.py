@@ -327,7 +327,8 @@ class _Owner:
         progress that a shutdown waits for: V8Closed once V8 is shut down, unless this thread
         is already inside such work (a step's later calls are made)."""
         depth = getattr(self._depth, "n", 0)
-        if depth == 0 and not self.on_owner_thread():
+        counted = depth == 0 and not self.on_owner_thread()
+        if counted:
             with self._lock:
                 self._start()  # V8 is set up (and, once shut down, raises V8Closed)
                 self._direct += 1
@@ -336,7 +337,7 @@ class _Owner:
             return work()
         finally:
             self._depth.n = depth
-            if depth == 0 and not self.on_owner_thread():
+            if counted:
                 with self._lock:
                     self._direct -= 1
 
