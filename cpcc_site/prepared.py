@@ -12,8 +12,9 @@ models whose save signals nobody listens to.
 On PostgreSQL a unit of work may run ``pipelined``: the writes it marks ``deferred`` go to the
 server without waiting for their answers, which come back with the next statement that waits
 (every other one does, as outside a pipeline), and their checks run when the block ends. A
-unit that is a transaction of its own (``pipelined_transaction``) sends its COMMIT with its
-last writes when no check waits for their answers, one round trip fewer.
+unit that is a transaction of its own (``pipelined_transaction``) sends its BEGIN with its
+first statements and its COMMIT with its last writes when no check waits for their answers:
+two round trips fewer than psycopg would make.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ from typing import Any, Generic, TypeVar
 
 from django.db import DatabaseError, connections, models, transaction
 from django.db.models.query import get_related_populators
+from psycopg import IsolationLevel
+from psycopg.pq import TransactionStatus
 
 M = TypeVar("M", bound=models.Model)
 
@@ -501,23 +504,56 @@ def pipelined(using: str = "default", *, commits: bool = False) -> Iterator[None
         yield
         return
     connection.ensure_connection()
-    with connection.wrap_database_errors, connection.connection.pipeline() as pipeline:
-        state = _Pipeline(pipeline)
-        setattr(connection, _PIPELINE, state)
+    pg = connection.connection
+    # The transaction's BEGIN, when the block starts it, goes to the server with the unit's
+    # first statements. psycopg would send its own BEGIN at the first statement and wait
+    # for its answer, a round trip of its own: so the connection is put in autocommit
+    # (psycopg then sends no BEGIN) and the block sends BEGIN itself, without waiting.
+    # (Django's commit or rollback, if the block does not commit, ends that transaction.)
+    begins = commits and _outermost(connection) and pg.info.transaction_status == _IDLE
+    with connection.wrap_database_errors:
+        if begins:
+            pg.autocommit = True
         try:
-            with connection.execute_wrapper(state.wait_unless_deferred):
-                yield
-            if commits and not state.checks and _outermost(connection):
-                # No check waits for the last writes' answers: the COMMIT goes with them and
-                # is answered in the same round trip. A write that fails makes the server
-                # skip it (the transaction rolls back) and is raised here, as it would have
-                # been; Django's commit then finds nothing left to send. A check that waits
-                # could still have to roll the writes back: then the COMMIT waits too.
-                connection.connection.execute("COMMIT", prepare=False)
+            with pg.pipeline() as pipeline:
+                state = _Pipeline(pipeline)
+                setattr(connection, _PIPELINE, state)
+                try:
+                    if begins:
+                        pg.execute(_begin_statement(pg), prepare=False)
+                    with connection.execute_wrapper(state.wait_unless_deferred):
+                        yield
+                    if commits and not state.checks and _outermost(connection):
+                        # No check waits for the last writes' answers: the COMMIT goes with
+                        # them and is answered in the same round trip. A write that fails
+                        # makes the server skip it (the transaction rolls back) and is
+                        # raised here, as it would have been; Django's commit then finds
+                        # nothing left to send. A check that waits could still have to roll
+                        # the writes back: then the COMMIT waits too.
+                        pg.execute("COMMIT", prepare=False)
+                finally:
+                    setattr(connection, _PIPELINE, None)
         finally:
-            setattr(connection, _PIPELINE, None)
+            if begins and not pg.closed and pg.info.transaction_status == _IDLE:
+                pg.autocommit = False  # as Django has it in a transaction
     for then in state.then:
         then()
+
+
+_IDLE = TransactionStatus.IDLE
+
+
+def _begin_statement(pg: Any) -> str:
+    """The BEGIN psycopg would send on this connection (its isolation level, as Django's
+    settings chose it)."""
+    parts = ["BEGIN"]
+    if pg.isolation_level is not None:
+        parts.append(f"ISOLATION LEVEL {IsolationLevel(pg.isolation_level).name.replace('_', ' ')}")
+    if pg.read_only is not None:
+        parts.append("READ ONLY" if pg.read_only else "READ WRITE")
+    if pg.deferrable is not None:
+        parts.append("DEFERRABLE" if pg.deferrable else "NOT DEFERRABLE")
+    return " ".join(parts)
 
 
 def _outermost(connection: Any) -> bool:
@@ -533,10 +569,10 @@ def _outermost(connection: Any) -> bool:
 @contextlib.contextmanager
 def pipelined_transaction(using: str = "default") -> Iterator[None]:
     """A unit of work that is a transaction of its own: ``transaction.atomic()`` with
-    ``pipelined`` inside. On PostgreSQL its COMMIT goes with its last writes when no check
-    waits for their answers (``save_fields`` of a row it holds, ``held``), one round trip a
-    unit fewer; inside another transaction it is a savepoint, as ``atomic`` makes it, and
-    commits nothing."""
+    ``pipelined`` inside. On PostgreSQL its BEGIN goes with its first statements, and its
+    COMMIT with its last writes when no check waits for their answers (``save_fields`` of a
+    row it holds, ``held``): two round trips a unit fewer; inside another transaction it is
+    a savepoint, as ``atomic`` makes it, and commits nothing."""
     with transaction.atomic(using=using), pipelined(using, commits=True):
         yield
 

@@ -386,6 +386,77 @@ def test_a_unit_of_work_of_its_own_commits_with_its_last_writes(monkeypatch) -> 
 
 
 @pytest.mark.django_db(transaction=True, serialized_rollback=True)
+def test_a_unit_of_work_of_its_own_sends_its_begin_with_its_first_statements(monkeypatch) -> None:
+    """On PostgreSQL a unit that is a transaction of its own waits for the server twice: for
+    its locking read (which BEGIN goes with: it gets no round trip of its own), and for its
+    last writes with the COMMIT. It is a transaction all the same (on any database): what it
+    holds is held until it ends, and what it wrote before a failure is rolled back."""
+    postgres = connection.vendor == "postgresql"
+    waits = _pipeline_waits(monkeypatch) if postgres else []
+    vv, other = _vv(), _vv()
+    with pipelined_transaction():
+        held = _locked(vv)
+        if postgres:
+            assert waits == ["sync"]  # the read (and the BEGIN sent with it)
+            _assert_held_elsewhere(vv)
+        with deferred():
+            held.steps = 7
+            save_fields(held, ["steps"], held=True)
+    if postgres:
+        assert waits == ["sync"]  # the writes and the COMMIT went when the pipeline closed
+        assert connection.connection.autocommit  # as Django leaves it between transactions
+    assert VirtualVehicle.objects.get(pk=vv.pk).steps == 7
+
+    def failing() -> None:
+        with pipelined_transaction():
+            held = _locked(other)
+            with deferred():
+                held.steps = 8
+                save_fields(held, ["steps"], held=True)
+            raise RuntimeError("the unit fails")
+
+    with pytest.raises(RuntimeError):
+        failing()
+    assert VirtualVehicle.objects.get(pk=other.pk).steps == 0
+
+
+def _pipeline_waits(monkeypatch) -> list[str]:
+    """Each time a psycopg pipeline syncs with the server and waits for its answers."""
+    from psycopg._pipeline_base import BasePipeline
+
+    waits: list[str] = []
+    real = BasePipeline._sync_gen
+
+    def counted(self):  # type: ignore[no-untyped-def]
+        waits.append("sync")
+        return real(self)
+
+    monkeypatch.setattr(BasePipeline, "_sync_gen", counted)
+    return waits
+
+
+def _assert_held_elsewhere(vv: VirtualVehicle) -> None:
+    """Another connection cannot lock the VV's row: a transaction holds it."""
+    import psycopg
+
+    settings = connection.settings_dict
+    with (
+        psycopg.connect(
+            host=settings["HOST"],
+            port=settings["PORT"],
+            dbname=settings["NAME"],
+            user=settings["USER"],
+            password=settings["PASSWORD"],
+            autocommit=True,
+        ) as onlooker,
+        pytest.raises(psycopg.errors.LockNotAvailable),
+    ):
+        onlooker.execute(
+            "SELECT 1 FROM missions_virtualvehicle WHERE id = %s FOR UPDATE NOWAIT", [vv.pk]
+        )
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
 def test_a_unit_whose_write_waits_for_its_check_commits_only_once_the_check_passed(
     monkeypatch,
 ) -> None:
