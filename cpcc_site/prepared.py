@@ -629,14 +629,53 @@ def send_later_rows(
 
 
 def _sent(sql: str, params: Sequence[Any], using: str) -> Any:
-    cursor = connections[using].cursor()
-    try:
-        with deferred(using):  # not waited for: the reader fetches its answer
+    connection = connections[using]
+    with deferred(using):  # not waited for: the reader fetches its answer
+        cursor = _deferred_cursor(connection)
+        try:
             cursor.execute(sql, params)
-    except BaseException:
-        cursor.close()
-        raise
+        except BaseException:
+            cursor.close()
+            raise
     return cursor
+
+
+def _deferred_cursor(connection: Any) -> Any:
+    """A cursor for a statement that does not wait for its answer: inside ``pipelined``,
+    psycopg's own, its calls' errors raised as Django's (Django's cursor also checks, logs
+    and wraps every call: a sixth of the time of such a statement); Django's elsewhere or
+    while statements are logged (DEBUG, a test that counts them)."""
+    state: _Pipeline | None = getattr(connection, _PIPELINE, None)
+    if state is None or not state.deferring or connection.queries_logged:
+        return connection.cursor()
+    connection.validate_no_broken_transaction()
+    return _DatabaseErrors(connection.connection.cursor(), connection.wrap_database_errors)
+
+
+class _DatabaseErrors:
+    """psycopg's cursor whose calls raise Django's database errors, as Django's do."""
+
+    def __init__(self, cursor: Any, wrap: Any) -> None:
+        self._cursor, self._wrap = cursor, wrap
+
+    def execute(self, sql: str, params: Sequence[Any]) -> None:
+        with self._wrap:
+            self._cursor.execute(sql, params)
+
+    def fetchone(self) -> Any:
+        with self._wrap:
+            return self._cursor.fetchone()
+
+    def fetchall(self) -> list[Any]:
+        with self._wrap:
+            return self._cursor.fetchall()
+
+    @property
+    def rowcount(self) -> int:
+        return int(self._cursor.rowcount)
+
+    def close(self) -> None:
+        self._cursor.close()
 
 
 def _execute(
@@ -652,13 +691,20 @@ def _execute(
     raise (the write did not do its part), which must roll back the unit's writes."""
     state: _Pipeline | None = getattr(connection, _PIPELINE, None)
     if state is None or not state.deferring or answer is None:
-        with connection.cursor() as cursor:
+        cursor = _deferred_cursor(connection)  # (Django's, unless the write is deferred)
+        try:
             cursor.execute(sql, params)
             if answer is not None:
                 answer(cursor)
+        finally:
+            cursor.close()
         return
-    cursor = connection.cursor()
-    cursor.execute(sql, params)
+    cursor = _deferred_cursor(connection)
+    try:
+        cursor.execute(sql, params)
+    except BaseException:
+        cursor.close()
+        raise
 
     def read() -> None:
         try:
