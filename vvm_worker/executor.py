@@ -112,6 +112,23 @@ def _weight_held(task: Task) -> float | None:
     return float(customer.service_class.weight)
 
 
+def write_estimates(stores: Sequence[DatabaseStore]) -> None:
+    """The estimates that wait in these RVs' stores (see ``DatabaseStore.estimated``), in one
+    statement for all of them; those whose VV another transaction holds wait in their store
+    for the next time (unless a newer estimate replaces them)."""
+    etas: dict[Any, float] = {}
+    owner: dict[Any, DatabaseStore] = {}
+    for store in stores:
+        if store._etas_waiting:
+            etas.update(store._etas_waiting)
+            owner.update(dict.fromkeys(store._etas_waiting, store))
+            store._etas_waiting = {}
+    if not etas:
+        return
+    for vv, eta_s in vvs_record_next_task_eta(etas=etas).items():
+        owner[vv]._etas_waiting.setdefault(vv, eta_s)
+
+
 class DatabaseStore:
     """An RV's work as the platform keeps it (``vvm_worker.control.Store``)."""
 
@@ -306,8 +323,9 @@ class DatabaseStore:
         """The loop's plan: when the vehicle expects to reach each VV's next task (by VV).
         Only the estimates that moved by more than ESTIMATE_SLACK_S are written: a plan that
         keeps its target (most of them) writes nothing, a new target one VV's. With ``ticks``
-        they wait for the host's map tick (``write_waiting``): an estimate is read by people,
-        and the plans of a busy RV change it many times a second."""
+        they wait for the host's map tick (``write_waiting``), with ``defer_reports`` for the
+        simulation's (``write_estimates``): an estimate is read by people, and the plans of a
+        busy RV change it many times a second."""
         told = self._estimates
         changed = {
             vv: eta_s
@@ -316,8 +334,8 @@ class DatabaseStore:
         }
         self._estimates = {vv: changed.get(vv, told.get(vv, eta_s)) for vv, eta_s in etas.items()}
         self._etas_waiting.update(changed)
-        if not self.ticks:
-            self._write_estimates()
+        if not self.ticks and not self.defer_reports:
+            write_estimates([self])
 
     def write_waiting(self) -> None:
         """Write the report that waits, if any (the host's map tick: a row is never more than
@@ -325,15 +343,7 @@ class DatabaseStore:
         answer, which writes it. Then the estimates that wait (see ``estimated``)."""
         if self._waiting is not None:
             self._write(self._waiting, moved=False)
-        self._write_estimates()
-
-    def _write_estimates(self) -> None:
-        """The estimates that wait, in one statement; those whose VV another transaction
-        holds now wait for the next time (unless a newer estimate replaces them)."""
-        if self._etas_waiting:
-            etas, self._etas_waiting = self._etas_waiting, {}
-            left = vvs_record_next_task_eta(etas=etas)
-            self._etas_waiting = {**left, **self._etas_waiting}
+        write_estimates([self])
 
     def seen_aboard(self, vvs: list[dict[str, Any]]) -> None:
         """The VVs aboard as the host read them for the map (see ``read_aboard``)."""

@@ -36,7 +36,13 @@ from missions.models import (
 from missions.readings import map_camera_readings
 from vvm_worker.clock import SimulatedClock
 from vvm_worker.dispatch import HostRef
-from vvm_worker.executor import PlatformSensing, RigFleet, VehicleRig, build_rig
+from vvm_worker.executor import (
+    PlatformSensing,
+    RigFleet,
+    VehicleRig,
+    build_rig,
+    write_estimates,
+)
 from vvm_worker.planning import DEFAULT_PLANNER, make_planner
 from vvm_worker.runtime import Runtime
 from vvm_worker.scenario import FleetEvent, Scenario, vv_instances
@@ -243,7 +249,8 @@ class Simulation:
         condition ``until`` holds after an event."""
         wall_start = time.monotonic()
         next_report = 0.0
-        while (until is None or not until()) and (item := self.queue.pop()) is not None:
+        next_tick = wall_start + settings.CPCC_MAP_TICK_S
+        while (until is None or not self._seen(until)) and (item := self.queue.pop()) is not None:
             t, fn = item
             if self.speed > 0:
                 delay = wall_start + t / self.speed - time.monotonic()
@@ -252,13 +259,28 @@ class Simulation:
             self.clock.t = t
             fn()
             self.events_run += 1
+            if time.monotonic() >= next_tick:  # the map tick of the RV workers, on wall time
+                self._write_estimates()
+                next_tick = time.monotonic() + settings.CPCC_MAP_TICK_S
             if progress is not None and time.monotonic() >= next_report:
                 progress(self._progress(total))
                 next_report = time.monotonic() + _PROGRESS_EVERY_S
         for rig in self.rigs.values():  # the rows say where every RV is now
             rig.store.flush()
+        self._write_estimates()
         if progress is not None:
             progress(self._progress(total))
+
+    def _seen(self, until: Callable[[], bool]) -> bool:
+        """Whether ``until`` holds, asked of the rows as a reader would see them after a
+        map tick (the estimates that wait are written first)."""
+        self._write_estimates()
+        return until()
+
+    def _write_estimates(self) -> None:
+        """When the RVs expect to reach the VVs' next tasks, as their plans last said: one
+        statement for the whole fleet (``write_estimates``)."""
+        write_estimates([rig.store for rig in self.rigs.values()])
 
     def _progress(self, total: int) -> Progress:
         mine = VirtualVehicle.objects.filter(pk__in=self.vv_ids)

@@ -538,11 +538,41 @@ def test_an_rv_workers_estimates_wait_for_the_map_tick_and_the_last_one_is_writt
     store.write_waiting()
     vv.refresh_from_db()
     assert vv.next_task_eta_s == 140.0
-    # Without ticks (simulate), each estimate that moves is written at once.
+    # Without ticks nor deferred reports, each estimate that moves is written at once.
     at_once = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm)
     at_once.estimated({vv.pk: 200.0})
     vv.refresh_from_db()
     assert vv.next_task_eta_s == 200.0
+
+
+def test_simulate_writes_the_whole_fleets_estimates_in_one_statement_when_it_ticks(
+    vvm_factory, customer_a
+) -> None:
+    # In simulate (deferred reports) the estimates wait too: its drain writes those of every
+    # RV at once, one statement for the fleet, not one a VV at every plan.
+    from django.db import connection
+    from django.test.utils import CaptureQueriesContext
+
+    from vvm_worker.executor import DatabaseStore, write_estimates
+
+    vvm = vvm_factory()
+    vvs = [vv_submit(customer=customer_a, name=n, program=program(), vvm=vvm) for n in "abc"]
+    stores = [
+        DatabaseStore(vehicle_id=VehicleFactory(name=n).pk, vvm=vvm, defer_reports=True)
+        for n in ("Heli One", "Heli Two")
+    ]
+    stores[0].estimated({vvs[0].pk: 100.0, vvs[1].pk: 105.0})
+    stores[1].estimated({vvs[2].pk: 120.0})
+    stores[0].estimated({vvs[0].pk: 90.0, vvs[1].pk: 105.5})  # (within the slack: kept)
+    assert set(VirtualVehicle.objects.values_list("next_task_eta_s", flat=True)) == {None}
+    with CaptureQueriesContext(connection) as statements:
+        write_estimates(stores)
+    assert len(statements) == 1
+    etas = dict(VirtualVehicle.objects.values_list("pk", "next_task_eta_s"))
+    assert etas == {vvs[0].pk: 90.0, vvs[1].pk: 105.0, vvs[2].pk: 120.0}
+    with CaptureQueriesContext(connection) as statements:
+        write_estimates(stores)  # nothing waits
+    assert len(statements) == 0
 
 
 @pytest.mark.django_db(transaction=True, serialized_rollback=True)  # another connection

@@ -13,8 +13,9 @@ import uuid
 from collections.abc import Mapping
 
 from django.db import connection
+from django.db.models import Case, FloatField, Value, When
 
-from cpcc_site.prepared import deferred, insert_rows, save_fields, update_row
+from cpcc_site.prepared import deferred, insert_rows, save_fields
 from missions.models import LogEntry, Task, VirtualVehicle, WaitReason
 from missions.waiting import duration_text
 from vvm_worker.services.base import VVM, customer_named, logger
@@ -24,6 +25,8 @@ from vvm_worker.services.base import VVM, customer_named, logger
 PLATFORM_NOTE = "platform"
 # The VV's columns that say why it waits (written only when that changes).
 WAITING_FIELDS = ("waiting_reason", "waiting_message", "waiting_since_s")
+# The estimates written by one statement on SQLite (three parameters each).
+_ETAS_A_STATEMENT = 1000
 
 
 def no_vehicle_message(task: Task) -> str:
@@ -83,13 +86,20 @@ def vvs_record_next_task_eta(*, etas: Mapping[uuid.UUID, float]) -> dict[uuid.UU
     clock seconds), as the RVs' control loops last planned it. Gives back the estimates not
     written because another transaction holds their VV's row (for the caller to try again):
     an estimate never waits for a row, so it never holds one VV's row while waiting for
-    another's. On PostgreSQL one statement for all of them; elsewhere (SQLite, where a writer
-    holds the whole database) one per VV, in the order of their ids."""
+    another's. One statement for all of them (on SQLite, where a writer holds the whole
+    database, nothing is left)."""
     if not etas:
         return {}
     if connection.vendor != "postgresql":
-        for vv_id in sorted(etas):
-            update_row(VirtualVehicle, vv_id, values={"next_task_eta_s": etas[vv_id]})
+        ids = sorted(etas)
+        for start in range(0, len(ids), _ETAS_A_STATEMENT):  # (SQLite's limit of parameters)
+            some = ids[start : start + _ETAS_A_STATEMENT]
+            VirtualVehicle.objects.filter(pk__in=some).update(
+                next_task_eta_s=Case(
+                    *(When(pk=vv_id, then=Value(etas[vv_id])) for vv_id in some),
+                    output_field=FloatField(),
+                )
+            )
         return {}
     ids = sorted(etas)
     with connection.cursor() as cursor:
