@@ -336,7 +336,45 @@ def update_row(
     them. The number of rows changed (0: no such row; None when ``deferred``: not known
     yet)."""
     connection = connections[using]
-    add = add or {}
+    sql, params = _update_statement(model, pk, values, add or {}, connection)
+    changed: list[int] = []
+    _execute(connection, sql, params, lambda cursor: changed.append(int(cursor.rowcount)))
+    return changed[0] if changed else None
+
+
+def update_row_with(
+    model: type[models.Model],
+    pk: Any,
+    *,
+    values: Mapping[str, Any],
+    add: Mapping[str, Any] | None = None,
+    write: tuple[str, Sequence[Any]],
+    using: str = "default",
+) -> None:
+    """``update_row`` and another write (``write``: its SQL and parameters; it must not read
+    the updated row) as one statement on PostgreSQL, the update a data-modifying ``WITH`` in
+    front of the other; elsewhere two statements, the other first. Whether the row was there
+    is not told."""
+    connection = connections[using]
+    sql, params = _update_statement(model, pk, values, add or {}, connection)
+    other_sql, other_params = write
+    if connection.vendor == "postgresql":
+        _execute(
+            connection, f'WITH "updated" AS ({sql}) {other_sql}', [*params, *other_params], None
+        )
+        return
+    _execute(connection, other_sql, list(other_params), None)
+    _execute(connection, sql, params, None)
+
+
+def _update_statement(
+    model: type[models.Model],
+    pk: Any,
+    values: Mapping[str, Any],
+    add: Mapping[str, Any],
+    connection: Any,
+) -> tuple[str, list[Any]]:
+    """``update_row``'s statement and parameters (its SQL written once per model and fields)."""
     key = (model, tuple(values), tuple(add), connection.vendor)
     compiled = _UPDATES.get(key)
     if compiled is None:
@@ -356,9 +394,7 @@ def update_row(
         for field, value in zip(targets, given, strict=True)
     ]
     params.append(model._meta.pk.get_db_prep_value(pk, connection))
-    changed: list[int] = []
-    _execute(connection, sql, params, lambda cursor: changed.append(int(cursor.rowcount)))
-    return changed[0] if changed else None
+    return sql, params
 
 
 _INSERTS: dict[tuple[Any, ...], tuple[str, list[Any]]] = {}

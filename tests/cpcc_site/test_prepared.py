@@ -17,6 +17,7 @@ from cpcc_site.prepared import (
     pipelined_transaction,
     save_fields,
     update_row,
+    update_row_with,
 )
 from fleet.models import Vehicle
 from missions.models import LogEntry, StorageDocument, Task, VirtualVehicle
@@ -171,6 +172,35 @@ def test_update_row_sets_and_adds_as_an_orm_update_does() -> None:
         5,
     )
     assert update_row(Vehicle, vehicle.pk + 1000, values={"lat": 2.0}) == 0
+
+
+def test_update_row_with_another_write_does_both_in_one_statement_on_postgresql() -> None:
+    # (An RV's row and the track points of the VVs aboard, where it stopped to serve a task.)
+    from django.test.utils import CaptureQueriesContext
+
+    vehicle = VehicleFactory(name="Heli One")
+    vv = _vv()
+    log = LogEntry._meta.db_table
+    write = (
+        f'INSERT INTO "{log}" ("vv_id", "seq", "at_s", "level", "message") '
+        "VALUES (%s, %s, %s, %s, %s)",
+        [VirtualVehicle._meta.pk.get_db_prep_value(vv.pk, connection), 1, 2.5, "info", "x"],
+    )
+    with CaptureQueriesContext(connection) as statements, transaction.atomic():
+        update_row_with(
+            Vehicle,
+            vehicle.pk,
+            values={"lat": 1.5, "planner_state": {"a": [1]}},
+            add={"tasks_done": 2},
+            write=write,
+        )
+    vehicle.refresh_from_db()
+    assert (vehicle.lat, vehicle.planner_state, vehicle.tasks_done) == (1.5, {"a": [1]}, 2)
+    assert list(LogEntry.objects.filter(vv=vv).values_list("seq", "message")) == [(1, "x")]
+    writes = [
+        q for q in statements.captured_queries if q["sql"].startswith(("WITH", "INSERT", "UPDATE"))
+    ]
+    assert len(writes) == (1 if connection.vendor == "postgresql" else 2)
 
 
 def test_rows_read_what_the_queryset_reads() -> None:

@@ -14,7 +14,7 @@ from django.db import connection, transaction
 from django.db.models.functions import Now
 from django.utils import timezone
 
-from cpcc_site.prepared import deferred, update_row
+from cpcc_site.prepared import deferred, update_row, update_row_with
 from fleet.geo import Position
 from fleet.models import (
     GroundStation,
@@ -486,29 +486,39 @@ def vehicle_record_state(
     (found by the database in the same statement); ``tasks_done``: the RV served that many
     more tasks. Inside the caller's transaction when there is one."""
     here = state.position
-    # One commit for the track points and the row (a lone UPDATE commits by itself).
-    alone = track_aboard and connection.get_autocommit()
+    values = {
+        "lat": here.lat,
+        "lng": here.lng,
+        "alt": here.alt,
+        "phase": state.phase,
+        "distance_m": state.distance_m,
+        "flight_s": state.flight_s,
+        "planner_state": state.planner_state,
+    }
+    add = {"tasks_done": tasks_done} if tasks_done else None
+    if not track_aboard:
+        with deferred():
+            update_row(Vehicle, vehicle_id, values=values, add=add)
+        return
+    # One commit for the track points and the row (a lone UPDATE commits by itself); on
+    # PostgreSQL one statement.
+    alone = connection.get_autocommit()
     with transaction.atomic() if alone else contextlib.nullcontext(), deferred():
-        if track_aboard:
-            _track_points_aboard(vehicle_id, [(state.t_s, here)])
-        update_row(
-            Vehicle,
-            vehicle_id,
-            values={
-                "lat": here.lat,
-                "lng": here.lng,
-                "alt": here.alt,
-                "phase": state.phase,
-                "distance_m": state.distance_m,
-                "flight_s": state.flight_s,
-                "planner_state": state.planner_state,
-            },
-            add={"tasks_done": tasks_done} if tasks_done else None,
-        )
+        track = _track_points_statement(vehicle_id, [(state.t_s, here)])
+        update_row_with(Vehicle, vehicle_id, values=values, add=add, write=track)
 
 
 def _track_points_aboard(vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:
     """Track points (time, position) for every VV aboard the RV now: one INSERT ... SELECT."""
+    sql, params = _track_points_statement(vehicle_id, points)
+    with connection.cursor() as cursor:
+        cursor.execute(sql, params)
+
+
+def _track_points_statement(
+    vehicle_id: int, points: Sequence[tuple[float, Position]]
+) -> tuple[str, list[Any]]:
+    """``_track_points_aboard``'s statement and its parameters."""
     track, vvs = TrackPoint._meta.db_table, VirtualVehicle._meta.db_table
     statuses = [str(status) for status in ACTIVE_STATUSES]
     marks = ", ".join(["%s"] * len(statuses))
@@ -516,14 +526,13 @@ def _track_points_aboard(vehicle_id: int, points: Sequence[tuple[float, Position
         ['SELECT %s AS "t_s", %s AS "lat", %s AS "lng", %s AS "alt"'] * len(points)
     )
     values = [v for t_s, p in points for v in (t_s, p.lat, p.lng, p.alt)]
-    with connection.cursor() as cursor:
-        cursor.execute(
-            f'INSERT INTO "{track}" ("vv_id", "t_s", "lat", "lng", "alt") '
-            f'SELECT v."id", p."t_s", p."lat", p."lng", p."alt" FROM "{vvs}" v, ({rows}) p '
-            f'WHERE v."host_rv_id" = %s AND v."status" IN ({marks}) '
-            'ORDER BY p."t_s", v."submitted_s", v."id"',
-            [*values, vehicle_id, *statuses],
-        )
+    return (
+        f'INSERT INTO "{track}" ("vv_id", "t_s", "lat", "lng", "alt") '
+        f'SELECT v."id", p."t_s", p."lat", p."lng", p."alt" FROM "{vvs}" v, ({rows}) p '
+        f'WHERE v."host_rv_id" = %s AND v."status" IN ({marks}) '
+        'ORDER BY p."t_s", v."submitted_s", v."id"',
+        [*values, vehicle_id, *statuses],
+    )
 
 
 def vehicle_record_track(*, vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:
