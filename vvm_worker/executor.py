@@ -116,17 +116,13 @@ def write_estimates(stores: Sequence[DatabaseStore]) -> None:
     """The estimates that wait in these RVs' stores (see ``DatabaseStore.estimated``), in one
     statement for all of them; those whose VV another transaction holds wait in their store
     for the next time (unless a newer estimate replaces them)."""
-    etas: dict[Any, float] = {}
-    owner: dict[Any, DatabaseStore] = {}
-    for store in stores:
-        if store._etas_waiting:
-            etas.update(store._etas_waiting)
-            owner.update(dict.fromkeys(store._etas_waiting, store))
-            store._etas_waiting = {}
+    taken = [(store, store.take_estimates()) for store in stores]
+    etas = {vv: eta_s for _, some in taken for vv, eta_s in some.items()}
     if not etas:
         return
-    for vv, eta_s in vvs_record_next_task_eta(etas=etas).items():
-        owner[vv]._etas_waiting.setdefault(vv, eta_s)
+    left = vvs_record_next_task_eta(etas=etas)
+    for store, some in taken:
+        store.keep_estimates({vv: left[vv] for vv in some if vv in left})
 
 
 class DatabaseStore:
@@ -336,6 +332,17 @@ class DatabaseStore:
         self._etas_waiting.update(changed)
         if not self.ticks and not self.defer_reports:
             write_estimates([self])
+
+    def take_estimates(self) -> dict[Any, float]:
+        """The estimates that wait to be written (see ``write_estimates``), taken out."""
+        etas, self._etas_waiting = self._etas_waiting, {}
+        return etas
+
+    def keep_estimates(self, etas: dict[Any, float]) -> None:
+        """Estimates taken but not written: they wait again, unless a newer one replaced
+        them meanwhile."""
+        if etas:
+            self._etas_waiting = {**etas, **self._etas_waiting}
 
     def write_waiting(self) -> None:
         """Write the report that waits, if any (the host's map tick: a row is never more than

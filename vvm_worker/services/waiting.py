@@ -90,8 +90,8 @@ def vvs_record_next_task_eta(*, etas: Mapping[uuid.UUID, float]) -> dict[uuid.UU
     database, nothing is left)."""
     if not etas:
         return {}
+    ids = sorted(etas)
     if connection.vendor != "postgresql":
-        ids = sorted(etas)
         for start in range(0, len(ids), _ETAS_A_STATEMENT):  # (SQLite's limit of parameters)
             some = ids[start : start + _ETAS_A_STATEMENT]
             VirtualVehicle.objects.filter(pk__in=some).update(
@@ -101,7 +101,6 @@ def vvs_record_next_task_eta(*, etas: Mapping[uuid.UUID, float]) -> dict[uuid.UU
                 )
             )
         return {}
-    ids = sorted(etas)
     with connection.cursor() as cursor:
         cursor.execute(_etas_sql(), [ids, [etas[i] for i in ids], ids])
         written = {row[0] for row in cursor.fetchall()}
