@@ -16,12 +16,14 @@ given on the command line win over these.
 - each worker warms up before it takes its first request (``cpcc_site.wsgi.warm_up``);
 - SIGTERM stops taking connections and lets the requests in progress finish (at most
   ``graceful_timeout``, 20 s, as the workers and daphne do); each worker closes V8 on its
-  way out (``vvm_worker.runtime``), exit status 0.
+  way out (``vvm_worker.runtime``), exit status 0; a worker on its way out ignores further
+  SIGTERMs (``worker_exit``).
 """
 
 from __future__ import annotations
 
 import os
+import signal
 from typing import Any
 
 from cpcc_site.env import env_float, env_str
@@ -43,3 +45,15 @@ def post_worker_init(worker: Any) -> None:
     from cpcc_site.wsgi import warm_up
 
     warm_up()
+
+
+def worker_exit(server: Any, worker: Any) -> None:
+    """A worker is on its way out: further SIGTERMs are ignored until it has exited.
+
+    When the whole process group is stopped (systemd, an operator's ``kill -- -PID``), each
+    worker receives SIGTERM twice: from the stop itself, and from the master as it stops its
+    workers. Late in an interpreter's shutdown Python gives SIGTERM back its default action, so
+    a second SIGTERM that arrives then kills the worker by the signal (gunicorn logs "was sent
+    SIGTERM!") before it has closed V8 and exited with status 0. An ignored signal stays
+    ignored through that shutdown."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
