@@ -575,6 +575,21 @@ def test_simulate_writes_the_whole_fleets_estimates_in_one_statement_when_it_tic
     assert len(statements) == 0
 
 
+def test_more_estimates_than_one_statement_takes_are_all_written(customer_a) -> None:
+    # (A simulation of a thousand VVs: on SQLite a statement takes a few hundred.)
+    from vvm_worker.services.waiting import vvs_record_next_task_eta
+
+    vvs = VirtualVehicle.objects.bulk_create(
+        VirtualVehicle(
+            customer=customer_a, name=f"VV {n}", program="", seed=n, start_ms=0, submitted_s=0.0
+        )
+        for n in range(1000)
+    )
+    etas = {vv.pk: 100.0 + n for n, vv in enumerate(vvs)}
+    assert vvs_record_next_task_eta(etas=etas) == {}
+    assert dict(VirtualVehicle.objects.values_list("pk", "next_task_eta_s")) == etas
+
+
 @pytest.mark.django_db(transaction=True, serialized_rollback=True)  # another connection
 def test_an_estimate_whose_vv_another_worker_holds_waits_for_the_next_tick(
     vvm_factory, customer_a

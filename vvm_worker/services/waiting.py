@@ -25,8 +25,6 @@ from vvm_worker.services.base import VVM, customer_named, logger
 PLATFORM_NOTE = "platform"
 # The VV's columns that say why it waits (written only when that changes).
 WAITING_FIELDS = ("waiting_reason", "waiting_message", "waiting_since_s")
-# The estimates written by one statement on SQLite (three parameters each).
-_ETAS_A_STATEMENT = 1000
 
 
 def no_vehicle_message(task: Task) -> str:
@@ -86,14 +84,19 @@ def vvs_record_next_task_eta(*, etas: Mapping[uuid.UUID, float]) -> dict[uuid.UU
     clock seconds), as the RVs' control loops last planned it. Gives back the estimates not
     written because another transaction holds their VV's row (for the caller to try again):
     an estimate never waits for a row, so it never holds one VV's row while waiting for
-    another's. One statement for all of them (on SQLite, where a writer holds the whole
-    database, nothing is left)."""
+    another's. On PostgreSQL one statement for all of them; on SQLite, where a writer holds
+    the whole database and nothing is left, one for as many as its limit of parameters
+    allows."""
     if not etas:
         return {}
     ids = sorted(etas)
     if connection.vendor != "postgresql":
-        for start in range(0, len(ids), _ETAS_A_STATEMENT):  # (SQLite's limit of parameters)
-            some = ids[start : start + _ETAS_A_STATEMENT]
+        # bulk_update's CASE, without the transaction it opens around its statements (a
+        # BEGIN more, where one statement commits by itself); its batches: three parameters
+        # an estimate (the IN's id, the WHEN's id, the value).
+        batch = connection.ops.bulk_batch_size(["pk", "pk", "next_task_eta_s"], ids)
+        for start in range(0, len(ids), batch):
+            some = ids[start : start + batch]
             VirtualVehicle.objects.filter(pk__in=some).update(
                 next_task_eta_s=Case(
                     *(When(pk=vv_id, then=Value(etas[vv_id])) for vv_id in some),
