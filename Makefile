@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed-stamp
 # (examples/scenarios/messages-and-images.json); `make demo SCENARIO=FILE` runs FILE alone.
 SCENARIO ?=
 
-.PHONY: demo test lint check bench bench-simulate bench-service-levels bench-planner bench-load bench-burst bench-idle screenshots simulate-fig2 simulate-fig3 vendor clean
+.PHONY: demo test test-serial pytest lint check bench bench-simulate bench-service-levels bench-planner bench-load bench-burst bench-idle screenshots simulate-fig2 simulate-fig3 vendor clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "CPCC needs Python 3.11, found " + sys.version.split()[0] + " (set PYTHON=...)")'
@@ -33,9 +33,26 @@ check: $(STAMP)
 	$(PY) manage.py check
 	$(PY) manage.py makemigrations --check --dry-run
 
-test: lint check
+# The suite runs on TEST_WORKERS pytest-xdist workers (tests/parallel.py gives each a database,
+# a Redis and a var folder of its own); `make test-serial` runs it in one process, for debugging.
+# Both end with the suite's time (docs/testing.md says how to read it); PYTEST_ARGS adds options.
+TEST_WORKERS ?= 2
+PYTEST_ARGS ?=
+
+test: $(STAMP)
+	@start=$$(date +%s); \
+	$(MAKE) --no-print-directory lint check && \
+	$(MAKE) --no-print-directory pytest PYTEST_ARGS="-n $(TEST_WORKERS) $(PYTEST_ARGS)"; \
+	status=$$?; spent=$$(( $$(date +%s) - start )); \
+	echo "make test: $$((spent / 60)) min $$((spent % 60)) s in all (lint, checks and tests), exit status $$status"; \
+	exit $$status
+
+test-serial: lint check
+	$(MAKE) --no-print-directory pytest PYTEST_ARGS="-p no:xdist $(PYTEST_ARGS)"
+
+pytest: $(STAMP)
 	@test -x /usr/bin/chromium || echo "browser tests: skipped (no /usr/bin/chromium; apt-get install chromium)"
-	$(PY) -m pytest
+	$(PY) -m pytest $(PYTEST_ARGS)
 
 simulate-fig2: $(STAMP)
 	$(PY) manage.py simulate examples/scenarios/paper-fig2.json --speed 0

@@ -9,8 +9,9 @@ import pytest
 
 from tests.factories import CustomerFactory, GroundStationFactory, UserFactory, VehicleFactory
 
-# The distributed platform's fixtures (worker processes): see tests/live.py.
-pytest_plugins = ["tests.live", "tests.broker"]
+# The distributed platform's fixtures (worker processes): see tests/live.py; which tests the
+# second pass on PostgreSQL and a Redis server skips: tests/backends.py.
+pytest_plugins = ["tests.live", "tests.broker", "tests.backends"]
 
 # The paper's examples (../shared/examples), kept in the repository so a clone is complete.
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

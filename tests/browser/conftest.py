@@ -35,6 +35,7 @@ from playwright.sync_api import (
     BrowserType,
     Page,
     Playwright,
+    expect,
     sync_playwright,
 )
 
@@ -63,6 +64,11 @@ CHROMIUM_ARGS = [
     "--disable-sync",
     "--no-first-run",
 ]
+
+# How long an expectation waits for the page to get there (Playwright's default: 5 s). The
+# suite runs on two busy cores beside other tests' servers and workers (make test); a heavy
+# page (the API's docs render the whole schema in the browser) can take longer than 5 s there.
+expect.set_options(timeout=15_000)
 
 # Simulated vehicles fly this many times faster than real time: fast enough for a short test,
 # slow enough that the map shows a vehicle between two points (0 would jump from stop to stop).

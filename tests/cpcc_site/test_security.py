@@ -30,8 +30,10 @@ def production_env(tmp_path: Path, **extra: str) -> dict[str, str]:
 
 
 def django_settings(env: dict[str, str], *names: str) -> dict[str, object]:
+    """These settings as a new process with ``env`` reads them (the settings module alone:
+    setting up the apps, a second more, changes no setting)."""
     code = (
-        "import json, django; from django.conf import settings; django.setup(); "
+        "import json; from django.conf import settings; "
         f"print(json.dumps({{n: getattr(settings, n, None) for n in {list(names)!r}}}))"
     )
     out = subprocess.run(

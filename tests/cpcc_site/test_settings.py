@@ -73,7 +73,12 @@ def _settings_read(code: str, tmp_path: Path, **env: str) -> Any:
     out = subprocess.run(
         [sys.executable, "-c", code],
         cwd=ROOT,
-        env={**os.environ, "CPCC_VAR_DIR": str(tmp_path), **env},
+        env={
+            **os.environ,
+            "DJANGO_SETTINGS_MODULE": "cpcc_site.settings",
+            "CPCC_VAR_DIR": str(tmp_path),
+            **env,
+        },
         capture_output=True,
         text=True,
         check=True,
@@ -109,7 +114,7 @@ def test_the_isolate_pool_and_the_database_pool_follow_the_environment(tmp_path:
 
 def test_postgresql_prepares_repeated_statements_unless_told_not_to(tmp_path: Path) -> None:
     code = (
-        "import json, django; django.setup(); from django.conf import settings; "
+        "import json; from django.conf import settings; "
         "options = settings.DATABASES['default']['OPTIONS']; "
         "print(json.dumps([options.get('server_side_binding'), "
         "options.get('prepare_threshold')]))"

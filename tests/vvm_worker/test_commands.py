@@ -156,6 +156,10 @@ def test_simulate_shows_a_progress_bar_on_a_terminal(tmp_path: Path) -> None:
     main, child = pty.openpty()
     fcntl.ioctl(child, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 200, 0, 0))
     env = {**os.environ, "CPCC_VAR_DIR": str(tmp_path), "CPCC_MEDIA_ROOT": str(tmp_path / "media")}
+    # The terminal's size is what the pseudo-terminal says, as in a shell: not a COLUMNS or
+    # LINES of the test run's own (pytest-xdist's workers have COLUMNS=80).
+    env.pop("COLUMNS", None)
+    env.pop("LINES", None)
     process = subprocess.Popen(
         [
             sys.executable,

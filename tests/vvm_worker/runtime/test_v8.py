@@ -88,10 +88,15 @@ def test_a_process_that_exits_while_a_step_runs_lets_it_finish_and_exits_0() -> 
     exit closed the isolate under it: the step was lost, its callback into Python called into
     a closed loop), then closes every isolate on the V8 thread."""
     code = f"""
-        import threading
+        import atexit, threading
         from tests.vvm_worker.runtime.harness import CATALOG, START_MS
         from vvm_worker.runtime import Limits, Runtime, StepInput, answer_task, v8
 
+        # Registered before V8's own exit hook, so it runs after it: once V8's hook has let
+        # the step's script end, the thread reports what the step came to before the
+        # interpreter finalizes (a daemon thread still printing then crashes the process).
+        workers = []
+        atexit.register(lambda: [thread.join(30) for thread in workers])
         runtime = Runtime()
         source = {GPS_TASK!r} + "var x = 0; for (var i = 0; i < 2e9; i++) x += i;" + {GPS_TASK!r}
 
@@ -110,7 +115,8 @@ def test_a_process_that_exits_while_a_step_runs_lets_it_finish_and_exits_0() -> 
             result = step([answer], first.effects_total)  # the long one
             print("step:", result.outcome.value, flush=True)
 
-        threading.Thread(target=work, daemon=True).start()
+        workers.append(threading.Thread(target=work, daemon=True))
+        workers[0].start()
         started.wait()
         while v8.busy() == 0:  # until the long step is in V8
             pass

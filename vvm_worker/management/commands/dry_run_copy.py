@@ -15,7 +15,8 @@ from typing import Any
 from django.conf import settings
 from django.core.management.base import BaseCommand, CommandError, CommandParser
 
-from vvm_worker.dry_run import prepare_database, run_copy
+from vvm_worker.dry_run import run_copy
+from vvm_worker.fresh_database import prepare_database
 
 
 class Command(BaseCommand):

@@ -19,13 +19,15 @@ from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
 from rich.progress import Progress as Bar
 from rich.table import Table
 
+from vvm_worker.fresh_database import prepare_database
 from vvm_worker.planning import DEFAULT_PLANNER, PLANNER_NAMES
 from vvm_worker.scenario import ScenarioError, load_scenario
 from vvm_worker.simulation import Progress, Simulation
 
 
 def use_fresh_database(directory: Path) -> None:
-    """Point the default database at a new SQLite file in ``directory`` and migrate it."""
+    """Point the default database at a new SQLite file in ``directory`` with the platform's
+    schema (a copy of the migrated template, vvm_worker/fresh_database.py)."""
     connections["default"].close()
     conf = connections.settings["default"]
     conf.update(
@@ -42,7 +44,7 @@ def use_fresh_database(directory: Path) -> None:
         }
     )
     connections["default"] = connections.create_connection("default")
-    call_command("migrate", verbosity=0, interactive=False)
+    prepare_database(directory / "simulate.sqlite3")
 
 
 class Command(BaseCommand):
