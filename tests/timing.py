@@ -38,6 +38,7 @@ _original_popen_init = subprocess.Popen.__init__
 class _Results:
     def __init__(self, started: float) -> None:
         self.started = started
+        self.wall_started = time.time()
         self.tests: dict[str, dict[str, Any]] = defaultdict(
             lambda: {
                 "setup": 0.0,
@@ -138,6 +139,12 @@ def pytest_runtest_logreport(report: pytest.TestReport) -> None:
             test["started"].extend(value)
         elif name == CPU:
             test["cpu"] = round(test["cpu"] + value, 3)
+    if report.when == "setup":
+        # When it started, in seconds from the run's start, and on which worker: the run's
+        # timeline (pytest-xdist's controller says which worker sent the report).
+        test["start_s"] = round(report.start - _results.wall_started, 1)
+        node = getattr(report, "node", None)
+        test["worker"] = node.gateway.id if node is not None else "main"
     if report.when == "call" or report.outcome != "passed":
         test["outcome"] = report.outcome
 

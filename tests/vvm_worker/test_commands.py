@@ -25,6 +25,13 @@ from tests.conftest import SCENARIOS
 
 ROOT = Path(__file__).resolve().parents[2]
 
+# simulate without --keep loads its scenario into a new SQLite database of its own, and with
+# --keep into the SQLite file the test names: the second pass's PostgreSQL and Redis change
+# nothing in what these tests see.
+OWN_SQLITE = pytest.mark.backend_independent(
+    "simulate runs on a new SQLite database of its own, or with --keep on the test's SQLite file"
+)
+
 
 def manage(*args: str, tmp: Path, check: bool = True) -> subprocess.CompletedProcess[str]:
     env = {
@@ -91,6 +98,7 @@ def assert_summary_shape(summary: dict) -> None:
         assert_shape(migration, "migration")
 
 
+@OWN_SQLITE
 @pytest.mark.parametrize("scenario", ["paper-fig2.json", "paper-fig3.json"])
 def test_simulate_prints_the_same_json_summary_twice(tmp_path: Path, scenario: str) -> None:
     args = ("simulate", str(SCENARIOS / scenario), "--speed", "0", "--json")
@@ -112,6 +120,7 @@ def test_simulate_prints_the_same_json_summary_twice(tmp_path: Path, scenario: s
     assert not (tmp_path / "configured.sqlite3").exists()
 
 
+@OWN_SQLITE
 def test_simulate_reports_its_own_speed_apart_from_the_summary(tmp_path: Path) -> None:
     speed = re.compile(
         r"^simulated (\d+) tasks, (\d+) migrations and \d+ events in [\d.]+ s of wall time: "
@@ -132,6 +141,7 @@ def test_simulate_reports_its_own_speed_apart_from_the_summary(tmp_path: Path) -
     assert "tasks/s" not in as_json.stdout
 
 
+@OWN_SQLITE
 def test_simulate_keep_leaves_the_results_in_the_configured_database(tmp_path: Path) -> None:
     manage(
         "simulate",
@@ -152,6 +162,7 @@ def test_simulate_keep_leaves_the_results_in_the_configured_database(tmp_path: P
     assert out.stdout.strip().splitlines()[-1] == "['finished', 'finished', 'finished']"
 
 
+@OWN_SQLITE
 def test_simulate_shows_a_progress_bar_on_a_terminal(tmp_path: Path) -> None:
     main, child = pty.openpty()
     fcntl.ioctl(child, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 200, 0, 0))
@@ -219,11 +230,13 @@ def read_until_closed(
     return received[terminal], received[pipe]
 
 
+@OWN_SQLITE
 def test_simulate_human_output_has_a_table(tmp_path: Path) -> None:
     out = manage("simulate", str(SCENARIOS / "paper-fig2.json"), "--speed", "0", tmp=tmp_path)
     assert "VV 1" in out.stdout and "finished" in out.stdout and "Heli One" in out.stdout
 
 
+@OWN_SQLITE
 def test_simulate_names_an_unknown_key_in_the_scenario(tmp_path: Path) -> None:
     data = json.loads((SCENARIOS / "paper-fig2.json").read_text())
     data["vehicles"][0]["max_sped_mps"] = 3
@@ -234,6 +247,7 @@ def test_simulate_names_an_unknown_key_in_the_scenario(tmp_path: Path) -> None:
     assert "vehicles[0]" in out.stderr and "unknown key 'max_sped_mps'" in out.stderr
 
 
+@OWN_SQLITE
 def test_simulate_refuses_an_unknown_planner(tmp_path: Path) -> None:
     out = manage(
         "simulate",

@@ -243,6 +243,7 @@ def simulate(scenario: Path, tmp: Path, *args: str) -> str:
     return done.stdout
 
 
+@pytest.mark.backend_independent("simulate runs on a new SQLite database of its own")
 def test_simulate_sums_up_per_class_only_when_a_customer_has_one(tmp_path: Path) -> None:
     plain = json.loads(simulate(SCENARIOS / "paper-fig3.json", tmp_path, "--json").splitlines()[-1])
     assert "service_levels" not in plain
