@@ -7,8 +7,9 @@ plugin is loaded with ``-p tests.parallel``, ahead of pytest-django; see pyproje
   (tests/conftest.py, ``broker_url``); with ``REDIS_URL`` (CI's second pass) worker ``gwN``
   uses database number ``base + N`` of that server, so no worker reads another's Celery queues,
   map feed or throttle counts.
-- A var folder (``var/test-gwN``, or under ``CPCC_VAR_DIR``): SQLite test databases, static files, what the workers write.
-  Media and ports are per test already (``tmp_path``, a free port from the kernel).
+- A var folder (``var/test-gwN``, or under ``CPCC_VAR_DIR``): SQLite test databases, static
+  files, what the workers write. Media and ports are per test already (``tmp_path``, a free
+  port from the kernel).
 
 Run alone (``make test-serial``), nothing changes.
 """

@@ -36,9 +36,9 @@ _original_popen_init = subprocess.Popen.__init__
 
 
 class _Results:
-    def __init__(self, started: float) -> None:
-        self.started = started
-        self.wall_started = time.time()
+    def __init__(self) -> None:
+        # The wall clock, as pytest's reports say when each test started (``report.start``).
+        self.started = time.time()
         self.tests: dict[str, dict[str, Any]] = defaultdict(
             lambda: {
                 "setup": 0.0,
@@ -95,7 +95,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     global _results
     subprocess.Popen.__init__ = _recording_popen  # type: ignore[method-assign]
-    _results = _Results(time.monotonic())
+    _results = _Results()
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
@@ -142,7 +142,7 @@ def pytest_runtest_logreport(report: pytest.TestReport) -> None:
     if report.when == "setup":
         # When it started, in seconds from the run's start, and on which worker: the run's
         # timeline (pytest-xdist's controller says which worker sent the report).
-        test["start_s"] = round(report.start - _results.wall_started, 1)
+        test["start_s"] = round(report.start - _results.started, 1)
         node = getattr(report, "node", None)
         test["worker"] = node.gateway.id if node is not None else "main"
     if report.when == "call" or report.outcome != "passed":
@@ -183,7 +183,7 @@ def minutes(seconds: float) -> str:
 def pytest_terminal_summary(terminalreporter: Any, config: pytest.Config) -> None:
     if hasattr(config, "workerinput") or _results is None or not _results.tests:
         return
-    wall = time.monotonic() - _results.started
+    wall = time.time() - _results.started
     tests = _results.tests
     summed = sum(total(t) for t in tests.values())
     workers = getattr(config.option, "numprocesses", None) or 1
