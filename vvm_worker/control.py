@@ -766,13 +766,39 @@ class ControlLoop:
             self._failed(exc)
             return True
         self.standby_until = there + wait_s
-        self.scheduler.call_at(self.standby_until, lambda: self._standby_over(token))
+        if self.driver.reports_arrival:
+            # A real vehicle waits its standby time from when its telemetry says it is there,
+            # not from the estimate (one quicker than its specification would wait longer).
+            self.scheduler.call_at(
+                self._first_look(now, there),
+                lambda: self._at_standby(token, spot, there, wait_s),
+            )
+        else:
+            self.scheduler.call_at(self.standby_until, lambda: self._standby_over(token))
         return True
+
+    def _at_standby(self, token: int, spot: Position, due_s: float, wait_s: float) -> None:
+        """Whether the vehicle is at its standby position yet: from then it waits ``wait_s``
+        (from now, if it is far overdue: it waits where it is, then goes home)."""
+        if token != self._token:
+            return
+        now = self.clock()
+        if not self.driver.has_arrived(spot, TURN_TOLERANCE_M, now) and (
+            now - due_s <= ARRIVAL_OVERDUE_S
+        ):
+            self.scheduler.call_at(
+                now + ARRIVAL_POLL_S, lambda: self._at_standby(token, spot, due_s, wait_s)
+            )
+            return
+        self.standby_until = now + wait_s
+        self.scheduler.call_at(self.standby_until, lambda: self._standby_over(token))
 
     def _standby_over(self, token: int) -> None:
         if token != self._token:
             return
         now = self.clock()
+        if self.standby_until is not None and now < self.standby_until:
+            return  # its wait started later than estimated: the call at its end is scheduled
         self._token += 1
         self._go_home(now, self._token)
         self._record(now)

@@ -7,6 +7,7 @@ import itertools
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import pytest
 from shapely.geometry import Polygon
 
 from fleet.airspace import Airspace, ExclusionZone
@@ -353,3 +354,44 @@ def test_a_planner_that_does_not_retarget_plans_on_the_loops_thread() -> None:
     store.open[1] = _task(1, 100.0)
     loop.wake()
     assert (loop.target, elsewhere.asked) == (1, [])
+
+
+class ReportingVehicle(SimVehicle):
+    """A vehicle that reports where it is (as a MAVLink one) and whose estimates are off by
+    ``factor``: it gets there in ``factor`` times the time it says (quicker below 1)."""
+
+    def __init__(self, factor: float) -> None:
+        super().__init__(VehicleSpec(max_speed_mps=10.0, climb_rate_mps=3.0), DEPOT)
+        self.reports_arrival = True
+        self.factor = factor
+        self.arrivals: list[float] = []  # when it really got to each place it was sent
+
+    def fly_to(self, target: Position, now: float) -> float:
+        arrival = super().fly_to(target, now)
+        self.arrivals.append(arrival)
+        return now + (arrival - now) / self.factor
+
+
+@pytest.mark.parametrize("factor", [0.25, 2.0], ids=["quicker", "slower"])
+def test_a_vehicle_that_reports_arrival_stands_by_from_when_it_is_there(factor: float) -> None:
+    store, clock, driver = Store(), Clock(), ReportingVehicle(factor)
+    loop = ControlLoop(
+        name="RV",
+        driver=driver,
+        planner=make_planner("latency", travel_time=TravelTime(10.0, 3.0)),
+        store=store,
+        scheduler=clock,
+        clock=lambda: clock.now,
+        config=LoopConfig(standby_s=30.0),
+    )
+    store.open[1] = _task(1, 100.0)
+    loop.wake()
+    while clock.timers and not loop.returning:
+        clock.now = clock.timers[0][0]
+        clock.run_due()
+    assert [task for task, _ in store.served] == [1]
+    assert loop.returning
+    _, at_standby = driver.arrivals  # the task, then the standby position
+    # 30 s there from when it is there (within 2 m, looked for every 0.2 s), not from when
+    # the estimate said it would be.
+    assert clock.now == pytest.approx(at_standby + 30.0, abs=0.25)
