@@ -34,7 +34,8 @@ check: $(STAMP)
 	$(PY) manage.py makemigrations --check --dry-run
 
 # The suite runs on TEST_WORKERS pytest-xdist workers (tests/parallel.py gives each a database,
-# a Redis and a var folder of its own); `make test-serial` runs it in one process, for debugging.
+# a Redis and a var folder of its own; --dist worksteal: a worker that runs out of tests takes
+# some of the other's); `make test-serial` runs it in one process, for debugging.
 # Both end with the suite's time (docs/testing.md says how to read it); PYTEST_ARGS adds options.
 TEST_WORKERS ?= 2
 PYTEST_ARGS ?=
@@ -42,7 +43,7 @@ PYTEST_ARGS ?=
 test: $(STAMP)
 	@start=$$(date +%s); \
 	$(MAKE) --no-print-directory lint check && \
-	$(MAKE) --no-print-directory pytest PYTEST_ARGS="-n $(TEST_WORKERS) $(PYTEST_ARGS)"; \
+	$(MAKE) --no-print-directory pytest PYTEST_ARGS="-n $(TEST_WORKERS) --dist worksteal $(PYTEST_ARGS)"; \
 	status=$$?; spent=$$(( $$(date +%s) - start )); \
 	echo "make test: $$((spent / 60)) min $$((spent % 60)) s in all (lint, checks and tests), exit status $$status"; \
 	exit $$status
