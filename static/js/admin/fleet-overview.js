@@ -198,7 +198,10 @@
       return;
     }
     note.dataset.taken = 'true';
-    note.querySelector('[data-command-state]').textContent = 'taken by its worker';
+    // As the page the server renders says it (the time in UTC, the site's TIME_ZONE): when
+    // this page heard of it, within one report of when the worker took it.
+    note.querySelector('[data-command-state]').textContent =
+      'taken by its worker ' + new Date().toISOString().slice(11, 19);
   };
 
   Row.prototype.next = function (v) {
