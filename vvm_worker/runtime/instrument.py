@@ -58,12 +58,14 @@ functions (and ``await``), whose continuations the platform cannot wait for, and
 from __future__ import annotations
 
 import re
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
-from functools import lru_cache
 
 import tree_sitter_javascript
 from tree_sitter import Language, Node, Parser, Tree
+
+from vvm_worker.runtime.memo import TextMemo
 
 RESERVED_PREFIX = "__cpcc"
 _RESERVED = re.compile(r"__cpcc\w*")
@@ -545,14 +547,8 @@ def _apply(data: bytes, inserts: list[_Insert], *, generator: bool) -> Instrumen
     )
 
 
-@lru_cache(maxsize=256)
-def instrument_program(source: str, *, suspendable: bool = True) -> Instrumented:
-    """The program with its catch and finally clauses instrumented and, when it can be and
-    ``suspendable``, made suspendable (see the module docstring).
-
-    Raises ReservedNameError when the program uses a reserved identifier. Syntax is checked by
-    V8 before this is called; a clause tree-sitter cannot parse is left as it is.
-    """
+def _instrument_program(source: str, suspendable: bool) -> Instrumented:
+    """``instrument_program``, not remembered."""
     data = source.encode("utf-8")
     root = _parse(data).root_node
     _find_reserved(source, root)
@@ -570,6 +566,30 @@ def instrument_program(source: str, *, suspendable: bool = True) -> Instrumented
     if not inserts:
         return Instrumented(source, False)
     return _apply(data, inserts, generator=bool(sites))
+
+
+def _instrumented_bytes(instrumented: Instrumented) -> int:
+    moves = sum(len(inserts) for _, inserts in instrumented.shifts)
+    return sys.getsizeof(instrumented.code) + 128 * (len(instrumented.shifts) + moves)
+
+
+# A worker resumes the VVs aboard from their programs at every step: this keeps the
+# instrumented programs of a few hundred VVs of ordinary size (tens of kilobytes).
+INSTRUMENTED_CACHE_BYTES = 32 * 1024 * 1024
+_INSTRUMENTED: TextMemo[Instrumented] = TextMemo(
+    _instrument_program, max_bytes=INSTRUMENTED_CACHE_BYTES, size_of=_instrumented_bytes
+)
+
+
+def instrument_program(source: str, *, suspendable: bool = True) -> Instrumented:
+    """The program with its catch and finally clauses instrumented and, when it can be and
+    ``suspendable``, made suspendable (see the module docstring).
+
+    Raises ReservedNameError when the program uses a reserved identifier. Syntax is checked by
+    V8 before this is called; a clause tree-sitter cannot parse is left as it is. Remembered
+    by the program's digest (``memo.TextMemo``, ``INSTRUMENTED_CACHE_BYTES``).
+    """
+    return _INSTRUMENTED(source, suspendable)
 
 
 def instrument(source: str) -> str:

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import asyncio
 import re
+import sys
 from dataclasses import dataclass
-from functools import lru_cache
 
 from vvm_worker.runtime import v8
 from vvm_worker.runtime.instrument import unsupported
+from vvm_worker.runtime.memo import TextMemo
 from vvm_worker.runtime.v8 import (
     JSEvalException,
     JSOOMException,
@@ -18,9 +19,12 @@ from vvm_worker.runtime.v8 import (
 
 PROGRAM_NAME = "vv.js"
 CHECK_TIMEOUT_S = 5.0
-# A checking isolate keeps the global names of the programs it parsed (below); a new one now
-# and then keeps that small.
+# A checking isolate keeps the global names of the programs it parsed (below), and the texts
+# of the scripts it was given until its garbage collector sees a need (which a heap without a
+# limit may not: 200 programs of a million characters were 470 MB): a new one after so many
+# programs or so many characters of them keeps that small.
 CHECKS_PER_ISOLATE = 500
+CHARACTERS_PER_ISOLATE = 16_000_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,7 +84,8 @@ class _Checker:
     at its top level (``var`` and functions on the global object, ``let``/``const``/``class``
     in the script scope). A later program declaring one of them again fails when it would run,
     not when it is parsed, so the verdict is the same as in a new isolate; the isolate is
-    replaced every CHECKS_PER_ISOLATE programs and after a check that V8 had to stop.
+    replaced every CHECKS_PER_ISOLATE programs or CHARACTERS_PER_ISOLATE characters and after
+    a check that V8 had to stop.
     """
 
     def __init__(self) -> None:
@@ -88,6 +93,7 @@ class _Checker:
         self._lock: asyncio.Lock | None = None
         self._isolate: v8.Isolate | None = None
         self._uses = 0
+        self._characters = 0
 
     async def parse_error(self, script: str) -> str | None:
         """V8's text of the script's syntax error, or None when it parses."""
@@ -95,11 +101,16 @@ class _Checker:
         if self._loop is not loop or self._lock is None:  # first use, or a new owner
             self._loop, self._lock, self._isolate = loop, asyncio.Lock(), None
         async with self._lock:
-            if self._isolate is None or self._uses >= CHECKS_PER_ISOLATE:
+            if (
+                self._isolate is None
+                or self._uses >= CHECKS_PER_ISOLATE
+                or self._characters >= CHARACTERS_PER_ISOLATE
+            ):
                 if self._isolate is not None:
                     self._isolate.close()
-                self._isolate, self._uses = await v8.adopt(), 0
+                self._isolate, self._uses, self._characters = await v8.adopt(), 0, 0
             self._uses += 1
+            self._characters += len(script)
             try:
                 await self._isolate.eval_async(script, timeout_s=CHECK_TIMEOUT_S)
             except JSParseException as exc:
@@ -115,15 +126,8 @@ class _Checker:
 _CHECKER = _Checker()
 
 
-@lru_cache(maxsize=512)
-def check_syntax(source: str) -> SyntaxProblem | None:
-    """V8's verdict on the program's syntax, without running any of it, then what a VV program
-    may not use although V8 parses it (``instrument.unsupported``: async functions and
-    ``await``, whose continuations would never run, and ``import()``).
-
-    The check evaluates ``throw 0;`` in front of the program on its first line (see
-    ``_Checker``). A leading "use strict" directive is kept in front. Safe from any thread.
-    """
+def _check_syntax(source: str) -> SyntaxProblem | None:
+    """``check_syntax``, not remembered."""
     prefix = "throw 0;"
     strict = _USE_STRICT.match(source)
     body = source
@@ -146,3 +150,26 @@ def check_syntax(source: str) -> SyntaxProblem | None:
     if line > len(lines):  # "Unexpected end of input" points past the program's end
         line, column = len(lines), len(lines[-1]) + 1
     return SyntaxProblem(message, line, column)
+
+
+def _verdict_bytes(problem: SyntaxProblem | None) -> int:
+    return 0 if problem is None else 64 + sys.getsizeof(problem.message)
+
+
+# Verdicts are small: this holds tens of thousands, whatever the programs' sizes.
+SYNTAX_CACHE_BYTES = 4 * 1024 * 1024
+_VERDICTS: TextMemo[SyntaxProblem | None] = TextMemo(
+    _check_syntax, max_bytes=SYNTAX_CACHE_BYTES, size_of=_verdict_bytes
+)
+
+
+def check_syntax(source: str) -> SyntaxProblem | None:
+    """V8's verdict on the program's syntax, without running any of it, then what a VV program
+    may not use although V8 parses it (``instrument.unsupported``: async functions and
+    ``await``, whose continuations would never run, and ``import()``).
+
+    The check evaluates ``throw 0;`` in front of the program on its first line (see
+    ``_Checker``). A leading "use strict" directive is kept in front. Safe from any thread.
+    Remembered by the program's digest (``memo.TextMemo``, ``SYNTAX_CACHE_BYTES``).
+    """
+    return _VERDICTS(source)
