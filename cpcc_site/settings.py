@@ -296,6 +296,12 @@ CPCC_MAVLINK_LINK_TIMEOUT_S = env_float("CPCC_MAVLINK_LINK_TIMEOUT_S", 3.0, mini
 # An RV worker that has not reported for this long is taken as gone: its VVs move on.
 CPCC_RV_LEASE_S = env_float("CPCC_RV_LEASE_S", 20.0, minimum=1.0)
 
+# Dry runs (vvm_worker/services/dry_run.py): the CPU seconds a customer's dry runs may use
+# within CPCC_DRY_RUN_WINDOW_S seconds, in each web process (each runs two at once, one per
+# customer).
+CPCC_DRY_RUN_CPU_S = env_float("CPCC_DRY_RUN_CPU_S", 120.0, minimum=1.0)
+CPCC_DRY_RUN_WINDOW_S = env_float("CPCC_DRY_RUN_WINDOW_S", 600.0, minimum=1.0)
+
 # A web process answers an API token it looked up in the last CPCC_TOKEN_CACHE_S seconds from
 # its memory (accounts/authentication.py): a token revoked in another process stops working
 # there within this time, in the revoking process at once (0: every request reads it).
@@ -318,6 +324,11 @@ REST_KNOX = {"TOKEN_PREFIX": "cpcc_", "TOKEN_TTL": None, "AUTO_REFRESH": False}
 # CPCC_WEBHOOK_ALLOW_PRIVATE (the demo and the tests, whose receivers run on this machine).
 CPCC_WEBHOOK_ALLOW_PRIVATE = env_bool("CPCC_WEBHOOK_ALLOW_PRIVATE", False)
 CPCC_WEBHOOK_TIMEOUT_S = env_float("CPCC_WEBHOOK_TIMEOUT_S", 5.0, minimum=0.1)
+# The notify worker (manage.py notifyworker): threads that POST webhooks and send e-mails, and
+# how many of them one customer's webhooks may hold at once (a slow receiver delays only its
+# own customer's notifications).
+CPCC_NOTIFY_THREADS = int(env_float("CPCC_NOTIFY_THREADS", 8, minimum=1))
+CPCC_NOTIFY_PER_CUSTOMER = int(env_float("CPCC_NOTIFY_PER_CUSTOMER", 2, minimum=1))
 CPCC_WEBHOOK_ATTEMPTS = int(env_float("CPCC_WEBHOOK_ATTEMPTS", 5, minimum=1))
 CPCC_WEBHOOK_RETRY_S = env_float("CPCC_WEBHOOK_RETRY_S", 30.0, minimum=0.0)
 # E-mail (the notifications a user chooses on the Account page): through EMAIL_HOST's SMTP
@@ -350,6 +361,8 @@ REST_FRAMEWORK = {
     "DEFAULT_THROTTLE_RATES": {
         "user": env_str("CPCC_API_RATE_USER", "1200/minute"),
         "address": env_str("CPCC_API_RATE_ADDRESS", "2400/minute"),
+        # Map tiles (fleet/views.py) per client address: a map shows 20 to 60 at a time.
+        "tiles": env_str("CPCC_TILE_RATE", "600/minute"),
     },
     "DEFAULT_PERMISSION_CLASSES": ["rest_framework.permissions.IsAuthenticated"],
     "DEFAULT_SCHEMA_CLASS": "drf_spectacular.openapi.AutoSchema",

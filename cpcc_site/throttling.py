@@ -167,6 +167,13 @@ class AddressRateThrottle(SharedRateThrottle):
         return self.cache_format % {"scope": self.scope, "ident": self.get_ident(request)}  # type: ignore[no-any-return]
 
 
+class TileRateThrottle(AddressRateThrottle):
+    """Map tiles per client address (the "tiles" rate, ``CPCC_TILE_RATE``): a tile is public,
+    so the address is all there is to count by."""
+
+    scope = "tiles"
+
+
 class RequestRateThrottle(BaseThrottle):
     """The "user" and the "address" rates (``UserRateThrottle``, ``AddressRateThrottle``),
     counted in one round trip to Redis: a request is refused when either rate refuses it, and

@@ -14,12 +14,14 @@ machine's own services). Redirects are not followed, for the same reason.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import hmac
 import http.client
 import ipaddress
 import socket
 import ssl
+import threading
 import time
 import urllib.parse
 import uuid
@@ -27,8 +29,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-# The Celery tasks (vvm_worker/tasks.py) by name, and the queue the ground-station workers
-# serve them on (one may run a worker of its own: `celery -A cpcc_site worker -Q notify`).
+# The Celery tasks (vvm_worker/tasks.py) by name, and the queue `manage.py notifyworker`
+# serves them on (threads of its own, never a station's or vehicle's worker thread).
 NOTIFY_TASK = "cpcc.notify"
 WEBHOOK_DELIVER_TASK = "cpcc.webhook_deliver"
 NOTIFY_QUEUE = "notify"
@@ -62,6 +64,34 @@ class Unheard:
         self, *, event: str, vv_id: uuid.UUID, at_ms: int, task_id: int | None = None
     ) -> None:
         pass
+
+
+class PerKeyLimit:
+    """At most ``limit`` of something at once per key (a customer's webhook POSTs in a notify
+    worker's threads), so that one slow or hostile receiver holds only its own customer's
+    share of the threads. Thread-safe."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self._lock = threading.Lock()
+        self._taken: dict[object, int] = {}
+
+    def try_take(self, key: object) -> bool:
+        """One for ``key`` if it has fewer than ``limit``; False (nothing taken) otherwise."""
+        with self._lock:
+            taken = self._taken.get(key, 0)
+            if taken >= self.limit:
+                return False
+            self._taken[key] = taken + 1
+            return True
+
+    def give_back(self, key: object) -> None:
+        with self._lock:
+            left = self._taken.get(key, 0) - 1
+            if left > 0:
+                self._taken[key] = left
+            else:
+                self._taken.pop(key, None)
 
 
 def sign(body: bytes, secret: str) -> str:
@@ -108,33 +138,62 @@ def check_url(
         raise UnsafeURL(f"The host name {host!r} does not resolve to an address.")
     if not allow_private:
         for address in addresses:
-            kind = _not_public(address)
-            if kind is not None:
+            what = _not_public(address)
+            if what is not None:
                 shown = host if host == address else f"{host} ({address})"
                 raise UnsafeURL(
-                    f"{shown} is a {kind} address: webhooks go to addresses on the public "
-                    "internet only."
+                    f"{shown} is {what}: webhooks go to addresses on the public internet only."
                 )
     return addresses
 
 
+# IPv6 addresses that carry an IPv4 address a router on the way may unwrap and connect to.
+_NAT64 = ipaddress.IPv6Network("64:ff9b::/96")  # RFC 6052's well-known prefix
+_NAT64_LOCAL = ipaddress.IPv6Network("64:ff9b:1::/48")  # RFC 8215's, for a network's own use
+
+
 def _not_public(address: str) -> str | None:
-    """What kind of address this is, when it is not a public one (None when it is)."""
+    """What this address is, when it is not a public one ("a loopback address", ...); None
+    when it is. An IPv6 address that carries an IPv4 one (IPv4-mapped, 6to4, Teredo, NAT64)
+    is as public as the IPv4 address inside it, and no more public than itself."""
     ip = ipaddress.ip_address(address.split("%", 1)[0])  # an IPv6 scope (fe80::1%eth0)
-    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
-        ip = ip.ipv4_mapped
+    if isinstance(ip, ipaddress.IPv6Address):
+        if ip in _NAT64_LOCAL:
+            return "a NAT64 address for local use"
+        if ip.ipv4_mapped is not None:
+            ip = ip.ipv4_mapped
+        else:
+            for carrier, inner in _carried_ipv4(ip):
+                what = _not_public(str(inner))
+                if what is not None:
+                    return f"a {carrier} address of {inner}, {what}"
     kinds = [  # the most telling name first (0.0.0.0 and 127.0.0.1 are "private" too)
-        ("unspecified", ip.is_unspecified),
-        ("loopback", ip.is_loopback),
-        ("link-local", ip.is_link_local),
-        ("multicast", ip.is_multicast),
-        ("reserved", ip.is_reserved),
-        ("private", ip.is_private),
+        ("an unspecified", ip.is_unspecified),
+        ("a loopback", ip.is_loopback),
+        ("a link-local", ip.is_link_local),
+        ("a multicast", ip.is_multicast),
+        ("a reserved", ip.is_reserved),
+        ("a private", ip.is_private),
     ]
     for kind, matches in kinds:
         if matches:
-            return kind
-    return None if ip.is_global else "non-public"
+            return f"{kind} address"
+    return None if ip.is_global else "a non-public address"
+
+
+def _carried_ipv4(
+    ip: ipaddress.IPv6Address,
+) -> list[tuple[str, ipaddress.IPv4Address]]:
+    """The IPv4 addresses inside an IPv6 one, each with the name of the way it is carried."""
+    carried: list[tuple[str, ipaddress.IPv4Address]] = []
+    if ip.sixtofour is not None:
+        carried.append(("6to4", ip.sixtofour))
+    if ip.teredo is not None:
+        server, client = ip.teredo
+        carried += [("Teredo", server), ("Teredo", client)]
+    if ip in _NAT64:
+        carried.append(("NAT64", ipaddress.IPv4Address(int(ip) & 0xFFFFFFFF)))
+    return carried
 
 
 @dataclass(frozen=True)
@@ -164,7 +223,9 @@ def post(
 ) -> Answer:
     """POST ``body`` to ``url`` (after ``check_url``), to the checked addresses in turn until
     one connects; an answer other than 2xx (a redirect included) is a failure with its status.
-    Never raises for what the receiver or the network does."""
+    ``timeout_s`` bounds the whole exchange (connecting, sending, the answer's headers and
+    what is read of its body), not each read: a receiver that sends a byte now and then is cut
+    off at it. Never raises for what the receiver or the network does."""
     started = clock()
 
     def took() -> int:
@@ -178,9 +239,15 @@ def post(
     parts = urllib.parse.urlsplit(url)
     target = urllib.parse.urlunsplit(("", "", parts.path or "/", parts.query, ""))
     sent = {"Content-Type": "application/json", "User-Agent": USER_AGENT, **headers}
+    no_answer = f"no answer within {timeout_s:g} s"
+    deadline = time.monotonic() + timeout_s
     error = ""
     for address in addresses:
-        connection = _connection(parts, address, timeout_s)
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return Answer(None, no_answer, took())
+        connection = _connection(parts, address, left)
+        cutoff = _Cutoff(connection, left)
         try:
             connection.request("POST", target, body=body, headers=sent)
             response = connection.getresponse()
@@ -190,18 +257,49 @@ def post(
             error = "connection refused"
             continue
         except TimeoutError:
-            return Answer(None, f"no answer within {timeout_s:g} s", took())
-        except ssl.SSLError as exc:
-            return Answer(None, f"TLS: {exc.reason or exc}", took())
+            return Answer(None, no_answer, took())
         except (OSError, http.client.HTTPException) as exc:
+            if cutoff.fired:
+                return Answer(None, no_answer, took())
+            if isinstance(exc, ssl.SSLError):
+                return Answer(None, f"TLS: {exc.reason or exc}", took())
             error = f"{type(exc).__name__}: {exc}"[:200]
             continue
         finally:
+            cutoff.cancel()
             connection.close()
+        if cutoff.fired:  # what was read ended because the socket was shut at the deadline
+            return Answer(None, no_answer, took())
         if 300 <= status < 400:
             return Answer(status, "redirects are not followed", took())
         return Answer(status, "" if 200 <= status < 300 else f"answered {status}", took())
     return Answer(None, error, took())
+
+
+class _Cutoff:
+    """Shuts a connection's socket when its time is up, whatever read or write waits on it
+    (a socket's own timeout bounds each read, not the exchange)."""
+
+    def __init__(self, connection: http.client.HTTPConnection, after_s: float) -> None:
+        self._connection = connection
+        self._lock = threading.Lock()
+        self.fired = False
+        self._timer = threading.Timer(after_s, self._fire)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _fire(self) -> None:
+        with self._lock:
+            self.fired = True
+            sock = self._connection.sock
+            if sock is not None:
+                with contextlib.suppress(OSError):
+                    sock.shutdown(socket.SHUT_RDWR)
+
+    def cancel(self) -> None:
+        self._timer.cancel()
+        with self._lock:  # a shutdown under way ends before the connection is closed
+            pass
 
 
 def _connection(

@@ -12,11 +12,12 @@ import uuid
 from typing import Any
 
 from celery import shared_task
+from django.conf import settings
 
 from cpcc_site import database
 from vvm_worker.dispatch import ADMIT_TASK, VEHICLE_CHANGED_TASK, VV_ADVANCE_TASK
 from vvm_worker.hosts import current_host
-from vvm_worker.notify import NOTIFY_QUEUE, NOTIFY_TASK, WEBHOOK_DELIVER_TASK
+from vvm_worker.notify import NOTIFY_QUEUE, NOTIFY_TASK, WEBHOOK_DELIVER_TASK, PerKeyLimit
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_admit_queued
 from vvm_worker.services import vv_advance as advance
@@ -56,6 +57,12 @@ def admit(customer_id: int) -> None:
 
 # --- notifications (the ``notify`` queue: vvm_worker/services/notifications.py) ---------------
 
+# A customer's webhook POSTs at once in this process (``manage.py notifyworker``'s threads): a
+# job beyond them goes back to the queue for a moment, its thread free for other customers.
+_POSTING = PerKeyLimit(1)
+# How soon a job that found its customer's POSTs all under way is tried again.
+BUSY_AGAIN_S = 0.5
+
 
 @shared_task(name=NOTIFY_TASK, acks_late=True, ignore_result=True)
 def notify(event: str, vv_id: str, at_ms: int, task_id: int | None = None) -> None:
@@ -80,8 +87,17 @@ def webhook_deliver(job: dict[str, Any], attempt: int) -> None:
         vv_id=uuid.UUID(job["vv_id"]),
         task_id=None if job["task_id"] is None else int(job["task_id"]),
         body=str(job["body"]),
+        customer_id=None if job.get("customer_id") is None else int(job["customer_id"]),
     )
-    retry_in_s = database.through_outages(lambda: webhook_attempt(job=parsed, attempt=attempt))
+    customer = parsed.customer_id
+    _POSTING.limit = settings.CPCC_NOTIFY_PER_CUSTOMER
+    if not _POSTING.try_take(customer):
+        _deliver(parsed, attempt=attempt, countdown_s=BUSY_AGAIN_S)  # (acknowledged: re-sent)
+        return
+    try:
+        retry_in_s = database.through_outages(lambda: webhook_attempt(job=parsed, attempt=attempt))
+    finally:
+        _POSTING.give_back(customer)
     if retry_in_s is not None:
         _deliver(parsed, attempt=attempt + 1, countdown_s=retry_in_s)
 
@@ -95,6 +111,7 @@ def _deliver(job: WebhookJob, *, attempt: int, countdown_s: float = 0.0) -> None
             "vv_id": str(job.vv_id),
             "task_id": job.task_id,
             "body": job.body,
+            "customer_id": job.customer_id,
         },
         attempt,
     ]

@@ -4,7 +4,8 @@ one. Another user's token answers 404.
 
 A token is made by a user who logged in with a password (a session: the Account page, the
 browsable API), never with a token: a token that leaked cannot make others that would outlive
-its revocation.
+its revocation. Nor can it revoke its user's other tokens (and lock every integration of the
+user out): a token may revoke itself; other tokens are revoked with a session.
 """
 
 from __future__ import annotations
@@ -29,6 +30,10 @@ NO_SUCH_TOKEN = "No API token with this id among yours (GET /api/v1/tokens/ list
 TOKENS_NEED_A_PASSWORD = (
     "An API token cannot make another: make tokens on the platform's Account page (API "
     "tokens), logged in with your password."
+)
+ONLY_ITSELF = (
+    "An API token can revoke only itself: revoke your other tokens on the platform's Account "
+    "page (API tokens), logged in with your password."
 )
 
 
@@ -86,7 +91,8 @@ class ApiTokenCreatedSerializer(ApiTokenOutSerializer):
     ),
     destroy=extend_schema(
         summary="Revoke an API token: refused from now on",
-        responses={204: None, 404: DetailSerializer},
+        description="With a token, only that token itself; any of yours with a session.",
+        responses={204: None, 403: DetailSerializer, 404: DetailSerializer},
     ),
 )
 class ApiTokenViewSet(
@@ -126,5 +132,10 @@ class ApiTokenViewSet(
         return Response(ApiTokenCreatedSerializer(token).data, status=status.HTTP_201_CREATED)
 
     def destroy(self, request: Request, *args: Any, **kwargs: Any) -> Response:
-        api_token_revoke(token=self.get_object())
+        token = self.get_object()
+        if request.auth is not None and not (
+            isinstance(request.auth, ApiToken) and request.auth.pk == token.pk
+        ):
+            raise PermissionDenied(ONLY_ITSELF)
+        api_token_revoke(token=token)
         return Response(status=status.HTTP_204_NO_CONTENT)

@@ -30,7 +30,6 @@ from vvm_worker.services.dry_run import (
 
 # Seconds a client is told to wait before it asks again when every place for a dry run is
 # taken.
-BUSY_RETRY_S = 5
 
 
 class DryRunUnavailable(APIException):
@@ -183,7 +182,8 @@ class DryRunView(generics.GenericAPIView):  # type: ignore[type-arg]
         "400 for a program with a syntax error, as a submission would answer (`error` with "
         "the line and column) or a refused name; 409 when no VV could start at all (the "
         "platform has no ground station); 429 while this server runs as many dry runs as it "
-        "may at once (try again after Retry-After); 503 when the simulation failed (the "
+        "may at once, while one of yours runs, or when yours used their CPU budget (try again "
+        "after Retry-After); 503 when the simulation failed (the "
         "platform's fault, not the program's).",
     )
     def post(self, request: Request) -> Response:
@@ -199,7 +199,7 @@ class DryRunView(generics.GenericAPIView):  # type: ignore[type-arg]
         except DjangoValidationError as exc:
             raise ValidationError(as_serializer_error(exc)) from None
         except DryRunBusy as exc:
-            raise Throttled(wait=BUSY_RETRY_S, detail=str(exc)) from None
+            raise Throttled(wait=max(1, round(exc.retry_after_s)), detail=str(exc)) from None
         except NoGroundStation as exc:
             raise Conflict(str(exc)) from None
         except DryRunFailed as exc:

@@ -223,7 +223,9 @@
   CPCCMap.prototype._tileLayer = function (options) {
     var own = !options.tiles;
     var layer = L.tileLayer(options.tiles || PLATFORM_TILES, {
-      maxZoom: MAX_ZOOM, maxNativeZoom: own ? MAX_ZOOM : 19,
+      // The platform draws its world to zoom 19 (fleet/views.py), as most tile servers do:
+      // deeper, the map enlarges those tiles.
+      maxZoom: MAX_ZOOM, maxNativeZoom: 19,
       attribution: own ? 'Background: the simulated world' : (options.attribution || '')
     });
     var el = this.element;

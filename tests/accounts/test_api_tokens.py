@@ -82,6 +82,21 @@ def test_a_token_can_revoke_itself(user_a, cache_on) -> None:
     assert client.get(VVS_URL).status_code == 401
 
 
+def test_a_token_cannot_revoke_its_users_other_tokens(user_a, cache_on) -> None:
+    # A token that leaked cannot lock out every other integration of its user.
+    laptop, ci = make(user_a, "laptop"), make(user_a, "CI")
+    legacy = Token.objects.create(user=user_a).key
+    for key in (laptop["key"], legacy):
+        refused = with_key(key).delete(f"{TOKENS_URL}{ci['id']}/")
+        assert refused.status_code == 403
+        assert refused.json()["detail"].startswith("An API token can revoke only itself")
+    assert with_key(ci["key"]).get(VVS_URL).status_code == 200
+    assert sorted(ApiToken.objects.values_list("name", flat=True)) == ["CI", "laptop"]
+    # With a session (logged in with the password) any of the user's tokens.
+    assert logged_in(user_a).delete(f"{TOKENS_URL}{ci['id']}/").status_code == 204
+    assert with_key(ci["key"]).get(VVS_URL).status_code == 401
+
+
 def test_another_users_token_is_not_found_and_keeps_working(user_a, user_b, cache_on) -> None:
     made = make(user_a)
     other = logged_in(user_b)

@@ -40,8 +40,12 @@ def test_the_secret_is_in_the_answer_to_the_making_only(api_a, customer_a) -> No
         ("http://10.1.2.3/hook", "10.1.2.3 is a private address"),
         ("http://192.168.0.10:8080/", "192.168.0.10 is a private address"),
         ("http://169.254.169.254/latest/meta-data/", "169.254.169.254 is a link-local address"),
-        ("http://0.0.0.0/", "0.0.0.0 is a unspecified address"),
+        ("http://0.0.0.0/", "0.0.0.0 is an unspecified address"),
         ("http://[::ffff:127.0.0.1]/", "::ffff:127.0.0.1 is a loopback address"),
+        (
+            "http://[2002:7f00:1::]/",
+            "2002:7f00:1:: is a 6to4 address of 127.0.0.1, a loopback address",
+        ),
     ],
 )
 def test_loopback_and_private_addresses_are_refused_without_the_setting(

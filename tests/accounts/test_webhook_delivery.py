@@ -234,3 +234,34 @@ def test_a_failed_vv_emails_the_users_who_chose_it(
     assert message.subject == "[CPCC] Broken failed"
     assert "TypeError" in message.body and "error_line: 2" in message.body
     assert f"https://cpcc.example.com/vvs/{failed.pk}/" in message.body
+
+
+def test_a_job_of_a_customer_whose_posts_are_all_under_way_goes_back_to_the_queue(
+    customer_a, customer_b, receiver, notify_queue, settings
+) -> None:
+    settings.CPCC_WEBHOOK_ALLOW_PRIVATE = True
+    settings.CPCC_NOTIFY_PER_CUSTOMER = 1
+
+    def job(customer) -> dict:
+        webhook = hook(customer, receiver.url, ["vv.finished"])
+        return {
+            "webhook_id": webhook.pk,
+            "delivery": str(uuid.uuid4()),
+            "event": "vv.finished",
+            "vv_id": str(uuid.uuid4()),
+            "task_id": None,
+            "body": "{}",
+            "customer_id": customer.pk,
+        }
+
+    a_job, b_job = job(customer_a), job(customer_b)
+    assert tasks._POSTING.try_take(customer_a.pk)  # a POST of customer A's under way
+    try:
+        tasks.webhook_deliver.apply(args=[a_job, 1])
+        tasks.webhook_deliver.apply(args=[b_job, 1])
+    finally:
+        tasks._POSTING.give_back(customer_a.pk)
+    # A's job waits its turn on the queue, the same attempt; its thread posted B's meanwhile.
+    assert notify_queue() == [("cpcc.webhook_deliver", [a_job, 1])]
+    assert [json.loads(r.body) for r in receiver.requests] == [{}]
+    assert receiver.requests[0].headers["X-CPCC-Delivery"] == b_job["delivery"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import hmac
 import socket
+import threading
 from collections.abc import Iterator
 
 import pytest
@@ -44,6 +45,36 @@ def test_a_name_is_refused_for_any_private_address_it_has() -> None:
         "10.0.0.7",
     ]
     assert check_url("https://hook.example/", allow_private=False, resolve=resolving_to("8.8.8.8"))
+
+
+@pytest.mark.parametrize(
+    ("address", "what"),
+    [
+        ("2002:7f00:1::", "a 6to4 address of 127.0.0.1, a loopback address"),
+        ("2002:c0a8:101::1", "a 6to4 address of 192.168.1.1, a private address"),
+        ("2001:0:7f00:1::", "a Teredo address of 127.0.0.1, a loopback address"),
+        ("2001:0:808:808:0:f7ff:f5ff:fffe", "a Teredo address of 10.0.0.1, a private address"),
+        ("64:ff9b::7f00:1", "a NAT64 address of 127.0.0.1, a loopback address"),
+        ("64:ff9b::a9fe:a9fe", "a NAT64 address of 169.254.169.254, a link-local address"),
+        ("64:ff9b:1::a00:1", "a NAT64 address for local use"),
+    ],
+)
+def test_an_ipv6_address_carrying_a_non_public_ipv4_address_is_refused(
+    address: str, what: str
+) -> None:
+    # A relay or a NAT64 gateway on the way unwraps these to the IPv4 address inside.
+    with pytest.raises(UnsafeURL) as refused:
+        check_url("https://hook.example/", allow_private=False, resolve=resolving_to(address))
+    assert str(refused.value) == (
+        f"hook.example ({address}) is {what}: webhooks go to addresses on the public internet only."
+    )
+    assert check_url("https://hook.example/", allow_private=True, resolve=resolving_to(address))
+
+
+def test_a_6to4_address_of_a_public_ipv4_address_is_public() -> None:
+    assert check_url(
+        "https://hook.example/", allow_private=False, resolve=resolving_to("2002:808:808::1")
+    ) == ["2002:808:808::1"]
 
 
 @pytest.mark.parametrize(
@@ -91,3 +122,34 @@ def test_no_answer_is_a_failure_that_says_why() -> None:
         url = f"http://127.0.0.1:{silent.getsockname()[1]}/"
         quiet = post(url, b"{}", {}, timeout_s=0.2, allow_private=True)
     assert (quiet.status, quiet.error) == (None, "no answer within 0.2 s")
+
+
+def test_a_receiver_that_answers_a_byte_at_a_time_is_cut_off_at_the_timeout() -> None:
+    # A header line every 0.1 s: each read is quick, the answer never ends. The timeout is
+    # the whole exchange's, so it ends at 0.5 s, not after the receiver's 5 s.
+    stop = threading.Event()
+
+    def drip(server: socket.socket) -> None:
+        connection, _ = server.accept()
+        with connection:
+            connection.recv(65536)
+            connection.sendall(b"HTTP/1.1 200 OK\r\n")
+            for n in range(50):
+                if stop.wait(0.1):
+                    return
+                try:
+                    connection.sendall(f"X-Slow-{n}: x\r\n".encode())
+                except OSError:
+                    return
+
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        dripping = threading.Thread(target=drip, args=(server,), daemon=True)
+        dripping.start()
+        url = f"http://127.0.0.1:{server.getsockname()[1]}/"
+        answer = post(url, b"{}", {}, timeout_s=0.5, allow_private=True)
+        stop.set()
+        dripping.join(10)
+    assert (answer.status, answer.error) == (None, "no answer within 0.5 s")
+    assert 450 <= answer.duration_ms < 2500, answer.duration_ms

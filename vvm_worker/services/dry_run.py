@@ -18,7 +18,10 @@ own, a throw-away SQLite file, for three reasons:
   report says how far it got; a process that overruns even that is killed.
 
 A web process runs at most MAX_RUNNING dry runs at once (each is a Python process of about
-100 MB for a few seconds); beyond that the request is refused with DryRunBusy.
+100 MB for a few seconds), one per customer, handed out in the order they were asked for; a
+customer's dry runs may use ``CPCC_DRY_RUN_CPU_S`` seconds of CPU within
+``CPCC_DRY_RUN_WINDOW_S`` (vvm_worker/dry_run_places.py). Beyond that a request is refused
+with DryRunBusy, which says when to try again: one customer cannot keep the others out.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ import os
 import subprocess
 import sys
 import tempfile
-import threading
+import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -42,6 +45,7 @@ from accounts.models import Customer, User
 from fleet.models import NoFlyZone, SensorType, VehicleKind
 from fleet.selectors import ground_station_list, vehicles_in_service
 from missions.models import vv_name_problem
+from vvm_worker.dry_run_places import DryRunPlaces, Refused
 from vvm_worker.runtime import SyntaxProblem, check_syntax
 from vvm_worker.services.vvs import NotACustomer
 
@@ -56,7 +60,7 @@ START_ALLOWANCE_S = 40.0
 MAX_RUNNING = 2
 # How long a request waits for one of the MAX_RUNNING places before it is refused.
 WAIT_FOR_PLACE_S = 5.0
-_places = threading.BoundedSemaphore(MAX_RUNNING)
+_places = DryRunPlaces(MAX_RUNNING)
 
 SETTINGS = "cpcc_site.settings"  # of the copy's process, unless this one names others
 COPY_CUSTOMER = "Customer"
@@ -65,7 +69,13 @@ UNFINISHED = "unfinished"
 
 
 class DryRunBusy(RuntimeError):
-    """This web process already runs as many dry runs as it may: try again shortly."""
+    """A dry run that may not start now: this web process runs as many as it may, one of the
+    customer's runs already, or the customer's dry runs used their CPU budget. ``str`` says
+    which; ``retry_after_s`` when to try again."""
+
+    def __init__(self, reason: str, retry_after_s: float) -> None:
+        super().__init__(reason)
+        self.retry_after_s = retry_after_s
 
 
 class DryRunFailed(RuntimeError):
@@ -184,7 +194,8 @@ def vv_dry_run_for_user(
     Returns the report, or a program's syntax error with where it is (as a submission would
     refuse it). Raises NotACustomer for a user of no customer, ValidationError for a name a
     submission would refuse, NoGroundStation when no VV could start, DryRunBusy when this
-    process runs MAX_RUNNING dry runs already, and DryRunFailed when the copy could not run.
+    process runs MAX_RUNNING dry runs already (or one of the customer's, or the customer's
+    used their CPU budget), and DryRunFailed when the copy could not run.
     """
     customer = user.customer
     if customer is None:
@@ -200,15 +211,22 @@ def vv_dry_run_for_user(
         "customer": customer_copy(customer=customer),
         "wall_s": wall_s,
     }
-    if not _places.acquire(timeout=WAIT_FOR_PLACE_S):
-        raise DryRunBusy(
-            f"{MAX_RUNNING} dry runs are running on this server already; try again in a few "
-            "seconds."
-        )
     try:
-        report = _run_copy(request, timeout_s=wall_s + START_ALLOWANCE_S)
+        _places.take(
+            customer.pk,
+            wait_s=WAIT_FOR_PLACE_S,
+            cpu_budget_s=settings.CPCC_DRY_RUN_CPU_S,
+            window_s=settings.CPCC_DRY_RUN_WINDOW_S,
+        )
+    except Refused as exc:
+        raise DryRunBusy(str(exc), exc.retry_after_s) from None
+    started = time.monotonic()
+    cpu_s: float | None = None
+    try:
+        report, cpu_s = _run_copy(request, timeout_s=wall_s + START_ALLOWANCE_S)
     finally:
-        _places.release()
+        # A copy that failed or was killed counts the time it took.
+        _places.give_back(customer.pk, cpu_s=time.monotonic() - started if cpu_s is None else cpu_s)
     logger.info(
         "dry run",
         extra={
@@ -217,6 +235,7 @@ def vv_dry_run_for_user(
             "status": report.status,
             "tasks": len(report.tasks),
             "unservable": len(report.unservable),
+            "cpu_s": round(cpu_s, 2),
         },
     )
     return report, None
@@ -305,9 +324,11 @@ def customer_copy(*, customer: Customer) -> dict[str, Any]:
     }
 
 
-def _run_copy(request: dict[str, Any], *, timeout_s: float) -> DryRunReport:
+def _run_copy(request: dict[str, Any], *, timeout_s: float) -> tuple[DryRunReport, float]:
     """Run the copy in a process of its own (``manage.py dry_run_copy FOLDER``) on a
-    throw-away SQLite database in FOLDER, and read its report."""
+    throw-away SQLite database in FOLDER, and read its report and the CPU seconds the process
+    used (as it says; the wall-clock time it took if it says nothing)."""
+    started = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="cpcc-dry-run-") as tmp:
         folder = Path(tmp)
         (folder / "request.json").write_text(json.dumps(request), encoding="utf-8")
@@ -339,4 +360,8 @@ def _run_copy(request: dict[str, Any], *, timeout_s: float) -> DryRunReport:
             tail = done.stderr.decode("utf-8", errors="replace")[-2000:]
             logger.error("dry run failed", extra={"exit_status": done.returncode, "stderr": tail})
             raise DryRunFailed(f"the simulated copy of the fleet failed ({done.returncode})")
-        return DryRunReport.from_json(json.loads(report.read_text(encoding="utf-8")))
+        found = json.loads(report.read_text(encoding="utf-8"))
+        cpu_s = found.get("cpu_s")
+        if not isinstance(cpu_s, (int, float)):
+            cpu_s = time.monotonic() - started
+        return DryRunReport.from_json(found), float(cpu_s)

@@ -115,8 +115,10 @@ def vv_message_send_for_user(
     *, user: User, vv_id: uuid.UUID | str, value: Any, vvm: VVM
 ) -> Message:
     """The user's own system sends ``value`` (any JSON value) to one of the user's VVs.
-    Raises VVNotFound (no such VV of the user's customer), VVAlreadyEnded, or MessageError
-    (a value the platform cannot keep, or over the customer's size of a message)."""
+    Such messages count like a VV's own: each VV takes at most the customer's messages per VV
+    from the API. Raises VVNotFound (no such VV of the user's customer), VVAlreadyEnded, or
+    MessageError (a value the platform cannot keep, over the customer's size of a message, or
+    over its number)."""
     vv = vv_get_for_user(user=user, vv_id=vv_id)
     if vv.is_ended:
         raise VVAlreadyEnded(vv)
@@ -124,7 +126,16 @@ def vv_message_send_for_user(
         text = json.dumps(value, ensure_ascii=False, separators=(",", ":"), allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise MessageError(f"the value cannot be sent as JSON: {exc}") from None
+    allowed = vv.customer.max_messages_per_vv
     with transaction.atomic():
+        # One sender at a time per VV (the row lock), so that concurrent requests count right.
+        VirtualVehicle.objects.select_for_update().filter(pk=vv.pk).values_list("pk").first()
+        sent = Message.objects.filter(recipient_id=vv.pk, sender__isnull=True).count()
+        if sent >= allowed:
+            raise MessageError(
+                f"{vv.name} has been sent {sent:,} messages over the API, as many as it may "
+                "take (quota: messages per VV)"
+            )
         message = message_send(
             customer_id=vv.customer_id,
             sender=None,

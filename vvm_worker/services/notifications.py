@@ -204,6 +204,7 @@ class WebhookJob:
     vv_id: uuid.UUID
     task_id: int | None
     body: str
+    customer_id: int | None = None  # whose: the notify worker limits each customer's POSTs
 
 
 def vv_event_fan_out(
@@ -231,6 +232,7 @@ def vv_event_fan_out(
             vv_id=vv_id,
             task_id=task_id,
             body=json.dumps(body, separators=(",", ":"), ensure_ascii=False),
+            customer_id=vv.customer_id,
         )
         for webhook in webhooks
         if event in webhook.events

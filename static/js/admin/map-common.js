@@ -51,7 +51,7 @@
     L.control.attribution({ prefix: false }).addTo(map);
     var layer = tiles
       ? L.tileLayer(tiles, { maxZoom: 21, maxNativeZoom: 19, attribution: 'Tiles: ' + tileHost(tiles) })
-      : L.tileLayer(PLATFORM_TILES, { maxZoom: 21, attribution: 'Background: the simulated world' });
+      : L.tileLayer(PLATFORM_TILES, { maxZoom: 21, maxNativeZoom: 19, attribution: 'Background: the simulated world' });
     element.classList.add('cpcc-map-plain'); // under the tiles while they load
     element.dataset.tilesLoaded = '0';
     layer.on('tileload', function () {

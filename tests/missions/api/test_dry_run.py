@@ -11,6 +11,7 @@ from django.conf import settings
 from fleet.models import VehicleStatus
 from missions.models import JournalEntry, LogEntry, StorageDocument, Task, VirtualVehicle
 from tests.factories import AREA_TWO, VehicleFactory
+from vvm_worker.dry_run_places import DryRunPlaces
 from vvm_worker.services import dry_run
 
 DRY_RUN = "/api/v1/vvs/dry-run/"
@@ -31,6 +32,14 @@ for (var i = 0; i < 3; i++) {
   VV.task.execute({position: new VV.types.LatLngAlt(48.111 + i / 1000, 12.861, 30), sensors: [gps]});
 }
 """
+
+
+@pytest.fixture(autouse=True)
+def places(monkeypatch) -> DryRunPlaces:
+    """This test's own places (what earlier tests' dry runs cost is not counted here)."""
+    fresh = DryRunPlaces(dry_run.MAX_RUNNING)
+    monkeypatch.setattr(dry_run, "_places", fresh)
+    return fresh
 
 
 @pytest.fixture
@@ -164,14 +173,46 @@ def test_without_a_ground_station_no_vv_could_start(api_a, heli_one) -> None:
 
 
 def test_a_server_running_its_most_dry_runs_says_when_to_come_back(
-    api_a, fleet, monkeypatch
+    api_a, fleet, places, monkeypatch
 ) -> None:
-    class Taken:
-        def acquire(self, timeout: float) -> bool:
-            return False
-
-    monkeypatch.setattr(dry_run, "_places", Taken())
+    monkeypatch.setattr(dry_run, "WAIT_FOR_PLACE_S", 0.1)
+    for other in ("other customer 1", "other customer 2"):
+        places.take(other, wait_s=0, cpu_budget_s=60, window_s=600)
     response = api_a.post(DRY_RUN, {"name": "x", "program": THREE_TASKS}, format="json")
     assert response.status_code == 429
     assert response["Retry-After"] == "5"
-    assert "dry runs are running on this server already" in response.json()["detail"]
+    assert "2 dry runs are running on this server already" in response.json()["detail"]
+
+
+def test_one_customer_runs_one_dry_run_at_a_time_and_the_next_customer_gets_a_place(
+    api_a, api_b, customer_a, fleet, places
+) -> None:
+    # Customer A's dry run is running (as if a long one were under way): A's next waits for
+    # it, B, another customer, is not refused because of A.
+    places.take(customer_a.pk, wait_s=0, cpu_budget_s=60, window_s=600)
+    refused = api_a.post(DRY_RUN, {"name": "x", "program": THREE_TASKS}, format="json")
+    assert refused.status_code == 429 and refused["Retry-After"] == "5"
+    assert refused.json()["detail"].startswith("A dry run of yours is running already")
+    answered = api_b.post(DRY_RUN, {"name": "x", "program": THREE_TASKS}, format="json")
+    assert answered.status_code == 200, answered.content
+    assert answered.json()["status"] == "finished"
+
+
+def test_a_customers_dry_runs_have_a_cpu_budget_and_are_told_when_they_may_go_on(
+    api_a, api_b, fleet, settings
+) -> None:
+    settings.CPCC_DRY_RUN_CPU_S = 1.0  # a dry run's process takes more than a second of CPU
+    settings.CPCC_DRY_RUN_WINDOW_S = 3600.0
+    first = api_a.post(DRY_RUN, {"name": "x", "program": THREE_TASKS}, format="json")
+    assert first.status_code == 200, first.content
+
+    second = api_a.post(DRY_RUN, {"name": "x", "program": THREE_TASKS}, format="json")
+
+    assert second.status_code == 429
+    detail = second.json()["detail"]
+    assert detail.startswith("Your dry runs used ") and "of CPU in the last 3600 s" in detail
+    assert 3500 <= int(second["Retry-After"]) <= 3600
+    # The budget is the customer's: another customer's dry run goes on.
+    assert (
+        api_b.post(DRY_RUN, {"name": "x", "program": THREE_TASKS}, format="json").status_code == 200
+    )

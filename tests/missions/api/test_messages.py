@@ -97,6 +97,28 @@ def test_a_value_over_the_customers_size_of_a_message_is_refused_saying_why(
     assert Message.objects.count() == 1
 
 
+def test_messages_over_the_api_count_against_the_customers_messages_per_vv(
+    api_a, customer_a, vvm_factory
+) -> None:
+    customer_a.max_messages_per_vv = 3
+    customer_a.save()
+    vv_id, other_id = submitted(api_a, "Inbox"), submitted(api_a, "Other")
+    send_between(other_id, vv_id, "from a VV: counted where it was sent", vvm_factory())
+    for n in range(3):
+        assert api_a.post(messages_url(vv_id), {"value": n}, format="json").status_code == 201
+
+    refused = api_a.post(messages_url(vv_id), {"value": 3}, format="json")
+
+    assert refused.status_code == 400
+    assert refused.json()["detail"] == (
+        "Inbox has been sent 3 messages over the API, as many as it may take (quota: messages "
+        "per VV)"
+    )
+    assert Message.objects.filter(recipient_id=vv_id).count() == 4
+    # The quota is each VV's: another VV of the customer still takes messages.
+    assert api_a.post(messages_url(other_id), {"value": 0}, format="json").status_code == 201
+
+
 def test_a_value_the_platform_cannot_keep_is_refused_saying_why(api_a) -> None:
     vv_id = submitted(api_a, "Nul")
     response = api_a.post(messages_url(vv_id), {"value": {"k": "a\x00b"}}, format="json")

@@ -27,14 +27,18 @@ def ensure_broker() -> None:
         EmbeddedRedis(settings.EMBEDDED_REDIS_SOCKET).start(detach=True)
 
 
-def run_celery(*, queues: list[str], node: str, loglevel: str) -> None:
-    """A Celery worker on these queues, its tasks run one at a time in this thread: the worker
-    ``celery worker`` makes, without Celery's command line (whose import, click-repl and
-    prompt-toolkit among it, was a fifth of a worker's start)."""
+def run_celery(*, queues: list[str], node: str, loglevel: str, threads: int = 0) -> None:
+    """A Celery worker on these queues, its tasks run one at a time in this thread (or, with
+    ``threads``, in that many threads): the worker ``celery worker`` makes, without Celery's
+    command line (whose import, click-repl and prompt-toolkit among it, was a fifth of a
+    worker's start)."""
+    pool: dict[str, Any] = (
+        {"pool_cls": "threads", "concurrency": threads} if threads else {"pool_cls": "solo"}
+    )
     worker = app.Worker(
         hostname=host_format(default_nodename(f"{node}@%h")),
         queues=queues,
-        pool_cls="solo",
+        **pool,
         without_gossip=True,
         without_mingle=True,
         loglevel=loglevel,
@@ -85,25 +89,25 @@ def serve(
     """
     ensure_broker()
     for signum in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(signum, _stop_now)
+        signal.signal(signum, stop_now)
     set_host(host)
     try:
         host.start()
         command.stdout.write(f"{command_name(host)} {host.name}: queues {', '.join(queues)}")
         command.stdout.flush()
         for signum in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(signum, _stop_celery)
+            signal.signal(signum, stop_celery)
         run_celery(queues=queues, node=node, loglevel=loglevel)
     finally:
         host.stop()
         set_host(None)
 
 
-def _stop_now(signum: int, frame: FrameType | None) -> None:
+def stop_now(signum: int, frame: FrameType | None) -> None:
     raise SystemExit(0)
 
 
-def _stop_celery(signum: int, frame: FrameType | None) -> None:
+def stop_celery(signum: int, frame: FrameType | None) -> None:
     """A stop while Celery starts (before its own handlers, which do the same): its warm
     shutdown, as soon as its loop runs, rather than an exception raised into its start-up."""
     celery_state.should_stop = 0

@@ -1,12 +1,12 @@
 """``manage.py demo``: the whole local system in the foreground, stopped cleanly by Ctrl-C.
 
 Starts the embedded Redis (unless REDIS_URL is set), loads the scenario, and runs the web
-server (daphne, ASGI), one ground-station worker per GS and one RV worker hosting all the
-scenario's RVs, as processes of their own, exactly as they would run on separate machines (a
-server of simulated vehicles; with ``--mavlink``, each with its simulated autopilot, a
-``mavsim`` process of its own). Fleet events of the scenario are applied at their
-(accelerated) time; a vehicle added by one gets an RV worker of its own. Everything keeps
-running after the scenario ends.
+server (daphne, ASGI), one ground-station worker per GS, the notify worker (webhooks and
+e-mails) and one RV worker hosting all the scenario's RVs, as processes of their own, exactly
+as they would run on separate machines (a server of simulated vehicles; with ``--mavlink``,
+each with its simulated autopilot, a ``mavsim`` process of its own). Fleet events of the
+scenario are applied at their (accelerated) time; a vehicle added by one gets an RV worker of
+its own. Everything keeps running after the scenario ends.
 
 Without ``--scenario`` it runs the paper's Figure 3 and, next to it on the same fleet for a
 customer of their own, the examples of VVs that message each other and look at their pictures
@@ -263,6 +263,7 @@ class Command(BaseCommand):
             _wait_for_port(options["host"], options["port"], processes)
             for name in ground_stations:
                 processes.start(f"gsworker {name}", manage, "gsworker", name)
+            processes.start("notifyworker", manage, "notifyworker")  # webhooks, e-mails
             rv_workers = self._start_vehicles(list(vehicles.values()), processes, manage)
             vvs = [
                 vv

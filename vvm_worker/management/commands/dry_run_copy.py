@@ -3,12 +3,14 @@ process of its own (``vvm_worker.services.dry_run`` starts it; not a command for
 
 FOLDER holds ``request.json`` (what ``vv_dry_run_for_user`` sends); the default database must
 be a new SQLite file (``DATABASE_URL``), which gets the platform's schema. The report goes to
-FOLDER/report.json.
+FOLDER/report.json, with the CPU seconds this process used (``cpu_s``: what the dry run
+counts against the customer's budget).
 """
 
 from __future__ import annotations
 
 import json
+import resource
 from pathlib import Path
 from typing import Any
 
@@ -39,5 +41,7 @@ class Command(BaseCommand):
         prepare_database(Path(database["NAME"]))
         report = run_copy(request)
         partial = folder / "report.json.part"
-        partial.write_text(json.dumps(report.to_json()), encoding="utf-8")
+        used = resource.getrusage(resource.RUSAGE_SELF)
+        written = {**report.to_json(), "cpu_s": round(used.ru_utime + used.ru_stime, 3)}
+        partial.write_text(json.dumps(written), encoding="utf-8")
         partial.replace(folder / "report.json")

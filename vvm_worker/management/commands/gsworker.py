@@ -11,7 +11,6 @@ from fleet.models import GroundStation
 from vvm_worker.dispatch import SHARED_QUEUE, gs_queue
 from vvm_worker.hosts import GSHost
 from vvm_worker.management.commands._worker import host_named, prepare_isolates, serve
-from vvm_worker.notify import NOTIFY_QUEUE
 
 
 class Command(BaseCommand):
@@ -27,9 +26,8 @@ class Command(BaseCommand):
         serve(
             self,
             GSHost(station),
-            # NOTIFY_QUEUE: webhook deliveries and e-mails (each POST waits at most
-            # CPCC_WEBHOOK_TIMEOUT_S; a worker of its own may serve them instead).
-            queues=[gs_queue(station.pk), SHARED_QUEUE, NOTIFY_QUEUE],
+            # (webhooks and e-mails: manage.py notifyworker, in threads of its own)
+            queues=[gs_queue(station.pk), SHARED_QUEUE],
             node=f"gs{station.pk}",
             loglevel=options["loglevel"],
         )

@@ -18,7 +18,6 @@ from vvm_worker.management.commands._worker import (
     prepare_isolates,
     serve,
 )
-from vvm_worker.notify import NOTIFY_QUEUE
 from vvm_worker.planning import DEFAULT_PLANNER, PLANNER_NAMES
 
 # Isolates kept prepared for each vehicle hosted (about 1.7 MB each), up to MAX_PREPARED.
@@ -70,9 +69,9 @@ class Command(BaseCommand):
         isolates = min(ISOLATES_PER_VEHICLE * len(ids), MAX_PREPARED)
         if station is not None:
             # Every new VV starts on the station, and the station's messages come here: its
-            # own queue, admission, notifications (as a gsworker's).
+            # own queue and admission (as a gsworker's).
             isolates += settings.CPCC_GS_ISOLATE_POOL
-            queues += [gs_queue(station.pk), SHARED_QUEUE, NOTIFY_QUEUE]
+            queues += [gs_queue(station.pk), SHARED_QUEUE]
         prepare_isolates(isolates)
         serve(
             self,
