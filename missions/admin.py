@@ -66,6 +66,7 @@ class VirtualVehicleAdmin(admin.ModelAdmin):
         "steps",
         "last_step",
         "storage_bytes",
+        "picture_bytes",
         "submitted",
         "started",
         "finished_at",

@@ -118,6 +118,9 @@ class VirtualVehicle(models.Model):
     steps = models.PositiveIntegerField(default=0)
     last_step_s = models.FloatField(default=0.0)
     storage_bytes = models.PositiveBigIntegerField(default=0)
+    # Bytes of the pictures it made (VV.image.crop and resize): they count against its
+    # storage quota together with ``storage_bytes``.
+    picture_bytes = models.PositiveBigIntegerField(default=0)
     error = models.TextField(blank=True)
     error_line = models.PositiveIntegerField(null=True, blank=True)
     error_column = models.PositiveIntegerField(null=True, blank=True)
@@ -278,6 +281,37 @@ class StorageDocument(models.Model):
 
     def __str__(self) -> str:
         return self.key
+
+
+class Picture(models.Model):
+    """A picture the platform keeps (``sensing.save_image``) as one customer's: a camera
+    reading one of its VVs received, or a picture one of its VVs made. Only that customer's VVs
+    may use it (``VV.image``), and only once they have received it (a reading, a call's
+    answer, a message from another of its VVs). The same content taken for two customers is
+    one file and a row for each."""
+
+    customer = models.ForeignKey(Customer, on_delete=models.CASCADE, related_name="+")
+    reference = models.CharField(max_length=64, help_text="The file under MEDIA_ROOT.")
+    vv = models.ForeignKey(
+        VirtualVehicle,
+        on_delete=models.SET_NULL,
+        null=True,
+        blank=True,
+        related_name="+",
+        help_text="The VV that first received or made it.",
+    )
+    made = models.BooleanField(
+        default=False, help_text="Made by VV.image.crop or resize (counts against storage)."
+    )
+    bytes = models.PositiveIntegerField(default=0)
+
+    class Meta:
+        constraints = [
+            models.UniqueConstraint(fields=["customer", "reference"], name="picture_per_customer")
+        ]
+
+    def __str__(self) -> str:
+        return self.reference
 
 
 class LogEntry(models.Model):

@@ -39,10 +39,15 @@ def iso_time(epoch_ms: int) -> str:
     return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
+def image_reference(data: bytes, extension: str) -> str:
+    """The reference ``save_image`` keeps an image of this content under."""
+    digest = hashlib.sha256(data).hexdigest()
+    return f"{IMAGE_DIR}/{digest[:2]}/{digest[:32]}.{extension}"
+
+
 def save_image(data: bytes, extension: str) -> str:
     """Keep an image under MEDIA_ROOT, named by its content, and return its reference."""
-    digest = hashlib.sha256(data).hexdigest()
-    name = f"{IMAGE_DIR}/{digest[:2]}/{digest[:32]}.{extension}"
+    name = image_reference(data, extension)
     if not default_storage.exists(name):
         saved = default_storage.save(name, ContentFile(data))
         if saved != name:  # another process stored the same content at the same moment

@@ -184,6 +184,7 @@ class VVContext:
             "limits": {
                 "maxTasks": limits.max_tasks,
                 "storageBytes": limits.storage_bytes,
+                "pictureBytes": step.picture_bytes,
                 "heapBytes": limits.heap_bytes,
                 "maxMessages": limits.max_messages,
                 "messageBytes": limits.message_bytes,

@@ -1062,8 +1062,11 @@
       const old = reflectApply(mapGet, storage, [key]);
       const bytes = utf8Bytes(key) + utf8Bytes(text);
       const used = storageChars - (old === undefined ? 0 : utf8Bytes(key) + utf8Bytes(old)) + bytes;
-      if (effectSeq >= effectsApplied && used > limits.storageBytes) {
-        stop('killed', 'storing ' + jsonStringify(key) + ' would use ' + used + ' bytes of storage, more than the ' +
+      // The pictures the VV made (VV.image.crop, resize) take their share of the quota.
+      const pictures = limits.pictureBytes || 0;
+      if (effectSeq >= effectsApplied && used + pictures > limits.storageBytes) {
+        stop('killed', 'storing ' + jsonStringify(key) + ' would use ' + used + ' bytes of storage' +
+          (pictures ? ' and its pictures ' + pictures + ' more' : '') + ', more than the ' +
           limits.storageBytes + ' allowed (quota: storage bytes)', 'storage');
       }
       storageChars = used;

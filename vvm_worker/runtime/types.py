@@ -86,7 +86,8 @@ class StepInput:
     ``cpu_spent_s`` is the CPU the VV already used since it last waited for the outside world
     (its steps in between and the host's work for its image calls and messages): it is taken
     off the quota (``cpu_allowance_s``). It is not part of what a warm context compares to
-    decide whether it may resume.
+    decide whether it may resume. ``picture_bytes`` is what the pictures the VV made take: its
+    storage may use the quota's ``storage_bytes`` less that.
     """
 
     vv_id: str
@@ -100,6 +101,7 @@ class StepInput:
     limits: Limits = field(default_factory=Limits)
     replay_s: float = 0.0
     cpu_spent_s: float = 0.0
+    picture_bytes: int = 0
 
     @property
     def cpu_allowance_s(self) -> float:

@@ -78,7 +78,7 @@ def _call(vv: VirtualVehicle, op: str, args: dict[str, Any], limits: Limits, vvm
         )
         return {"id": message.pk}
     if op.startswith("image."):
-        return image_call(vv=vv, op=op, args=args)
+        return image_call(vv=vv, op=op, args=args, limits=limits)
     raise ValueError(f"unknown VVM-API call {op!r}")  # the prelude makes no other
 
 

@@ -73,6 +73,7 @@ from vvm_worker.services.base import (
 from vvm_worker.services.calls import vv_answer_call, vv_answer_receive
 from vvm_worker.services.customers import customer_limits
 from vvm_worker.services.fleet import vehicle_record_state
+from vvm_worker.services.images import pictures_received
 from vvm_worker.services.journal import JournalView, journal_append, journal_full
 from vvm_worker.services.notifications import ended_event, vv_notify
 from vvm_worker.services.routing import (
@@ -359,6 +360,7 @@ def _run_step(vv: VirtualVehicle, vvm: VVM) -> StepResult:
         limits=customer_limits(customer=vv.customer),
         replay_s=vv.last_step_s,
         cpu_spent_s=vv.call_cpu_s,
+        picture_bytes=vv.picture_bytes,
     )
     result = vvm.runtime.step(step)
     # Its CPU since it last waited for the outside world (see ``VirtualVehicle.call_cpu_s``):
@@ -559,6 +561,7 @@ _ADVANCED_FIELDS = (
     "last_step_s",
     "effects_applied",
     "storage_bytes",
+    "picture_bytes",
     "journal_length",
     "journal_bytes",
     "error",
@@ -849,6 +852,8 @@ def _answer_and_advance(
         entry = answer_part(pending, index=task.index, time_ms=time_ms, data=readings)
     else:
         entry = answer_task(pending, time_ms=time_ms, data=readings)
+    if failure is None:
+        pictures_received(vv=vv, readings=readings)
     vvm.announce(lambda: task_event(task, vv.customer_id))
     class_held_nudge(service_class_id=vv.customer.service_class_id, vvm=vvm)
     if failure is None:
