@@ -12,6 +12,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PURE = [
     "fleet.geo",
+    "fleet.kinematics",
     "fleet.airspace",
     "fleet.service_area",
     "fleet.driving",

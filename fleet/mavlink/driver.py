@@ -60,6 +60,7 @@ import PIL.Image
 from fleet.driving import Sample, SensorFailure, SensorRead
 from fleet.geo import Position, distance_m, ground_distance_m, headings_deg, turn_deg
 from fleet.kinds import AERIAL, GROUND, SURFACE, UNDERWATER, a_vehicle, limits_of
+from fleet.kinematics import from_ground_s, leg_s
 from fleet.mavlink.errors import (
     CommandDenied,
     LinkLost,
@@ -873,15 +874,20 @@ class MavlinkDriver:
         or boat turns in place first, from the heading it reports; a sub takes off from
         nowhere."""
         here = self._position
-        seconds = 0.0
         if not self.flies:
             target = self._reachable(target)
             return self._turn_s(here, target) + self.leg_s(here, target)
         if self.is_landed_at(now_s):
-            top = here.with_alt(max(target.alt, self.spec.takeoff_alt_m, here.alt))
-            seconds += self.leg_s(here, top)
-            here = top
-        return seconds + self.leg_s(here, target)
+            spec = self.spec
+            return from_ground_s(
+                here,
+                target,
+                takeoff_alt_m=spec.takeoff_alt_m,
+                speed_mps=spec.max_speed_mps,
+                climb_mps=spec.climb_rate_mps,
+                descent_mps=spec.descent_rate_mps,
+            )
+        return self.leg_s(here, target)
 
     def time_home_s(self, start: Position) -> float:
         """Estimated seconds to return from ``start`` in the air: cruise to above the depot at
@@ -898,10 +904,14 @@ class MavlinkDriver:
     def leg_s(self, a: Position, b: Position) -> float:
         """Estimated seconds of a straight leg in the air (or water) from ``a`` to ``b``: up
         at the climb rate, down at the dive rate (the climb rate without one). No turn."""
-        horizontal = ground_distance_m(a, b) / self.spec.max_speed_mps
-        rise = b.alt - a.alt
-        rate = self.spec.climb_rate_mps if rise >= 0 else self.spec.descent_rate_mps
-        return max(horizontal, abs(rise) / rate)
+        spec = self.spec
+        return leg_s(
+            a,
+            b,
+            speed_mps=spec.max_speed_mps,
+            climb_mps=spec.climb_rate_mps,
+            descent_mps=spec.descent_rate_mps,
+        )
 
     def _turn_s(self, here: Position, target: Position) -> float:
         """A rover's or boat's turn in place towards ``target``, from the heading it last

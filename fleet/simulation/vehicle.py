@@ -34,6 +34,7 @@ from fleet.geo import (
     turn_deg,
 )
 from fleet.kinds import AERIAL, UNDERWATER, limits_of
+from fleet.kinematics import from_ground_s, leg_s, take_off_top
 
 PHASE_LANDED = "landed"
 PHASE_TAKEOFF = "takeoff"
@@ -219,9 +220,8 @@ class SimVehicle:
         if self._in_plane:
             t = self._turn(t, here, target)
         elif landed and not self._submerges:
-            climb_to = max(target.alt, self.spec.takeoff_alt_m)
-            if climb_to > here.alt:
-                top = here.with_alt(climb_to)
+            top = take_off_top(here, target, takeoff_alt_m=self.spec.takeoff_alt_m)
+            if top.alt > here.alt:
                 t = self._append(t, here, top, PHASE_TAKEOFF)
                 here = top
         return self._append(t, here, target, PHASE_CRUISE)
@@ -305,11 +305,15 @@ class SimVehicle:
         if self._in_plane:
             seconds += self._turn_s(self._heading_at(now_s), here, target)
         elif self.is_landed_at(now_s) and not self._submerges:
-            climb_to = max(target.alt, self.spec.takeoff_alt_m)
-            if climb_to > here.alt:
-                top = here.with_alt(climb_to)
-                seconds += self._duration(here, top)
-                here = top
+            spec = self.spec
+            return from_ground_s(
+                here,
+                target,
+                takeoff_alt_m=spec.takeoff_alt_m,
+                speed_mps=spec.max_speed_mps,
+                climb_mps=spec.climb_rate_mps,
+                descent_mps=spec.descent_rate_mps,
+            )
         return seconds + self._duration(here, target)
 
     def time_home_s(self, start: Position) -> float:
@@ -429,12 +433,16 @@ class SimVehicle:
     # Internals
 
     def _duration(self, start: Position, end: Position) -> float:
-        """A straight leg's duration: cruise at max speed while climbing at the climb rate
-        (descending at the dive rate)."""
-        horizontal = ground_distance_m(start, end)
-        rise = end.alt - start.alt
-        rate = self.spec.climb_rate_mps if rise >= 0.0 else self.spec.descent_rate_mps
-        return max(horizontal / self.spec.max_speed_mps, abs(rise) / rate)
+        """A straight leg's duration (``fleet.kinematics``): cruise at max speed while climbing
+        at the climb rate (descending at the dive rate)."""
+        spec = self.spec
+        return leg_s(
+            start,
+            end,
+            speed_mps=spec.max_speed_mps,
+            climb_mps=spec.climb_rate_mps,
+            descent_mps=spec.descent_rate_mps,
+        )
 
     def _reachable(self, target: Position) -> Position:
         """``target`` as the vehicle's kind reaches it; ValueError where it cannot go."""

@@ -17,7 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fleet.airspace import Airspace
-from fleet.geo import Position, distance_m, ground_distance_m
+from fleet.geo import Position, distance_m
+from fleet.kinematics import leg_s, legs_s
 
 from .base import CostFn
 
@@ -87,9 +88,13 @@ class TravelTime:
         return self.descent_rate_mps == self.climb_rate_mps
 
     def __call__(self, a: Position, b: Position) -> float:
-        rise = b.alt - a.alt
-        rate = self.climb_rate_mps if rise >= 0.0 else self.descent_rate_mps
-        return max(ground_distance_m(a, b) / self.max_speed_mps, abs(rise) / rate)
+        return leg_s(
+            a,
+            b,
+            speed_mps=self.max_speed_mps,
+            climb_mps=self.climb_rate_mps,
+            descent_mps=self.descent_rate_mps,
+        )
 
 
 NO_WAY_COST = 1e9
@@ -216,17 +221,13 @@ def build_cost_matrix(
         ground = approximate_ground_matrix(positions)
         alt = np.fromiter((p.alt for p in positions), dtype=np.float64, count=n)
         if isinstance(cost, TravelTime):
-            ground *= 1.0 / cost.max_speed_mps
-            # rise[i, j]: the climb from task i to task j (below 0: a descent).
-            rise = alt[None, :] - alt[:, None]
-            if symmetric:
-                np.abs(rise, out=rise)
-                rise *= 1.0 / cost.climb_rate_mps
-            else:
-                rise = np.where(
-                    rise >= 0.0, rise / cost.climb_rate_mps, -rise / cost.descent_rate_mps
-                )
-            values[1:, 1:] = np.maximum(ground, rise, out=ground)
+            values[1:, 1:] = legs_s(
+                ground,
+                alt,
+                speed_mps=cost.max_speed_mps,
+                climb_mps=cost.climb_rate_mps,
+                descent_mps=cost.descent_rate_mps,
+            )
         else:
             dalt = np.abs(alt[:, None] - alt[None, :])
             values[1:, 1:] = np.hypot(ground, dalt, out=ground)
