@@ -34,12 +34,12 @@ from accounts.selectors import (
     webhook_get_for_user,
     webhook_list_for_user,
 )
+from accounts.services import api_token_create, api_token_revoke, legacy_token_revoke
 from vvm_worker.services.notifications import (
     user_set_email_events,
     webhook_create,
     webhook_delete,
 )
-from vvm_worker.services.tokens import api_token_create, api_token_revoke, legacy_token_revoke
 
 # The newest attempts the Notifications page shows under each webhook; its own page has all.
 ATTEMPTS_SHOWN = 5

@@ -394,6 +394,7 @@ SPECTACULAR_SETTINGS = {
         "drf_spectacular.hooks.postprocess_schema_enums",
         "cpcc_site.api.add_error_responses",
         "cpcc_site.api.nullable_as_json_schema",
+        "missions.api.views.submission_list_bounds",
     ],
 }
 

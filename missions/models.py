@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import datetime as dt
-import unicodedata
 import uuid
 
 from django.core.exceptions import ValidationError
 from django.db import models
 
 from accounts.models import Customer
+from cpcc_site.names import plain_name_problem
 from fleet.geo import Position
 from fleet.models import GroundStation, Vehicle
 
@@ -44,32 +44,11 @@ PROGRAM_TOO_LONG = (
     f"A program has at most {PROGRAM_MAX_CHARS:,} characters: split the work into several VVs "
     "or make the program shorter."
 )
-# Characters that reorder how the text around them is shown (bidirectional formatting: the
-# embeddings, overrides and isolates, and the invisible direction marks). In a name they make
-# one VV look like another on the pages, in the admin and in a terminal.
-BIDI_CONTROLS = frozenset(
-    "\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069"
-)
 
 
 def vv_name_problem(name: str) -> str | None:
-    """What is wrong with a VV's name, or None: a name has no control character (C0 and C1,
-    such as a terminal's escape ``\\x1b``, a tab or a line break) and no bidirectional
-    formatting character (BIDI_CONTROLS)."""
-    for position, char in enumerate(name, start=1):
-        if unicodedata.category(char) == "Cc":
-            what = "a control character"
-        elif char in BIDI_CONTROLS:
-            what = "a bidirectional formatting character"
-        else:
-            continue
-        label = unicodedata.name(char, "")
-        shown = f"U+{ord(char):04X}" + (f" {label}" if label else "")
-        return (
-            f"The name has {what} ({shown}) at character {position}: a name is plain text "
-            "shown on pages and in terminals; remove it."
-        )
-    return None
+    """What is wrong with a VV's name, or None (``cpcc_site.names.plain_name_problem``)."""
+    return plain_name_problem(name)
 
 
 def validate_vv_name(name: str) -> None:

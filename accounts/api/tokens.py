@@ -23,8 +23,8 @@ from rest_framework.response import Response
 
 from accounts.models import ApiToken
 from accounts.selectors import ApiTokenNotFound, api_token_get_for_user, api_token_list_for_user
+from accounts.services import api_token_create, api_token_revoke
 from cpcc_site.api import DetailSerializer, StrictCharField, object_id, refusal
-from vvm_worker.services.tokens import api_token_create, api_token_revoke
 
 NO_SUCH_TOKEN = "No API token with this id among yours (GET /api/v1/tokens/ lists them)."
 TOKENS_NEED_A_PASSWORD = (

@@ -13,8 +13,8 @@ from drf_spectacular.utils import extend_schema_field
 from rest_framework import serializers
 
 from cpcc_site.api import StrictCharField
+from cpcc_site.names import BIDI_CONTROLS
 from missions.models import (
-    BIDI_CONTROLS,
     PROGRAM_MAX_CHARS,
     PROGRAM_TOO_LONG,
     LogEntry,

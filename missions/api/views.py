@@ -95,6 +95,19 @@ SUBMISSIONS = PolymorphicProxySerializer(
     resource_type_field_name=None,
     many=False,
 )
+
+
+def submission_list_bounds(result: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+    """drf-spectacular postprocessing hook: a list of submissions holds 1 to MAX_SUBMISSIONS
+    (the list serializer's lengths, which drf-spectacular does not write)."""
+    for form in (
+        result.get("components", {}).get("schemas", {}).get("VVSubmission", {}).get("oneOf", ())
+    ):
+        if form.get("type") == "array":
+            form.update(minItems=1, maxItems=MAX_SUBMISSIONS)
+    return result
+
+
 SUBMITTED = PolymorphicProxySerializer(
     component_name="VVSubmitted",
     serializers=[VVSerializer, VVSerializer(many=True)],

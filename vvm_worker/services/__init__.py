@@ -24,9 +24,9 @@ programs at once, all or none: ``submissions``), ``vv_update_program_for_user`` 
 queued), ``vv_restart_for_user`` (a new VV with the program of an ended one) and
 ``vv_cancel_for_user``.
 
-A user's API tokens (``tokens``) and a customer's webhooks and e-mails (``notifications``,
-which the services that end a VV or answer a task tell through ``vv_notify``) are used from
-their modules.
+A customer's webhooks and e-mails (``notifications``, which the services that end a VV or
+answer a task tell through ``vv_notify``) are used from their module; a user's API tokens are
+the accounts' own (``accounts.services``).
 """
 
 from vvm_worker.services.base import VVM, ProgramRejected

@@ -150,7 +150,12 @@ def test_the_openapi_schema_describes_both_forms(api_a) -> None:
     assert body == {"$ref": "#/components/schemas/VVSubmission"}
     assert schema["components"]["schemas"]["VVSubmission"]["oneOf"] == [
         {"$ref": "#/components/schemas/VVCreate"},
-        {"type": "array", "items": {"$ref": "#/components/schemas/VVCreate"}},
+        {
+            "type": "array",
+            "items": {"$ref": "#/components/schemas/VVCreate"},
+            "minItems": 1,  # an empty list is refused (400): the schema says so
+            "maxItems": MAX_SUBMISSIONS,
+        },
     ]
     answer = post["responses"]["201"]["content"]["application/json"]["schema"]
     assert answer == {"$ref": "#/components/schemas/VVSubmitted"}

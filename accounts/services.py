@@ -1,4 +1,5 @@
-"""API tokens a user makes and revokes (the Account page, ``/api/v1/tokens/``).
+"""The accounts' services: every state change of a user's own (their API tokens, made and
+revoked on the Account page and at ``/api/v1/tokens/``), one keyword-only function each.
 
 A token is django-rest-knox's (accounts.ApiToken): the key is shown once, when it is made; only
 its digest and its first characters are kept. Revoking one deletes it, which forgets it at once
@@ -14,7 +15,7 @@ from django.db import IntegrityError, transaction
 
 from accounts.models import ApiToken, User
 from accounts.selectors import legacy_token_for_user
-from missions.models import vv_name_problem
+from cpcc_site.names import plain_name_problem
 
 # More would be forgotten rather than used; revoking one makes room.
 MAX_TOKENS_PER_USER = 100
@@ -55,7 +56,7 @@ def _name_problem(name: str) -> str | None:
         return 'Give the token a name, e.g. where it is used ("laptop", "CI").'
     if len(name) > NAME_MAX_CHARS:
         return f"A token's name has at most {NAME_MAX_CHARS} characters ({len(name)} given)."
-    return vv_name_problem(name)
+    return plain_name_problem(name)
 
 
 def _taken(name: str) -> ValidationError:
