@@ -15,7 +15,17 @@ from collections import Counter
 from pathlib import Path
 
 TESTS = Path(__file__).resolve().parent
-HELPERS = {"raises", "warns", "fail", "expect", "wait_for", "wait_until", "wait_for_log"}
+HELPERS = {
+    "raises",
+    "warns",
+    "fail",
+    "expect",
+    "wait_for",
+    "wait_until",
+    "wait_until_async",
+    "eventually",
+    "wait_for_log",
+}
 
 
 def called_name(node: ast.Call) -> str:

@@ -9,8 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
-import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +17,7 @@ import pytest
 from django.conf import settings
 from django.db import connection
 
+from tests.polling import wait_until
 from vvm_worker.services.waiting import PLATFORM_NOTE
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,23 +41,6 @@ def program_log(vv: Any) -> list[str]:
     none): what two runs of one program must agree on."""
     lines = vv.log.exclude(level=PLATFORM_NOTE).order_by("seq")
     return list(lines.values_list("message", flat=True))
-
-
-def wait_for(
-    condition: Callable[[], bool],
-    *,
-    timeout: float = 60.0,
-    what: str = "condition",
-    details: Callable[[], str] | None = None,
-) -> None:
-    """Poll until ``condition`` holds; fail saying ``what`` (and ``details()``, e.g. the
-    workers' logs at that moment) after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            more = f"\n{details()}" if details is not None else ""
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}{more}")
-        time.sleep(0.05)
 
 
 class Workers:
@@ -105,7 +88,7 @@ class Workers:
         path = Path(log.name)
         # The log is appended to: only what this process wrote says that it runs.
         started = f"{kind} {', '.join(names)}:".encode()
-        wait_for(
+        wait_until(
             lambda: started in path.read_bytes()[logged:] or process.poll() is not None,
             timeout=60,
             what=f"{kind} {', '.join(names)} to start",
@@ -273,7 +256,7 @@ class Web:
             except OSError:
                 return False
 
-        wait_for(up, timeout=60, what="the web server to answer")
+        wait_until(up, timeout=60, what="the web server to answer")
 
     def kill(self) -> None:
         """SIGKILL it, as a crash would."""

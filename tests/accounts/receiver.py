@@ -9,7 +9,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
-from tests.live import wait_for
+from tests.polling import wait_until
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,7 @@ class Receiver:
 
     def wait_for(self, count: int, *, timeout: float = 30.0) -> list[Received]:
         """The first ``count`` requests, once they have come (polled, with a deadline)."""
-        wait_for(lambda: len(self.requests) >= count, timeout=timeout, what=f"{count} POST(s)")
+        wait_until(lambda: len(self.requests) >= count, timeout=timeout, what=f"{count} POST(s)")
         return self.requests[:count]
 
 

@@ -17,7 +17,7 @@ import pytest
 
 from accounts.models import WebhookDelivery
 from tests.factories import GroundStationFactory
-from tests.live import wait_for
+from tests.polling import wait_until
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_submit
 from vvm_worker.services.notifications import webhook_create
@@ -52,7 +52,7 @@ def test_a_worker_posts_a_finished_vv_signed_and_retries_after_a_500(
     assert (body["event"], body["id"], body["status"]) == ("vv.finished", str(vv.pk), "finished")
 
     attempts = WebhookDelivery.objects.filter(webhook=webhook).order_by("attempt")
-    wait_for(lambda: attempts.count() == 2, timeout=30, what="both attempts logged")
+    wait_until(lambda: attempts.count() == 2, timeout=30, what="both attempts logged")
     assert list(attempts.values_list("attempt", "status_code")) == [(1, 500), (2, 200)]
 
 
@@ -135,7 +135,7 @@ def test_a_receiver_that_never_answers_delays_no_other_customers_notifications(
     # (one at a time: B's share of the threads).
     for n in range(4):
         vv_submit(customer=customer_b, name=f"b{n}", program="VV.log('b');", vvm=vvm)
-    wait_for(lambda: stalling.open == 1, timeout=30, what="B's first delivery held")
+    wait_until(lambda: stalling.open == 1, timeout=30, what="B's first delivery held")
 
     # Meanwhile customer A's VV runs to its end and A's receiver hears of it.
     vv = vv_submit(customer=customer_a, name="a", program="VV.log('a');", vvm=vvm)

@@ -45,7 +45,8 @@ from missions.events import EVENTS_STREAM, POSITIONS_STREAM, VEHICLES_HASH
 from tests.browser.pages import FIELD
 from tests.browser.traffic import Traffic
 from tests.factories import CustomerFactory, GroundStationFactory, UserFactory, VehicleFactory
-from tests.live import ROOT, Workers, database_url, wait_for
+from tests.live import ROOT, Workers, database_url
+from tests.polling import wait_until
 
 CHROMIUM = Path("/usr/bin/chromium")
 SKIPPED = "browser tests: skipped (no /usr/bin/chromium; apt-get install chromium)"
@@ -249,7 +250,7 @@ def asgi_server(
             return False
 
     try:
-        wait_for(answers, timeout=60, what="daphne to serve the login page")
+        wait_until(answers, timeout=60, what="daphne to serve the login page")
         yield Server(url=url, log=log_path)
     finally:
         os.killpg(server.pid, signal.SIGTERM)

@@ -24,7 +24,8 @@ from tests.browser.pages import log_in
 from tests.browser.traffic import Traffic
 from tests.conftest import PROGRAMS
 from tests.factories import AREA_TWO, GroundStationFactory, VehicleFactory
-from tests.live import Workers, wait_for
+from tests.live import Workers
+from tests.polling import wait_until
 
 pytestmark = pytest.mark.django_db(transaction=True, serialized_rollback=True)
 
@@ -180,7 +181,7 @@ def test_a_vv_named_with_markup_is_text_on_every_map_and_page(
     assert_text_only(customer_map, traffic, dialogs=map_dialogs)
     assert_text_only(vv_page, traffic, dialogs=vv_dialogs)
 
-    wait_for(
+    wait_until(
         lambda: VirtualVehicle.objects.get(pk=vv_id).status == VVStatus.FINISHED,
         timeout=FLIGHT_MS / 1000,
         what="the VV to finish",

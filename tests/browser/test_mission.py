@@ -17,7 +17,8 @@ from playwright.sync_api import Page, expect
 from missions.models import VirtualVehicle, VVStatus
 from tests.browser.pages import log_in, map_state
 from tests.conftest import PROGRAMS
-from tests.live import Workers, wait_for
+from tests.live import Workers
+from tests.polling import wait_until
 from vvm_worker.runtime import check_syntax
 
 pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
@@ -153,7 +154,7 @@ def test_a_customer_writes_vv1_watches_it_fly_and_gets_its_results_others_see_no
         expect(live).to_have_attribute("data-tasks-open", "0")
         expect(live).to_have_attribute("data-vehicles", "0")
         assert "Heli One" not in page.content()
-        wait_for(
+        wait_until(
             lambda: VirtualVehicle.objects.get(pk=vv_id).status == VVStatus.FINISHED,
             timeout=30,
             what="VV 1 to finish",

@@ -13,7 +13,8 @@ from django.db import OperationalError, connection, connections
 from rest_framework.authtoken.models import Token
 
 from cpcc_site import database
-from tests.live import Web, wait_for
+from tests.live import Web
+from tests.polling import wait_until
 from tests.tcp_proxy import TcpProxy
 
 pytestmark = [
@@ -116,7 +117,7 @@ def test_the_pool_serves_good_connections_again_after_an_outage(pooled, proxy) -
     assert database.is_outage(failed.value, ALIAS)
     assert not database.answers(ALIAS)
     proxy.restore()
-    wait_for(serves, timeout=15, what="the pool to serve a connection again")
+    wait_until(serves, timeout=15, what="the pool to serve a connection again")
     assert all(serves() for _ in range(20))
 
 
@@ -144,7 +145,7 @@ def test_the_web_server_answers_503_during_an_outage_and_serves_again_after_it(
     assert api.post(web.url("/api/v1/vvs/"), json=body, timeout=30).status_code == 503
 
     proxy.restore()
-    wait_for(
+    wait_until(
         lambda: api.get(web.url("/api/v1/vvs/"), timeout=30).status_code == 200,
         timeout=30,
         what="the web server to serve again",

@@ -25,7 +25,8 @@ from tests.factories import (
     UserFactory,
     VehicleFactory,
 )
-from tests.live import Workers, wait_for
+from tests.live import Workers
+from tests.polling import wait_until
 from tests.vvm_worker.test_distributed import (
     all_ended,
     assert_paper_results,
@@ -165,7 +166,9 @@ def test_workers_stopped_with_sigterm_mid_mission_exit_0_and_the_vvs_finish_afte
     workers.start("rvworker", "Heli One")
     workers.start("rvworker", "Heli Two")
     workers.start("gsworker", "GS Base")
-    wait_for(all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs)
+    wait_until(
+        all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs
+    )
     assert_paper_results()
 
 
@@ -188,7 +191,7 @@ def test_an_rv_worker_stopped_with_sigterm_in_the_middle_of_steps_exits_0(
         pool.start("gsworker", "GS Base")
         for stop in range(3):
             pool.start("rvworker", "Heli One")
-            wait_for(
+            wait_until(
                 lambda: step_under_way() or ended(*vvs),
                 timeout=60,
                 what="a step under way on Heli One",
@@ -198,7 +201,7 @@ def test_an_rv_worker_stopped_with_sigterm_in_the_middle_of_steps_exits_0(
             status = pool.terminate("Heli One")
             assert status == 0, (stop, pool.logs())
         pool.start("rvworker", "Heli One")
-        wait_for(lambda: ended(*vvs), timeout=180, what="the VVs to end", details=pool.logs)
+        wait_until(lambda: ended(*vvs), timeout=180, what="the VVs to end", details=pool.logs)
         assert pool.terminate("GS Base") == 0
         assert pool.terminate("Heli One") == 0
         logs = pool.logs()

@@ -14,7 +14,8 @@ from fleet.models import Vehicle, VehicleStatus
 from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.conftest import SCENARIOS
 from tests.factories import VehicleFactory
-from tests.live import Workers, wait_for
+from tests.live import Workers
+from tests.polling import wait_until
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vehicle_set_status
 
@@ -45,7 +46,7 @@ def all_ended() -> bool:
 def wait_mid_mission(workers: Workers) -> None:
     """Until VVs are aboard the RVs and at least two tasks are done (the workers' logs say
     why, if not)."""
-    wait_for(
+    wait_until(
         lambda: (
             Task.objects.filter(status=TaskStatus.DONE).count() >= 2
             and VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
@@ -73,7 +74,7 @@ def busy_rv_of_two(workers, tmp_path: Path, monkeypatch) -> Vehicle:
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
     workers.start("rvworker", "Heli Two")
-    wait_for(
+    wait_until(
         lambda: (
             VirtualVehicle.objects.filter(host_rv__isnull=False).exists()
             and Task.objects.filter(status=TaskStatus.DONE).exists()
@@ -93,14 +94,14 @@ def test_figure_3_through_separate_gs_and_rv_workers(workers, tmp_path, monkeypa
     # worker has not reported yet counts as away, and its VVs would wait on the GS).
     workers.start("rvworker", "Heli One")
     workers.start("rvworker", "Heli Two")
-    wait_for(
+    wait_until(
         lambda: not Vehicle.objects.filter(worker_seen__isnull=True).exists(),
         timeout=60,
         what="both RV workers to report",
         details=workers.logs,
     )
     workers.start("gsworker", "GS Base")
-    wait_for(all_ended, timeout=120, what="the three VVs to end", details=workers.logs)
+    wait_until(all_ended, timeout=120, what="the three VVs to end", details=workers.logs)
     assert_paper_results()
     for vv in VirtualVehicle.objects.all():
         path = [(m.from_name, m.to_name) for m in Migration.objects.filter(vv=vv)]
@@ -114,7 +115,7 @@ def test_an_rv_worker_killed_mid_mission_loses_nothing_when_it_comes_back(
     load("paper-fig2.json", tmp_path, monkeypatch)
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
-    wait_for(
+    wait_until(
         lambda: Task.objects.filter(status=TaskStatus.DONE).count() >= 3,
         timeout=120,
         what="three tasks done",
@@ -124,7 +125,9 @@ def test_an_rv_worker_killed_mid_mission_loses_nothing_when_it_comes_back(
     done_before = Task.objects.filter(status=TaskStatus.DONE).count()
     assert done_before < 12 and not all_ended()
     workers.start("rvworker", "Heli One")
-    wait_for(all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs)
+    wait_until(
+        all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs
+    )
     assert_paper_results()
     assert Vehicle.objects.get(name="Heli One").tasks_done == 12
 
@@ -137,7 +140,7 @@ def test_an_rv_removed_mid_mission_hands_its_vvs_to_the_other(
     # The workers' clock is this machine's: a task with a later done_s was read after the
     # removal committed, whichever worker committed first, so the removed RV cannot have read it.
     removed_s = time.time()
-    wait_for(all_ended, timeout=180, what="the VVs to end", details=workers.logs)
+    wait_until(all_ended, timeout=180, what="the VVs to end", details=workers.logs)
     assert_paper_results()
     later = Task.objects.filter(status=TaskStatus.DONE, done_s__gt=removed_s)
     assert later.exists(), "the removal came after the last task: it tested nothing"
@@ -158,7 +161,7 @@ def test_an_rv_added_mid_mission_takes_over_work_in_its_area(
     load(data, tmp_path, monkeypatch)
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
-    wait_for(
+    wait_until(
         lambda: Task.objects.filter(status=TaskStatus.OPEN, lng__gte=12.864).exists(),
         timeout=120,
         what="a VV asking for a reading in Heli Two's area",
@@ -172,7 +175,7 @@ def test_an_rv_added_mid_mission_takes_over_work_in_its_area(
         depot_lng=heli_two["depot"][1],
     )
     workers.start("rvworker", "Heli Two")
-    wait_for(all_ended, timeout=180, what="the VVs to end", details=workers.logs)
+    wait_until(all_ended, timeout=180, what="the VVs to end", details=workers.logs)
     assert_paper_results()
     served = Task.objects.filter(vehicle__name="Heli Two", status=TaskStatus.DONE)
     assert served.exists()
@@ -202,7 +205,7 @@ def test_a_vv_submitted_over_rest_by_token_finishes_and_its_results_come_back(
     created = client.post("/api/v1/vvs/", {"name": "over REST", "program": program}, format="json")
     assert created.status_code == 201, created.content
     vv_id = created.json()["id"]
-    wait_for(all_ended, timeout=120, what="the VV to end", details=workers.logs)
+    wait_until(all_ended, timeout=120, what="the VV to end", details=workers.logs)
     detail = client.get(f"/api/v1/vvs/{vv_id}/").json()
     assert detail["status"] == "finished" and detail["tasks_done"] == 4
     storage = client.get(f"/api/v1/vvs/{vv_id}/storage/").json()
@@ -231,7 +234,7 @@ def test_the_vvs_of_an_rv_worker_that_never_comes_back_move_on_when_its_lease_ex
     busy = busy_rv_of_two(workers, tmp_path, monkeypatch)
     workers.kill(busy.name)
     killed_at = Task.objects.filter(status=TaskStatus.DONE, vehicle=busy).count()
-    wait_for(all_ended, timeout=180, what="the VVs to end on the other RV", details=workers.logs)
+    wait_until(all_ended, timeout=180, what="the VVs to end on the other RV", details=workers.logs)
     assert_paper_results()
     assert Task.objects.filter(status=TaskStatus.DONE, vehicle=busy).count() == killed_at
     assert Migration.objects.filter(reason="its vehicle's worker stopped reporting").exists()

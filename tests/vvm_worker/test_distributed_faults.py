@@ -37,7 +37,8 @@ from tests.factories import (
     UserFactory,
     VehicleFactory,
 )
-from tests.live import Workers, program_log, wait_for
+from tests.live import Workers, program_log
+from tests.polling import wait_until
 from vvm_worker.dispatch import SHARED_QUEUE, gs_queue, rv_queue
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_create_for_user, vv_submit
@@ -203,7 +204,7 @@ def test_an_rv_worker_killed_mid_step_three_times_ends_its_vvs_as_an_undisturbed
         attempts += 1
         assert attempts <= 10, f"only {kills} of {attempts - 1} kills cut a step"
         assert not ended(*vvs), f"the VVs ended after {kills} kills cut a step"
-        wait_for(step_under_way, timeout=60, what="a step under way", details=workers.logs)
+        wait_until(step_under_way, timeout=60, what="a step under way", details=workers.logs)
         before = answers(vvs)
         workers.kill("Heli One")
         # Dead, the worker commits nothing more: no answer more than while the step was under
@@ -211,13 +212,13 @@ def test_an_rv_worker_killed_mid_step_three_times_ends_its_vvs_as_an_undisturbed
         kills += answers(vvs) == before
         logged = visits_logged(vvs)
         workers.start("rvworker", "Heli One")
-        wait_for(
+        wait_until(
             lambda logged=logged: visits_logged(vvs) > logged or ended(*vvs),
             timeout=60,
             what="Heli One's worker to go on after its restart",
             details=workers.logs,
         )
-    wait_for(lambda: ended(*vvs), timeout=120, what="the VVs to end", details=workers.logs)
+    wait_until(lambda: ended(*vvs), timeout=120, what="the VVs to end", details=workers.logs)
 
     for vv, undisturbed in zip(vvs, expected, strict=True):
         vv.refresh_from_db()
@@ -262,7 +263,7 @@ def set_consuming(name: str, queue: str, consume: bool) -> None:
     def answered() -> bool:
         return bool(command(queue, destination=[name], reply=True, timeout=1.0, limit=1))
 
-    wait_for(answered, timeout=30, what=f"{name} to answer about {queue}")
+    wait_until(answered, timeout=30, what=f"{name} to answer about {queue}")
 
 
 def test_a_killed_gs_worker_and_lost_messages_leave_no_vv_behind(workers) -> None:
@@ -286,7 +287,7 @@ def test_a_killed_gs_worker_and_lost_messages_leave_no_vv_behind(workers) -> Non
     )
     assert [v.status for v in (first, second, third)] == ["running", "queued", "queued"]
     assert lose(gs_queue(gs.pk)) > 0
-    wait_for(
+    wait_until(
         lambda: VirtualVehicle.objects.filter(
             pk=first.pk, host_gs=gs, pending__isnull=False
         ).exists(),
@@ -299,7 +300,7 @@ def test_a_killed_gs_worker_and_lost_messages_leave_no_vv_behind(workers) -> Non
     workers.kill("GS Base")
     workers.start("rvworker", "Heli One")
     workers.start("rvworker", "Heli Two")
-    wait_for(lambda: waiting(gs_queue(gs.pk)) > 0, what="word for GS Base", details=workers.logs)
+    wait_until(lambda: waiting(gs_queue(gs.pk)) > 0, what="word for GS Base", details=workers.logs)
     assert lose(gs_queue(gs.pk)) > 0
 
     # The ground station's worker comes back and takes First up; the word that moves First
@@ -307,7 +308,7 @@ def test_a_killed_gs_worker_and_lost_messages_leave_no_vv_behind(workers) -> Non
     set_consuming(node("rv", heli_two.pk), rv_queue(heli_two.pk), False)
     workers.start("gsworker", "GS Base")
     running = dict(workers.processes)
-    wait_for(
+    wait_until(
         lambda: (
             VirtualVehicle.objects.filter(
                 pk=first.pk, host_rv=heli_two, status=VVStatus.MIGRATING
@@ -322,7 +323,7 @@ def test_a_killed_gs_worker_and_lost_messages_leave_no_vv_behind(workers) -> Non
     set_consuming(node("rv", heli_two.pk), rv_queue(heli_two.pk), True)
 
     # Heli Two's sweep finds First, which ends; GS Base's sweep admits Second.
-    wait_for(
+    wait_until(
         lambda: ended(first) and waiting(SHARED_QUEUE) > 0,
         timeout=60,
         what="First to end",
@@ -330,7 +331,7 @@ def test_a_killed_gs_worker_and_lost_messages_leave_no_vv_behind(workers) -> Non
     )
     assert lose(SHARED_QUEUE) > 0
     set_consuming(gs_worker, SHARED_QUEUE, True)
-    wait_for(lambda: ended(first, second, third), what="the VVs to end", details=workers.logs)
+    wait_until(lambda: ended(first, second, third), what="the VVs to end", details=workers.logs)
 
     for vv in (first, second, third):
         vv.refresh_from_db()
@@ -374,7 +375,7 @@ def test_two_gs_workers_run_one_vv_at_a_time_for_a_customer_allowed_one(workers)
         peak = max(peak, running.count())
         return ended(*vvs)
 
-    wait_for(all_ended, what="the VVs to end", details=workers.logs)
+    wait_until(all_ended, what="the VVs to end", details=workers.logs)
     assert peak <= 1, f"{peak} VVs of a customer allowed one ran at once"
 
     ran = []

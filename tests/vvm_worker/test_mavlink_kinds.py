@@ -17,7 +17,7 @@ from fleet.models import Driver, Vehicle
 from fleet.simulation.vehicle import VehicleSpec
 from missions.models import JournalEntry, TaskStatus, VirtualVehicle, VVStatus
 from tests.fleet.mavlink.conftest import free_udp_port
-from tests.live import wait_for
+from tests.polling import wait_until
 from tests.vvm_worker.test_distributed import FIELD, all_ended, load
 
 pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
@@ -90,7 +90,7 @@ def _serve_to_the_end(workers, vehicle: Vehicle) -> VirtualVehicle:
     workers.env["CPCC_STANDBY_S"] = "1"  # real seconds waiting for work before going home
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", vehicle.name)
-    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    wait_until(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
     return VirtualVehicle.objects.get()
 
 
@@ -125,7 +125,7 @@ def test_an_rv_worker_drives_a_rover_over_mavlink_through_a_vv(
     (polygon,) = sim.fence_polygons()
     assert [(round(a, 6), round(b, 6)) for a, b in polygon] == [tuple(p) for p in FIELD[:-1]]
     assert sim.param("FENCE_TYPE") == 4 and sim.param("FENCE_ENABLE") == 1
-    wait_for(
+    wait_until(
         lambda: not sim.armed and distance_m(sim.position(), vehicle.depot) < 2.5,
         timeout=60,
         what="the rover parked at its depot",
@@ -156,7 +156,7 @@ def test_an_rv_worker_dives_a_sub_over_mavlink_through_a_vv(
     _assert_every_reading_where_asked(vv, vehicle, len(points))
     for task in vv.tasks.all():
         assert task.alt == -5 and task.readings[0]["position"]["alt"] == pytest.approx(-5, abs=2)
-    wait_for(
+    wait_until(
         lambda: not sim.armed and sim.position().alt == 0.0,
         timeout=60,
         what="the sub home at the surface",

@@ -14,7 +14,7 @@ from fleet.geo import distance_m, ground_distance_m
 from fleet.mavlink.wire import mavlink
 from fleet.models import Vehicle, VehicleCommand, VehicleStatus
 from tests.conftest import SCENARIOS
-from tests.live import wait_for
+from tests.polling import wait_until
 from tests.vvm_worker.test_distributed import load
 from tests.vvm_worker.test_mavlink_worker import _mavlink, _vv1_only, copters  # noqa: F401
 from vvm_worker.platform import platform_vvm
@@ -35,7 +35,7 @@ def test_land_now_then_return_home_reach_the_autopilot(
     copters.append(sim := _mavlink(heli))
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
-    wait_for(
+    wait_until(
         # (over the ground: a copter climbing above its depot is not away from home)
         lambda: not sim.on_ground and ground_distance_m(sim.position(), heli.depot) > 60,
         timeout=120,
@@ -47,14 +47,14 @@ def test_land_now_then_return_home_reach_the_autopilot(
         vehicle=heli, command=VehicleCommand.LAND, vvm=platform_vvm(), reason="test: land"
     )
     assert asked.status == VehicleStatus.MAINTENANCE
-    wait_for(
+    wait_until(
         lambda: sim.commands_seen(mavlink.MAV_CMD_NAV_LAND),
         timeout=30,
         what="MAV_CMD_NAV_LAND at the autopilot",
         details=workers.logs,
     )
     where = sim.position()
-    wait_for(lambda: sim.on_ground and not sim.armed, timeout=60, what="the landing")
+    wait_until(lambda: sim.on_ground and not sim.armed, timeout=60, what="the landing")
     assert ground_distance_m(sim.position(), where) < 20.0, "where it was"
     assert ground_distance_m(sim.position(), heli.depot) > 40.0, "not at home"
     heli.refresh_from_db()
@@ -64,13 +64,13 @@ def test_land_now_then_return_home_reach_the_autopilot(
     vehicle_command(
         vehicle=heli, command=VehicleCommand.RETURN_HOME, vvm=platform_vvm(), reason="test: home"
     )
-    wait_for(
+    wait_until(
         lambda: sim.commands_seen(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH),
         timeout=60,
         what="MAV_CMD_NAV_RETURN_TO_LAUNCH at the autopilot",
         details=workers.logs,
     )
-    wait_for(
+    wait_until(
         lambda: sim.on_ground and not sim.armed and distance_m(sim.position(), heli.depot) < 2,
         timeout=60,
         what="the copter home",

@@ -17,7 +17,7 @@ from fleet.simulation.vehicle import VehicleSpec
 from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.conftest import SCENARIOS
 from tests.fleet.mavlink.conftest import free_udp_port
-from tests.live import wait_for
+from tests.polling import wait_until
 from tests.vvm_worker.test_distributed import KEYS, all_ended, load
 from vvm_worker.executor import time_scale
 from vvm_worker.platform import platform_vvm
@@ -76,7 +76,7 @@ def test_an_rv_worker_flies_the_papers_vv_1_over_mavlink(
     workers.env["CPCC_STANDBY_S"] = "1"  # real seconds in the air before it lands
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
-    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    wait_until(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
     vv = VirtualVehicle.objects.get()
     assert vv.status == VVStatus.FINISHED, vv.error
     assert set(vv.storage.values_list("key", flat=True)) == KEYS
@@ -92,7 +92,7 @@ def test_an_rv_worker_flies_the_papers_vv_1_over_mavlink(
     assert [(round(a, 6), round(b, 6)) for a, b in polygon] == ring
     assert sim.param("FENCE_ALT_MAX") == pytest.approx(heli.max_altitude_m - heli.depot_alt)
     assert sim.param("FENCE_ENABLE") == 1
-    wait_for(lambda: sim.on_ground, timeout=60, what="the copter to land at its depot")
+    wait_until(lambda: sim.on_ground, timeout=60, what="the copter to land at its depot")
 
 
 def test_a_link_cut_in_flight_hands_the_vv_to_another_rv_and_nothing_is_read_twice(
@@ -107,21 +107,21 @@ def test_a_link_cut_in_flight_hands_the_vv_to_another_rv_and_nothing_is_read_twi
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
     workers.start("rvworker", "Heli Two")
-    wait_for(
+    wait_until(
         lambda: Task.objects.filter(status=TaskStatus.DONE, vehicle=heli).exists(),
         timeout=120,
         what="a task done by the MAVLink RV",
         details=workers.logs,
     )
     sim.cut_link()  # the radio dies in flight
-    wait_for(
+    wait_until(
         lambda: Vehicle.objects.get(pk=heli.pk).status == VehicleStatus.OFFLINE,
         timeout=30,
         what="the RV offline",
         details=workers.logs,
     )
     assert Vehicle.objects.get(pk=heli.pk).status_reason == "link lost"
-    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    wait_until(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
     vv = VirtualVehicle.objects.get()
     assert vv.status == VVStatus.FINISHED, vv.error
     assert set(vv.storage.values_list("key", flat=True)) == KEYS
@@ -133,7 +133,7 @@ def test_a_link_cut_in_flight_hands_the_vv_to_another_rv_and_nothing_is_read_twi
     )
     # The link comes back: the RV returns to service by itself.
     sim.restore_link()
-    wait_for(
+    wait_until(
         lambda: Vehicle.objects.get(pk=heli.pk).status == VehicleStatus.ACTIVE,
         timeout=30,
         what="the RV back in service",
@@ -153,14 +153,14 @@ def test_maintenance_set_while_the_link_is_down_survives_the_links_return(
     workers.env["CPCC_MAVLINK_LINK_TIMEOUT_S"] = "1"
     workers.env["CPCC_LOG_LEVEL"] = "INFO"
     workers.start("rvworker", "Heli One")
-    wait_for(
+    wait_until(
         lambda: any("rv worker started" in p.read_text() for p in tmp_path.glob("*.log")),
         timeout=60,
         what="the RV worker",
         details=workers.logs,
     )
     sim.cut_link()
-    wait_for(
+    wait_until(
         lambda: Vehicle.objects.get(pk=heli.pk).status == VehicleStatus.OFFLINE,
         timeout=30,
         what="the RV offline",
@@ -173,7 +173,7 @@ def test_maintenance_set_while_the_link_is_down_survives_the_links_return(
         reason="propeller check",
     )
     sim.restore_link()
-    wait_for(
+    wait_until(
         lambda: any("Heli One: link back" in p.read_text() for p in tmp_path.glob("*.log")),
         timeout=30,
         what="the worker to see the link back",
@@ -203,7 +203,7 @@ def test_a_vv_on_a_mavlink_rv_gets_the_readings_of_the_vehicles_own_sensors(
     copters.append(_mavlink(heli, payload=True))
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
-    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    wait_until(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
     vv = VirtualVehicle.objects.get()
     assert vv.status == VVStatus.FINISHED, vv.error
     stored = {d.key: d.value for d in vv.storage.all()}
@@ -235,22 +235,22 @@ def test_a_stopped_workers_drone_returns_home_by_the_autopilots_failsafe(
     workers.env["CPCC_GCS_FAILSAFE_S"] = "2"
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
-    wait_for(
+    wait_until(
         lambda: sim.param("FS_GCS_ENABLE") == 1 and sim.param("FS_GCS_TIMEOUT") == 2,
         timeout=60,
         what="the GCS failsafe turned on",
         details=workers.logs,
     )
-    wait_for(
+    wait_until(
         lambda: not sim.on_ground and distance_m(sim.position(), heli.depot) > 30,
         timeout=120,
         what="the copter on its way",
         details=workers.logs,
     )
     assert workers.terminate("Heli One") == 0
-    wait_for(lambda: sim.mode == "RTL", timeout=30, what="the failsafe's RTL")
+    wait_until(lambda: sim.mode == "RTL", timeout=30, what="the failsafe's RTL")
     assert "GCS Failsafe" in sim.texts_sent()
-    wait_for(lambda: sim.on_ground, timeout=120, what="the copter landed")
+    wait_until(lambda: sim.on_ground, timeout=120, what="the copter landed")
     assert distance_m(sim.position(), heli.depot) < 2.0
 
 
@@ -269,7 +269,7 @@ def test_a_low_battery_keeps_the_rv_home_until_telemetry_shows_it_charged_and_a_
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")
     log = tmp_path / "rvworker-Heli_One.log"
-    wait_for(
+    wait_until(
         lambda: "waiting for a charged battery" in log.read_text(),
         timeout=60,
         what="the RV waiting for its battery",
@@ -282,7 +282,7 @@ def test_a_low_battery_keeps_the_rv_home_until_telemetry_shows_it_charged_and_a_
     )
     assert sim.on_ground and not sim.armed
     sim.set_battery(1.0)  # swapped
-    wait_for(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
+    wait_until(all_ended, timeout=180, what="VV 1 to end", details=workers.logs)
     vv = VirtualVehicle.objects.get()
     assert vv.status == VVStatus.FINISHED, vv.error
     assert log.read_text().count("battery too low for the next task: home to recharge") == 1, (

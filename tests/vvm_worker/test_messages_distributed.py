@@ -15,7 +15,8 @@ from tests.factories import (
     GroundStationFactory,
     VehicleFactory,
 )
-from tests.live import Workers, wait_for
+from tests.live import Workers
+from tests.polling import wait_until
 from tests.vvm_worker.test_distributed_faults import workers  # noqa: F401 - instant flights
 from tests.vvm_worker.test_messages import ROUNDS, exchange
 from vvm_worker.platform import platform_vvm
@@ -76,7 +77,7 @@ def test_two_vvs_in_different_cells_exchange_ten_messages_each_way(
     workers,  # noqa: F811 - the fixture
 ) -> None:
     vvs = start_exchange(workers)
-    wait_for(lambda: both_ended(vvs), timeout=120, what="both VVs to end", details=workers.logs)
+    wait_until(lambda: both_ended(vvs), timeout=120, what="both VVs to end", details=workers.logs)
     assert_exchanged(vvs)
 
 
@@ -85,7 +86,7 @@ def test_with_each_rv_worker_killed_mid_exchange_every_message_is_received_once_
 ) -> None:
     vvs = start_exchange(workers)
     for name, after in (("Heli One", 4), ("Heli Two", 10)):
-        wait_for(
+        wait_until(
             lambda after=after: received(vvs) >= after,
             timeout=60,
             what=f"{after} messages received",
@@ -94,5 +95,5 @@ def test_with_each_rv_worker_killed_mid_exchange_every_message_is_received_once_
         assert not both_ended(vvs), "the exchange ended before the kill"
         workers.kill(name)
         workers.start("rvworker", name)
-    wait_for(lambda: both_ended(vvs), timeout=180, what="both VVs to end", details=workers.logs)
+    wait_until(lambda: both_ended(vvs), timeout=180, what="both VVs to end", details=workers.logs)
     assert_exchanged(vvs)

@@ -29,7 +29,8 @@ from tests.factories import (
     UserFactory,
     VehicleFactory,
 )
-from tests.live import Web, Workers, program_log, wait_for
+from tests.live import Web, Workers, program_log
+from tests.polling import wait_until
 from tests.tcp_proxy import TcpProxy
 from vvm_worker.dispatch import VV_ADVANCE_TASK
 from vvm_worker.platform import platform_vvm
@@ -144,18 +145,18 @@ def test_redis_restarted_mid_mission_loses_no_vv_and_no_reading(
     try:
         vvs = submit(fleet)
         start_fleet(workers)
-        wait_for(lambda: done(vvs) >= 3, what="the mission under way", details=workers.logs)
+        wait_until(lambda: done(vvs) >= 3, what="the mission under way", details=workers.logs)
         assert not ended(vvs)
         redis_server.stop()
         before = done(vvs)
         # The RVs fly on and the VVs step on their hosts meanwhile; what they send is lost.
-        wait_for(
+        wait_until(
             lambda: done(vvs) >= before + 2,
             what="work done while Redis is down",
             details=workers.logs,
         )
         redis_server = EmbeddedRedis(socket_path).start()
-        wait_for(lambda: ended(vvs), timeout=180, what="the VVs to end", details=workers.logs)
+        wait_until(lambda: ended(vvs), timeout=180, what="the VVs to end", details=workers.logs)
         for vv in vvs:
             assert_each_reading_once(vv)
         assert all(p.poll() is None for p in workers.processes.values()), workers.logs()
@@ -234,14 +235,14 @@ def test_the_database_unavailable_for_seconds_workers_wait_and_the_web_answers_5
             workers.start(
                 "rvworker" if name.startswith("Heli") else "gsworker", name, env=outage.env
             )
-        wait_for(lambda: done(vvs) >= 2, what="the mission under way", details=workers.logs)
+        wait_until(lambda: done(vvs) >= 2, what="the mission under way", details=workers.logs)
         browser = logged_in(web, "customer-a")
 
         outage.begin()
         try:
             # The RV workers meet the outage (a heartbeat, a task's completion) and wait.
             logs = [workers.tmp / f"rvworker-Heli_{n}.log" for n in ("One", "Two")]
-            wait_for(
+            wait_until(
                 lambda: all(b"database unavailable" in log.read_bytes() for log in logs),
                 timeout=60,
                 what="the RV workers to meet the outage",
@@ -267,7 +268,7 @@ def test_the_database_unavailable_for_seconds_workers_wait_and_the_web_answers_5
         again = api.post(web.url("/api/v1/vvs/"), json=body, timeout=30)
         assert again.status_code == 201, again.text
         vvs.append(VirtualVehicle.objects.get(pk=again.json()["id"]))
-        wait_for(lambda: ended(vvs), timeout=180, what="the VVs to end", details=workers.logs)
+        wait_until(lambda: ended(vvs), timeout=180, what="the VVs to end", details=workers.logs)
         for vv in vvs:
             assert_each_reading_once(vv)
         assert no_lease_lost(vvs)  # nobody's lease ran out for the outage
@@ -318,7 +319,7 @@ def test_every_message_delivered_twice_changes_nothing(
     workers.start("rvworker", "Heli One", env=fault)
     workers.start("rvworker", "Heli Two", env=fault)
     vvs = submit(fleet)
-    wait_for(lambda: ended(vvs), timeout=180, what="the VVs to end", details=workers.logs)
+    wait_until(lambda: ended(vvs), timeout=180, what="the VVs to end", details=workers.logs)
     for vv in vvs:
         assert_each_reading_once(vv)
     sent = twice.read_text().split()
@@ -340,7 +341,7 @@ def test_the_web_process_killed_and_restarted_mid_mission_loses_nothing(
     ids = [api.post(web.url("/api/v1/vvs/"), json=body, timeout=30).json()["id"] for _ in range(3)]
     vvs = list(VirtualVehicle.objects.filter(pk__in=ids))
     assert len(vvs) == 3
-    wait_for(lambda: done(vvs) >= 2, what="the mission under way", details=workers.logs)
+    wait_until(lambda: done(vvs) >= 2, what="the mission under way", details=workers.logs)
 
     web.kill()
     with pytest.raises(requests.ConnectionError):
@@ -352,7 +353,7 @@ def test_the_web_process_killed_and_restarted_mid_mission_loses_nothing(
         listed = api.get(web.url("/api/v1/vvs/"), timeout=30).json()["results"]
         return sorted(v["id"] for v in listed if v["status"] == "finished") == sorted(ids)
 
-    wait_for(finished_over_rest, timeout=180, what="the VVs to finish", details=workers.logs)
+    wait_until(finished_over_rest, timeout=180, what="the VVs to finish", details=workers.logs)
     for vv in vvs:
         assert_each_reading_once(vv)
         storage = api.get(web.url(f"/api/v1/vvs/{vv.pk}/storage/"), timeout=30).json()
@@ -369,7 +370,7 @@ def test_an_rv_worker_whose_clock_is_an_hour_behind_keeps_its_lease_and_its_work
 ) -> None:
     vvs = submit(fleet)
     start_fleet(workers, CPCC_FAULT_CLOCK_S=str(-3600))
-    wait_for(lambda: ended(vvs), timeout=180, what="the VVs to end", details=workers.logs)
+    wait_until(lambda: ended(vvs), timeout=180, what="the VVs to end", details=workers.logs)
     for vv in vvs:
         assert_each_reading_once(vv)
     assert no_lease_lost(vvs)

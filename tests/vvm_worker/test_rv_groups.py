@@ -27,7 +27,8 @@ from tests.factories import (
     GroundStationFactory,
     VehicleFactory,
 )
-from tests.live import Workers, wait_for
+from tests.live import Workers
+from tests.polling import wait_until
 from tests.vvm_worker.test_distributed import (
     all_ended,
     assert_paper_results,
@@ -112,7 +113,7 @@ def test_a_vv_migrating_between_two_rvs_of_one_process_resumes_its_warm_context(
         vv.refresh_from_db()
         return vv.is_ended
 
-    wait_for(ended, timeout=60, what="the VV to end")
+    wait_until(ended, timeout=60, what="the VV to end")
     assert vv.status == VVStatus.FINISHED, vv.error
     path = list(Migration.objects.filter(vv=vv).values_list("from_name", "to_name"))
     assert path == [("GS Base", "Heli One"), ("Heli One", "Heli Two"), ("Heli Two", "GS Base")]
@@ -153,7 +154,7 @@ def test_a_vv_admitted_on_a_station_of_the_rvs_process_keeps_its_warm_context_ab
         vv.refresh_from_db()
         return vv.is_ended
 
-    wait_for(ended, timeout=60, what="the VV to end")
+    wait_until(ended, timeout=60, what="the VV to end")
     assert vv.status == VVStatus.FINISHED, vv.error
     path = list(Migration.objects.filter(vv=vv).values_list("from_name", "to_name"))
     assert path == [("GS Base", "Heli One"), ("Heli One", "Heli Two"), ("Heli Two", "GS Base")]
@@ -197,7 +198,7 @@ def test_a_worker_of_several_rvs_stopped_with_sigterm_mid_mission_exits_0_and_it
     one process: stopped by SIGTERM mid-mission, then started again."""
     load("paper-fig3.json", tmp_path, monkeypatch)
     workers.start("rvworker", "Heli One", "Heli Two")
-    wait_for(
+    wait_until(
         lambda: not Vehicle.objects.filter(worker_seen__isnull=True).exists(),
         timeout=60,
         what="both RVs to report",
@@ -211,7 +212,9 @@ def test_a_worker_of_several_rvs_stopped_with_sigterm_mid_mission_exits_0_and_it
     assert "Fatal Python error" not in logs
     assert not all_ended(), "the mission ended before the stop: it tested nothing"
     workers.start("rvworker", "Heli One", "Heli Two")
-    wait_for(all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs)
+    wait_until(
+        all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs
+    )
     assert_paper_results()
     for vv in VirtualVehicle.objects.all():
         path = [(m.from_name, m.to_name) for m in Migration.objects.filter(vv=vv)]
@@ -238,7 +241,9 @@ def test_a_worker_of_rvs_and_their_station_stopped_with_sigterm_mid_mission_exit
     assert "Fatal Python error" not in logs
     assert not all_ended(), "the mission ended before the stop: it tested nothing"
     workers.start(*combined, options=["--station", "GS Base"])
-    wait_for(all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs)
+    wait_until(
+        all_ended, timeout=180, what="the VVs to end after the restart", details=workers.logs
+    )
     assert_paper_results()
     for vv in VirtualVehicle.objects.all():
         path = [(m.from_name, m.to_name) for m in Migration.objects.filter(vv=vv)]
@@ -276,7 +281,7 @@ def test_a_worker_of_several_rvs_stopped_with_sigterm_in_the_middle_of_steps_exi
             pool.start("rvworker", "Heli One", "Heli Two")
             # With instant flights the worker steps VVs without a pause: once it has gone on
             # since its start, a stop comes in the middle of its work.
-            wait_for(
+            wait_until(
                 lambda logged=logged: visits_logged(counters) > logged or ended(*vvs),
                 timeout=60,
                 what="the worker of Heli One and Heli Two to go on",
@@ -285,7 +290,7 @@ def test_a_worker_of_several_rvs_stopped_with_sigterm_in_the_middle_of_steps_exi
             assert pool.terminate("Heli One") == 0, (stop, pool.logs())
             assert stop > 0 or not ended(*vvs), "the VVs ended before the stop: it tested nothing"
         pool.start("rvworker", "Heli One", "Heli Two")
-        wait_for(lambda: ended(*vvs), timeout=180, what="the VVs to end", details=pool.logs)
+        wait_until(lambda: ended(*vvs), timeout=180, what="the VVs to end", details=pool.logs)
         assert pool.terminate("Heli One") == 0
         assert pool.terminate("GS Base") == 0
         logs = pool.logs()
@@ -348,7 +353,7 @@ def test_a_vv_that_waits_for_an_isolate_does_not_hold_up_the_host_thread(
         vv.refresh_from_db()
         return vv.is_ended
 
-    wait_for(ended, timeout=60, what="the VV to end")
+    wait_until(ended, timeout=60, what="the VV to end")
     assert vv.status == VVStatus.FINISHED, vv.error
     assert [(s.replayed, s.answers_read) for s in steps] == [(True, 1), (False, 1)]
     assert {d.key: d.value for d in vv.storage.all()} == {"one": 1, "two": 2}

@@ -13,6 +13,7 @@ import pytest
 from fleet.geo import Position
 from fleet.mavlink import MavSim
 from fleet.simulation.vehicle import VehicleSpec
+from tests import polling
 
 # Heli One's depot and area in the paper's Figure 3 (tests/factories' AREA_ONE).
 DEPOT = Position(48.1135, 12.86, 0.0)
@@ -42,16 +43,8 @@ def free_tcp_port() -> int:
 
 
 def wait_until(condition: Callable[[], Any], *, timeout: float = 10.0, what: str = "it") -> Any:
-    """Poll ``condition`` until it returns something truthy (which is returned); fail naming
-    ``what`` after ``timeout`` wall seconds."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        time.sleep(0.005)
+    """``tests.polling.wait_until`` every 5 ms: mavsim flies many times faster than life."""
+    return polling.wait_until(condition, timeout=timeout, what=what, interval=0.005)
 
 
 def sim_clock(speed: float = SPEED) -> Callable[[], float]:

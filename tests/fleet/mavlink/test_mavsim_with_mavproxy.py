@@ -8,7 +8,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -19,6 +18,7 @@ from fleet.geo import Position, distance_m, offset
 from fleet.mavlink import MavSim
 from fleet.mavlink.wire import mavlink
 from tests.fleet.mavlink.conftest import DEPOT
+from tests.polling import wait_until
 
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
 SPEED = 40.0
@@ -60,12 +60,19 @@ class MavProxy:
         return self.log.read_text(errors="replace")
 
     def eventually(self, condition: Callable[[], Any], what: str, timeout: float = 10.0) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
+        """Wait until ``condition`` holds while MAVProxy runs (failing with its output)."""
+
+        def holds() -> Any:
             assert self.process.poll() is None, f"MAVProxy exited\n{self.output()}"
-            if time.monotonic() > deadline:
-                raise AssertionError(f"no {what} within {timeout:g} s\n{self.output()[-3000:]}")
-            time.sleep(0.01)
+            return condition()
+
+        wait_until(
+            holds,
+            timeout=timeout,
+            what=what,
+            details=lambda: self.output()[-3000:],
+            interval=0.01,
+        )
 
     def close(self) -> None:
         if self.process.poll() is None:

@@ -6,7 +6,6 @@ the landing, asserted on mavsim's own state; and a photo through MAVSDK's camera
 from __future__ import annotations
 
 import asyncio
-import time
 import urllib.request
 from collections.abc import Callable
 from typing import Any
@@ -20,6 +19,7 @@ from fleet.geo import Position, distance_m, offset
 from fleet.mavlink import MavSim
 from fleet.mavlink.wire import mavlink
 from tests.fleet.mavlink.conftest import DEPOT
+from tests.polling import wait_until_async
 
 SPEED = 40.0
 GROUND_AMSL_M = 350.0
@@ -27,14 +27,6 @@ GOTO = offset(DEPOT, north_m=120, east_m=-80, up_m=25)
 A = offset(DEPOT, north_m=-150, east_m=60, up_m=30)
 B = offset(DEPOT, north_m=-60, east_m=200, up_m=20)
 HOLD_S = 20.0  # at the first waypoint: half a second of the test at SPEED
-
-
-async def eventually(condition: Callable[[], Any], what: str, timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-        await asyncio.sleep(0.01)
 
 
 def waypoint(seq: int, where: Position, hold_s: float = 0.0) -> Any:
@@ -69,31 +61,40 @@ async def test_mavsdk_flies_guided_a_mission_and_home(
         await action.arm()
         assert sim.armed
         await action.takeoff()  # GUIDED, then NAV_TAKEOFF
-        await eventually(lambda: abs(sim.position().alt - 15.0) < 0.05, "the take-off")
+        await wait_until_async(
+            lambda: abs(sim.position().alt - 15.0) < 0.05, what="the take-off", timeout=10
+        )
         assert sim.mode == "GUIDED"
 
         # goto_location: DO_REPOSITION, the altitude above mean sea level.
         await action.goto_location(GOTO.lat, GOTO.lng, GROUND_AMSL_M + GOTO.alt, 0.0)
-        await eventually(lambda: distance_m(sim.position(), GOTO) < 0.5, "the goto point")
+        await wait_until_async(
+            lambda: distance_m(sim.position(), GOTO) < 0.5, what="the goto point", timeout=10
+        )
 
         # A raw mission: item 0 is home on ArduPilot, then the two waypoints.
         await missions.upload_mission([waypoint(0, DEPOT), waypoint(1, A, HOLD_S), waypoint(2, B)])
         assert len(sim.mission_items(mavlink.MAV_MISSION_TYPE_MISSION)) == 3
         await missions.start_mission()
-        await eventually(lambda: sim.mode == "AUTO", "AUTO")
-        await eventually(lambda: distance_m(sim.position(), A) < 0.5, "the first waypoint")
-        await eventually(lambda: distance_m(sim.position(), B) < 0.5, "the second waypoint")
+        await wait_until_async(lambda: sim.mode == "AUTO", what="AUTO", timeout=10)
+        await wait_until_async(
+            lambda: distance_m(sim.position(), A) < 0.5, what="the first waypoint", timeout=10
+        )
+        await wait_until_async(
+            lambda: distance_m(sim.position(), B) < 0.5, what="the second waypoint", timeout=10
+        )
         # MAVSDK sees the mission done from MISSION_CURRENT and MISSION_ITEM_REACHED.
-        deadline = time.monotonic() + 5.0
-        while not await missions.is_mission_finished():
-            assert time.monotonic() < deadline, "MAVSDK never saw the mission finished"
-            await asyncio.sleep(0.05)
+        await wait_until_async(
+            missions.is_mission_finished, timeout=5, what="MAVSDK to see it finished", interval=0.05
+        )
         progress = await missions.mission_progress()
         assert (progress.current, progress.total) == (3, 3)
 
         await action.return_to_launch()
         assert sim.mode == "RTL"
-        await eventually(lambda: sim.on_ground and not sim.armed, "the landing")
+        await wait_until_async(
+            lambda: sim.on_ground and not sim.armed, what="the landing", timeout=10
+        )
         assert distance_m(sim.position(), DEPOT) < 0.5
 
 
@@ -105,11 +106,14 @@ async def test_mavsdk_takes_a_photo(make_sim: Callable[..., MavSim], port: int) 
         system = await drone.first_autopilot(timeout_s=10.0)
         assert system is not None
         camera = CameraAsync(system)
+
         # MAVSDK finds the camera by its HEARTBEAT and asks for CAMERA_INFORMATION.
-        deadline = time.monotonic() + 10.0
-        while not (cameras := (await camera.camera_list()).cameras):
-            assert time.monotonic() < deadline, "MAVSDK found no camera"
-            await asyncio.sleep(0.05)
+        async def listed() -> Any:
+            return (await camera.camera_list()).cameras
+
+        cameras = await wait_until_async(
+            listed, timeout=10, what="MAVSDK to find the camera", interval=0.05
+        )
         assert [(c.component_id, c.vendor_name) for c in cameras] == [(100, "CPCC")]
         assert (cameras[0].horizontal_resolution_px, cameras[0].vertical_resolution_px) == (
             640,
