@@ -18,7 +18,7 @@ from django.template.response import TemplateResponse
 from django.urls import URLPattern, path
 
 from vvm_worker.clock import SystemClock
-from vvm_worker.service_levels import LevelStats
+from vvm_worker.level_figures import LevelStats
 from vvm_worker.services.service_levels import service_levels_report
 
 PERIODS = {"hour": 3_600.0, "day": 86_400.0}

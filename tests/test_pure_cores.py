@@ -24,7 +24,7 @@ PURE = [
     "vvm_worker.mapping",
     "vvm_worker.scenario_gen",
     "vvm_worker.dispatch",
-    "vvm_worker.notify",
+    "vvm_worker.delivery",
     "vvm_worker.clock",
     "vvm_worker.control",
     "vvm_worker.imaging",

@@ -14,6 +14,7 @@ from cpcc_site.celery import app
 from cpcc_site.prepared import PreparedRead
 from missions.models import VirtualVehicle
 from missions.selectors import customer_has_queued_vv
+from vvm_worker.delivery import NOTIFY_QUEUE, NOTIFY_TASK
 from vvm_worker.dispatch import (
     ADMIT_TASK,
     SHARED_QUEUE,
@@ -24,7 +25,6 @@ from vvm_worker.dispatch import (
     gs_queue,
     rv_queue,
 )
-from vvm_worker.notify import NOTIFY_QUEUE, NOTIFY_TASK
 
 logger = logging.getLogger("cpcc.dispatch")
 

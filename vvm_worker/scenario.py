@@ -33,7 +33,7 @@ from fleet.kinds import (
     UNDERWATER,
     limit_problems,
 )
-from vvm_worker.service_levels import ServiceClassSpec
+from vvm_worker.level_figures import ServiceClassSpec
 
 __all__ = [
     "CustomerSpec",

@@ -15,9 +15,9 @@ from celery import shared_task
 from django.conf import settings
 
 from cpcc_site import database
+from vvm_worker.delivery import NOTIFY_QUEUE, NOTIFY_TASK, WEBHOOK_DELIVER_TASK, PerKeyLimit
 from vvm_worker.dispatch import ADMIT_TASK, VEHICLE_CHANGED_TASK, VV_ADVANCE_TASK
 from vvm_worker.hosts import current_host
-from vvm_worker.notify import NOTIFY_QUEUE, NOTIFY_TASK, WEBHOOK_DELIVER_TASK, PerKeyLimit
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_admit_queued
 from vvm_worker.services import vv_advance as advance

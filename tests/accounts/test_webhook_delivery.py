@@ -24,7 +24,7 @@ from missions.models import VirtualVehicle, VVStatus
 from tests.broker import queued
 from vvm_worker import tasks
 from vvm_worker.celery_dispatch import CeleryNotifier
-from vvm_worker.notify import NOTIFY_QUEUE, retry_delay_s
+from vvm_worker.delivery import NOTIFY_QUEUE, retry_delay_s
 from vvm_worker.services import vv_submit
 from vvm_worker.services.notifications import (
     user_set_email_events,

@@ -1,4 +1,4 @@
-"""The webhook transport (vvm_worker/notify.py, no Django): the signature, which addresses are
+"""The webhook transport (vvm_worker/delivery.py, no Django): the signature, which addresses are
 refused, and what a POST reports for each way a receiver can answer, or not."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from collections.abc import Iterator
 import pytest
 
 from tests.accounts.receiver import Receiver, running_receiver
-from vvm_worker.notify import UnsafeURL, check_url, post, sign
+from vvm_worker.delivery import UnsafeURL, check_url, post, sign
 
 
 @pytest.fixture

@@ -17,8 +17,8 @@ from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus, WaitReas
 from missions.waiting import vv_waiting
 from tests.api_fixtures import token_client
 from tests.factories import CustomerFactory, VehicleFactory
+from vvm_worker.level_figures import ServiceClassSpec
 from vvm_worker.scenario import Scenario, ScenarioError, parse_scenario
-from vvm_worker.service_levels import ServiceClassSpec
 from vvm_worker.services import vv_admit_queued, vv_cancel, vv_submit
 from vvm_worker.services.customers import customer_class_set, service_class_save
 from vvm_worker.services.scenarios import scenario_apply

@@ -1,11 +1,11 @@
-"""The figures of service levels (vvm_worker.service_levels): percentiles, per-class stats, and
+"""The figures of service levels (vvm_worker.level_figures): percentiles, per-class stats, and
 when admission should hold a class."""
 
 from __future__ import annotations
 
 import pytest
 
-from vvm_worker.service_levels import (
+from vvm_worker.level_figures import (
     NO_CLASS,
     ServiceClassSpec,
     level_stats,

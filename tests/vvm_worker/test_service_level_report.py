@@ -22,7 +22,7 @@ from tests.api_fixtures import token_client
 from tests.conftest import SCENARIOS
 from tests.factories import VehicleFactory
 from vvm_worker.executor import DatabaseStore
-from vvm_worker.service_levels import percentile
+from vvm_worker.level_figures import percentile
 from vvm_worker.services.customers import customer_class_set, service_class_save
 from vvm_worker.services.service_levels import ALL_CUSTOMERS, service_levels_report
 

@@ -3,10 +3,7 @@
 Pure Python over mini-racer; no Django import (tests check this).
 """
 
-from vvm_worker.runtime.context import VVContext
-from vvm_worker.runtime.engine import Runtime, run_step
-from vvm_worker.runtime.instrument import ReservedNameError, instrument
-from vvm_worker.runtime.journal import (
+from vvm_worker.runtime.answers import (
     answer_call,
     answer_call_error,
     answer_message,
@@ -14,6 +11,9 @@ from vvm_worker.runtime.journal import (
     answer_reject,
     answer_task,
 )
+from vvm_worker.runtime.context import VVContext
+from vvm_worker.runtime.engine import Runtime, run_step
+from vvm_worker.runtime.instrument import ReservedNameError, instrument
 from vvm_worker.runtime.syntax import SyntaxProblem, check_syntax
 from vvm_worker.runtime.types import (
     VVM_API_CALLS,

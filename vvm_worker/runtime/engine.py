@@ -5,7 +5,8 @@ replayed.
 sends each step only the journal entries the context does not have yet; ``run_step`` runs one
 step in a context made for it. The parts: v8.py (the thread that owns V8), syntax.py (V8's
 verdict on a program), instrument.py (the program as the platform runs it), pool.py (isolates
-with the prelude), context.py (one VV's isolate and a step in it), journal.py (the answers).
+with the prelude), context.py (one VV's isolate and a step in it), answers.py (the journal
+entries the host writes).
 
 In a warm context the program does not re-run: where it can, the platform compiles it as a
 generator whose waiting calls yield (instrument.py), so between steps it stays suspended at its

@@ -25,8 +25,8 @@ from missions.models import (
     VirtualVehicle,
 )
 from vvm_worker.clock import Clock
+from vvm_worker.delivery import Notifier, Unheard
 from vvm_worker.dispatch import Announcer, Dispatcher, Silent
-from vvm_worker.notify import Notifier, Unheard
 from vvm_worker.runtime import (
     PendingRequest,
     Runtime,

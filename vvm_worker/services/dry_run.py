@@ -5,7 +5,7 @@ The copy is what ``manage.py simulate`` runs (vvm_worker/simulation.py): the veh
 service with their areas, altitudes, sensors and speeds, the ground stations and no-fly zones,
 the SDC, and one VV of the customer's with the customer's quotas; simulated sensors answer at
 once (no picture is drawn), and time is discrete (a flight takes no wall time). It runs in a
-process of its own (``manage.py dry_run_copy``, vvm_worker/dry_run.py) on a database of its
+process of its own (``manage.py dry_run_copy``, vvm_worker/dry_run_copy.py) on a database of its
 own, a throw-away SQLite file, for three reasons:
 
 - nothing of the copy can reach the platform's database or its media: no VV, task, storage

@@ -7,7 +7,7 @@ The way of an event:
 1. ``vv_notify`` (called by the services that end a VV or answer a task, in their
    transaction) looks at ``Customer.notify_events``, read with the VV: when nobody of the
    customer listens for the event, that is all it costs. Otherwise the VVM's notifier sends
-   one message once the transaction commits (vvm_worker/notify.py).
+   one message once the transaction commits (vvm_worker/delivery.py).
 2. ``vv_event_fan_out`` (a worker on the ``notify`` queue) writes the event's JSON body once,
    e-mails the users who chose the event, and gives back one ``WebhookJob`` per webhook.
 3. ``webhook_attempt`` POSTs a job's body, signed, records the attempt in the webhook's
@@ -35,7 +35,7 @@ from django.db import transaction
 
 from accounts.models import Customer, NotifyEvent, User, Webhook, WebhookDelivery
 from missions.models import Task, VirtualVehicle, VVStatus
-from vvm_worker import notify
+from vvm_worker import delivery
 from vvm_worker.services.base import VVM
 
 logger = logging.getLogger("cpcc.notify")
@@ -126,8 +126,8 @@ def _check_url(url: str, *, allow_private: bool) -> None:
             {"url": "A URL has no spaces or control characters (percent-encode them)."}
         )
     try:
-        notify.check_url(url, allow_private=allow_private)
-    except notify.UnsafeURL as exc:
+        delivery.check_url(url, allow_private=allow_private)
+    except delivery.UnsafeURL as exc:
         raise ValidationError({"url": str(exc)}) from None
 
 
@@ -324,13 +324,13 @@ def webhook_attempt(*, job: WebhookJob, attempt: int) -> float | None:
     if tried.filter(attempt__gte=attempt).exists() or delivered.exists():
         return None
     raw = job.body.encode()
-    answer = notify.post(
+    answer = delivery.post(
         webhook.url,
         raw,
         {
-            notify.SIGNATURE_HEADER: notify.sign(raw, webhook.secret),
-            notify.EVENT_HEADER: job.event,
-            notify.DELIVERY_HEADER: str(job.delivery),
+            delivery.SIGNATURE_HEADER: delivery.sign(raw, webhook.secret),
+            delivery.EVENT_HEADER: job.event,
+            delivery.DELIVERY_HEADER: str(job.delivery),
         },
         timeout_s=settings.CPCC_WEBHOOK_TIMEOUT_S,
         allow_private=settings.CPCC_WEBHOOK_ALLOW_PRIVATE,
@@ -363,7 +363,7 @@ def webhook_attempt(*, job: WebhookJob, attempt: int) -> float | None:
     )
     if last:
         return None
-    return notify.retry_delay_s(attempt, first_s=settings.CPCC_WEBHOOK_RETRY_S)
+    return delivery.retry_delay_s(attempt, first_s=settings.CPCC_WEBHOOK_RETRY_S)
 
 
 def _prune(webhook: Webhook) -> None:

@@ -3,7 +3,7 @@ class's target now (the tasks of its customers read lately and those still open)
 holds the queued VVs of a class that misses its target (``vvs._admit``) and asks again when
 one of the class's tasks ends (``class_held_nudge``) or a ground station sweeps.
 
-The figures themselves are computed in the pure core ``vvm_worker.service_levels``.
+The figures themselves are computed in the pure core ``vvm_worker.level_figures``.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from django.db.models import Q
 from accounts.models import ServiceClass
 from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus, WaitReason
 from missions.waiting import duration_text
-from vvm_worker.service_levels import (
+from vvm_worker.level_figures import (
     NO_CLASS,
     LevelStats,
     ServiceClassSpec,

@@ -17,7 +17,7 @@ from typing import Any
 from django.conf import settings
 from django.core.management.base import BaseCommand, CommandError, CommandParser
 
-from vvm_worker.dry_run import run_copy
+from vvm_worker.dry_run_copy import run_copy
 from vvm_worker.fresh_database import prepare_database
 
 

@@ -15,13 +15,13 @@ from typing import Any
 from django.conf import settings
 from django.core.management.base import BaseCommand, CommandParser
 
+from vvm_worker.delivery import NOTIFY_QUEUE
 from vvm_worker.management.commands._worker import (
     ensure_broker,
     run_celery,
     stop_celery,
     stop_now,
 )
-from vvm_worker.notify import NOTIFY_QUEUE
 
 
 class Command(BaseCommand):

@@ -1,5 +1,6 @@
-"""Notifications: the interface through which the services say that a VV ended or a task was
-done, and the webhook transport (the signature, the address check, the POST, the back-off).
+"""Delivering notifications: the interface through which the services say that a VV ended or
+a task was done, and the webhook transport (the signature, the address check, the POST, the
+back-off). The database side, what a customer listens for, is services/notifications.py.
 
 No Django here. The services tell a `Notifier` (the VVM's) only about events the VV's customer
 listens for; in the distributed platform `vvm_worker.celery_dispatch.CeleryNotifier` sends one

@@ -1,6 +1,6 @@
-"""Service levels: a customer's class (a p95 target for the time from a task's request to its
-reading, and a weight the planners give its requests), and the figures that show whether the
-fleet keeps it.
+"""Service levels, the figures (pure; the database side is services/service_levels.py): a
+customer's class (a p95 target for the time from a task's request to its reading, and a
+weight the planners give its requests), and the figures that show whether the fleet keeps it.
 
 Pure Python (no Django): the services read tasks from the database and hand their latencies
 here; `simulate` and the benchmark hand theirs from the simulation.
