@@ -15,6 +15,11 @@ server without waiting for their answers, which come back with the next statemen
 unit that is a transaction of its own (``pipelined_transaction``) sends its BEGIN with its
 first statements and its COMMIT with its last writes when no check waits for their answers:
 two round trips fewer than psycopg would make.
+
+Django's parts used here that its documentation does not promise are named in
+``DJANGO_INTERNALS`` (with the signatures this module relies on);
+tests/cpcc_site/test_django_internals.py fails when a Django release changes one of them, and
+``pyproject.toml`` keeps Django within one minor version.
 """
 
 from __future__ import annotations
@@ -30,6 +35,31 @@ from psycopg import IsolationLevel
 from psycopg.pq import TransactionStatus
 
 M = TypeVar("M", bound=models.Model)
+
+# The undocumented parts of Django this module stands on: callables by their dotted path, with
+# the signature it calls them by, and attributes (of a compiled read, a connection, an
+# instance) checked on real objects by the test.
+DJANGO_INTERNALS: dict[str, str] = {
+    "django.db.models.query.get_related_populators": "(klass_info, select, db)",
+    "django.db.models.sql.query.Query.get_compiler": (
+        "(self, using=None, connection=None, elide_empty=True)"
+    ),
+    "django.db.models.sql.compiler.SQLCompiler.as_sql": (
+        "(self, with_limits=True, with_col_aliases=False)"
+    ),
+    "django.db.models.sql.compiler.SQLCompiler.get_converters": "(self, expressions)",
+    "django.db.models.sql.compiler.SQLCompiler.apply_converters": "(self, rows, converters)",
+    "django.db.backends.base.base.BaseDatabaseWrapper.make_cursor": "(self, cursor)",
+    "SQLCompiler.select": "[(column, sql, alias)], a column's .target.attname",
+    "SQLCompiler.klass_info": "{model, select_fields, related_klass_infos}",
+    "SQLCompiler.annotation_col_map": "{name: index}",
+    "Model._state": ".adding, .db",
+    "Options.local_concrete_fields": "the fields with a column of their own",
+    "BaseDatabaseWrapper": (
+        ".atomic_blocks, .savepoint_ids, .needs_rollback, .in_atomic_block, "
+        ".queries_logged, .wrap_database_errors, .ensure_connection()"
+    ),
+}
 
 
 @dataclass(frozen=True)
