@@ -170,8 +170,9 @@ def _load_platform(args: argparse.Namespace) -> Setup:
     from vvm_worker.platform import platform_vvm
     from vvm_worker.scenario import parse_scenario
     from vvm_worker.services import user_set_login
+    from vvm_worker.services.admission import vv_submit
     from vvm_worker.services.scenarios import scenario_apply
-    from vvm_worker.services.vvs import vv_cancel, vv_submit
+    from vvm_worker.services.vvs import vv_cancel
 
     call_command("migrate", verbosity=0, interactive=False)
     call_command("collectstatic", verbosity=0, interactive=False)

@@ -192,18 +192,18 @@ def test_a_crash_after_the_effects_but_before_the_commit_applies_them_once(
 ) -> None:
     vv = vv_submit(customer=customer_a, name="VV", program=CALLBACKS, vvm=platform.vvm)
     task = run_until_task(platform, vv, q=1)
-    original = vv_services._new_tasks
+    original = vv_services.new_tasks_of
 
     def crash(*args, **kwargs):
         raise Crash("database connection lost")
 
-    monkeypatch.setattr(vv_services, "_new_tasks", crash)
+    monkeypatch.setattr(vv_services, "new_tasks_of", crash)
     with pytest.raises(Crash):
         task_complete(task_id=task.pk, readings=[{"sensor": "GPS", "value": 1}], vvm=platform.vvm)
     vv.refresh_from_db()
     assert vv.storage.get(key="calls").value == 1  # rolled back with the step
     assert LogEntry.objects.filter(vv=vv).count() == 1
-    monkeypatch.setattr(vv_services, "_new_tasks", original)
+    monkeypatch.setattr(vv_services, "new_tasks_of", original)
     vv_advance(vv_id=vv.pk, vvm=platform.vvm)
     platform.drain()
     vv.refresh_from_db()

@@ -359,7 +359,7 @@ def test_an_rv_weighs_a_task_routed_to_it_by_its_class_without_reading_it_again(
     # A VV's next task put on an RV's list in a unit of work that holds the VV (read with its
     # customer and class) reaches the RV's plan with the class's weight, read with the VV.
     from vvm_worker.executor import DatabaseStore
-    from vvm_worker.services.vvs import _locked_vv
+    from vvm_worker.services.store import locked_vv
 
     gold = service_class_save(name="gold", p95_s=30.0, weight=2.5)
     customer_class_set(customer=customer_a, service_class=gold, vvm=vvm)
@@ -368,7 +368,7 @@ def test_an_rv_weighs_a_task_routed_to_it_by_its_class_without_reading_it_again(
     assert store.open_tasks() == []
     added = []
     for customer in (customer_a, customer_b):
-        vv = _locked_vv(vv_submit(customer=customer, name="vv", program=PROGRAM, vvm=vvm).pk)
+        vv = locked_vv(vv_submit(customer=customer, name="vv", program=PROGRAM, vvm=vvm).pk)
         task = Task.objects.create(
             vv=vv,
             q=9,

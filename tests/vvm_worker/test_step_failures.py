@@ -106,10 +106,10 @@ def test_a_write_the_database_refuses_after_the_checks_fails_its_vv_and_keeps_it
     # cannot be refused but by a platform bug): one refused all the same, here because the
     # platform got its size wrong, fails the VV as a step that cannot be applied does. The
     # RV's answer to its task is kept; nothing of the step is.
-    from vvm_worker.services import vvs
+    from vvm_worker.services import steps
 
     bad_id = uuid.uuid4()
-    checked = vvs._storable
+    checked = steps._storable
 
     def wrong_size(vv, effects, vvm):
         final, lines = checked(vv, effects, vvm)
@@ -119,7 +119,7 @@ def test_a_write_the_database_refuses_after_the_checks_fails_its_vv_and_keeps_it
                     document.size_bytes = -1
         return final, lines
 
-    monkeypatch.setattr(vvs, "_storable", wrong_size)
+    monkeypatch.setattr(steps, "_storable", wrong_size)
     bad = vv_submit(
         customer=customer_a, name="bad", program=ONE_TASK, vvm=platform.vvm, vv_id=bad_id
     )

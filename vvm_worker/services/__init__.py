@@ -1,8 +1,11 @@
 """Every state change of the platform, one named function each (the VVM's services).
 
-The modules by subject: ``vvs`` (a VV's life), ``routing`` (the vehicle mapper and the
-migrator), ``journal``, ``fleet`` (RVs and ground stations), ``customers`` (tenants, quotas and
-logins) and ``scenarios``. Edges (REST views, pages, admin, Celery tasks, commands) call these
+The modules by subject: ``admission`` (a VV's way in), ``vvs`` (a VV's life: advancing,
+answers, its end), ``steps`` (running a step and applying it), ``store`` (how a VV's unit of
+work reads and writes: the only one with hand-written SQL of the task path), ``routing`` (the
+vehicle mapper and the migrator), ``journal``, ``fleet`` (RVs and ground stations),
+``customers`` (tenants, quotas and logins), ``user_actions`` (what a user does with their own
+VVs) and ``scenarios``. Edges (REST views, pages, admin, Celery tasks, commands) call these
 functions and nothing else that writes. Each changes state in one transaction and then tells
 the dispatcher which host must act next (DESIGN.md section 3). A VV moves through its life like
 this:
@@ -18,8 +21,8 @@ this:
 - ``task_complete`` records the readings an RV took as the answer in the VV's journal and
   resumes the VV on that RV.
 
-What a user does with their own VVs (the REST API and the web pages): ``vv_create_for_user``
-and ``vv_create_copies_for_user`` (N copies at once), ``vvs_submit_many_for_user`` (several
+What a user does with their own VVs (the REST API and the web pages; ``user_actions``):
+``vv_create_for_user`` and ``vv_create_copies_for_user`` (N copies at once), ``vvs_submit_many_for_user`` (several
 programs at once, all or none: ``submissions``), ``vv_update_program_for_user`` (while it is
 queued), ``vv_restart_for_user`` (a new VV with the program of an ended one) and
 ``vv_cancel_for_user``.
@@ -29,7 +32,8 @@ answer a task tell through ``vv_notify``) are used from their module; a user's A
 the accounts' own (``accounts.services``).
 """
 
-from vvm_worker.services.base import VVM, ProgramRejected
+from vvm_worker.services.admission import VVQueueFull, vv_admit_queued, vv_submit
+from vvm_worker.services.base import VVM, ProgramRejected, VVAlreadyEnded
 from vvm_worker.services.customers import (
     CustomerBusy,
     CustomerConfig,
@@ -76,25 +80,23 @@ from vvm_worker.services.submissions import (
     SubmissionsRefused,
     vvs_submit_many_for_user,
 )
-from vvm_worker.services.vvs import (
+from vvm_worker.services.user_actions import (
     MAX_COPIES,
-    MAX_STEPS_PER_ADVANCE,
-    NotACustomer,
-    VVAlreadyEnded,
-    VVNotEnded,
-    VVNotQueued,
-    VVQueueFull,
     copy_names,
-    task_complete,
-    vv_admit_queued,
-    vv_advance,
-    vv_cancel,
     vv_cancel_for_user,
     vv_create_copies_for_user,
     vv_create_for_user,
     vv_restart_for_user,
-    vv_submit,
     vv_update_program_for_user,
+)
+from vvm_worker.services.vvs import (
+    MAX_STEPS_PER_ADVANCE,
+    NotACustomer,
+    VVNotEnded,
+    VVNotQueued,
+    task_complete,
+    vv_advance,
+    vv_cancel,
 )
 
 __all__ = [

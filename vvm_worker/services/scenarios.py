@@ -32,10 +32,10 @@ from vvm_worker.scenario import (
     VVSpec,
     vv_instances,
 )
+from vvm_worker.services.admission import vv_submit
 from vvm_worker.services.base import VVM
 from vvm_worker.services.customers import service_class_save
 from vvm_worker.services.fleet import vehicle_register, vehicle_set_status
-from vvm_worker.services.vvs import vv_submit
 
 
 @dataclass

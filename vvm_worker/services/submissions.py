@@ -11,8 +11,9 @@ from django.db import transaction
 from accounts.models import User
 from missions.models import VirtualVehicle, vv_name_problem
 from vvm_worker.runtime import SyntaxProblem, check_syntax
+from vvm_worker.services.admission import vvs_queue
 from vvm_worker.services.base import VVM, logger
-from vvm_worker.services.vvs import NotACustomer, vvs_queue
+from vvm_worker.services.vvs import NotACustomer
 
 # Submissions one request may hold: a script that queues a whole survey at once (the issue's
 # benchmark submits 200 VVs), small enough that one transaction stays short. The request body
