@@ -7,11 +7,10 @@ from django.http import HttpRequest
 
 from accounts.admin_reports import ServiceLevelsReportMixin
 from accounts.models import ApiToken, Customer, ServiceClass, User, Webhook
-from accounts.services import api_token_revoke
+from accounts.services import api_token_revoke, webhook_delete
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import CustomerConfig, customer_create, customer_update
 from vvm_worker.services.customers import service_class_save
-from vvm_worker.services.notifications import webhook_delete
 
 
 class CustomerUserInline(admin.TabularInline):

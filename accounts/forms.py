@@ -1,6 +1,5 @@
 """The Account pages' forms: a new API token, a new webhook, the e-mails a user wants. The
-services check what matters (accounts/services.py and vvm_worker/services/notifications.py);
-these only read the fields."""
+services check what matters (accounts/services.py); these only read the fields."""
 
 from __future__ import annotations
 

@@ -1,5 +1,8 @@
-"""The accounts' services: every state change of a user's own (their API tokens, made and
-revoked on the Account page and at ``/api/v1/tokens/``), one keyword-only function each.
+"""The accounts' services: every state change of a user's or a customer's own, one
+keyword-only function each: API tokens (made and revoked on the Account page and at
+``/api/v1/tokens/``), webhooks and the e-mails a user chooses (which keep
+``Customer.notify_events``, what ``vvm_worker.services.notifications`` reads to know whether
+anyone listens).
 
 A token is django-rest-knox's (accounts.ApiToken): the key is shown once, when it is made; only
 its digest and its first characters are kept. Revoking one deletes it, which forgets it at once
@@ -10,12 +13,20 @@ working beside them, and its owner may revoke it too.
 
 from __future__ import annotations
 
+import logging
+import secrets
+from collections.abc import Sequence
+
 from django.core.exceptions import ValidationError
+from django.core.validators import EmailValidator
 from django.db import IntegrityError, transaction
 
-from accounts.models import ApiToken, User
+from accounts.models import ApiToken, Customer, NotifyEvent, User, Webhook
 from accounts.selectors import legacy_token_for_user
 from cpcc_site.names import plain_name_problem
+from vvm_worker import delivery
+
+logger = logging.getLogger("cpcc.notify")
 
 # More would be forgotten rather than used; revoking one makes room.
 MAX_TOKENS_PER_USER = 100
@@ -79,3 +90,129 @@ def legacy_token_revoke(*, user: User) -> bool:
         return False
     token.delete()
     return True
+
+
+# Webhooks one customer may have.
+MAX_WEBHOOKS_PER_CUSTOMER = 20
+EVENTS = tuple(NotifyEvent.values)
+
+
+# --- webhooks and e-mails: what the customer's people choose to hear of -----------------------
+
+
+def webhook_create(
+    *, customer: Customer, url: str, events: Sequence[str], allow_private: bool
+) -> Webhook:
+    """Add a webhook: ``url`` hears of ``events`` by a POST signed with a new secret (the
+    returned webhook's ``secret``, to be shown to the customer once).
+
+    Raises ValidationError on ``url`` for a URL that is not http(s), is too long, or whose
+    host does not resolve or (unless ``allow_private``) has an address not on the public
+    internet; one the customer already has (code ``unique``); on ``events`` for none or an
+    unknown one; and when the customer has MAX_WEBHOOKS_PER_CUSTOMER webhooks.
+    """
+    url = url.strip()
+    chosen = _events(events, field="events")
+    if not chosen:
+        raise ValidationError({"events": f"Choose at least one of {', '.join(EVENTS)}."})
+    _check_url(url, allow_private=allow_private)
+    with transaction.atomic():
+        customer = Customer.objects.select_for_update().get(pk=customer.pk)
+        if customer.webhooks.count() >= MAX_WEBHOOKS_PER_CUSTOMER:
+            raise ValidationError(
+                f"You have {MAX_WEBHOOKS_PER_CUSTOMER} webhooks, the most one may have: remove "
+                "one first (a webhook hears of several events)."
+            )
+        if customer.webhooks.filter(url=url).exists():
+            raise ValidationError(
+                {
+                    "url": ValidationError(
+                        "You already have a webhook for this URL: remove it first to change it.",
+                        code="unique",
+                    )
+                }
+            )
+        webhook = Webhook.objects.create(
+            customer=customer, url=url, events=chosen, secret=_new_secret()
+        )
+        _listen(customer)
+    logger.info("webhook added", extra={"customer": customer.slug, "webhook": webhook.pk})
+    return webhook
+
+
+def _new_secret() -> str:
+    return "whsec_" + secrets.token_hex(32)
+
+
+def _check_url(url: str, *, allow_private: bool) -> None:
+    max_length = Webhook._meta.get_field("url").max_length or 2000
+    if len(url) > max_length:
+        raise ValidationError({"url": f"A webhook URL has at most {max_length} characters."})
+    if any(char.isspace() or ord(char) < 32 or ord(char) == 127 for char in url):
+        raise ValidationError(
+            {"url": "A URL has no spaces or control characters (percent-encode them)."}
+        )
+    try:
+        delivery.check_url(url, allow_private=allow_private)
+    except delivery.UnsafeURL as exc:
+        raise ValidationError({"url": str(exc)}) from None
+
+
+def _events(events: Sequence[str], *, field: str) -> list[str]:
+    unknown = [e for e in events if e not in EVENTS]
+    if unknown:
+        raise ValidationError(
+            {
+                field: f"Unknown event(s) {', '.join(map(repr, unknown))}; events: {', '.join(EVENTS)}."
+            }
+        )
+    return [e for e in EVENTS if e in events]  # in the usual order, each once
+
+
+def webhook_delete(*, webhook: Webhook) -> None:
+    """Remove a webhook (one the caller selected for its customer) with its delivery log;
+    attempts under way end unsent."""
+    with transaction.atomic():
+        customer = Customer.objects.select_for_update().get(pk=webhook.customer_id)
+        webhook.delete()
+        _listen(customer)
+
+
+def user_set_email_events(*, user: User, email: str, events: Sequence[str]) -> User:
+    """Set the address a customer's user gets e-mails at and the events it is e-mailed
+    (none: no e-mail). Raises ValidationError on ``email`` for an address that is not one, or
+    is missing while events are chosen; on ``email_events`` for an unknown event."""
+    email = email.strip()
+    chosen = _events(events, field="email_events")
+    if email:
+        try:
+            EmailValidator()(email)
+        except ValidationError:
+            raise ValidationError({"email": f"{email!r} is not an e-mail address."}) from None
+    elif chosen:
+        raise ValidationError({"email": "Give the address the e-mails should go to."})
+    if user.customer_id is None:
+        raise ValidationError("Only a customer's users have VVs to hear about.")
+    with transaction.atomic():
+        customer = Customer.objects.select_for_update().get(pk=user.customer_id)
+        user = User.objects.select_for_update().get(pk=user.pk)
+        user.email = email
+        user.email_events = chosen
+        user.save(update_fields=["email", "email_events"])
+        _listen(customer)
+    return user
+
+
+def _listen(customer: Customer) -> None:
+    """Write which events someone of the customer listens for (its row held by the caller)."""
+    events: set[str] = set()
+    for chosen in Webhook.objects.filter(customer=customer).values_list("events", flat=True):
+        events.update(chosen)
+    users = User.objects.filter(customer=customer, is_active=True).exclude(email="")
+    for chosen in users.values_list("email_events", flat=True):
+        events.update(chosen)
+    listened = [e for e in EVENTS if e in events]
+    if listened != customer.notify_events:
+        # An UPDATE of its own: no audit-log entry, no customer signal (Customer.save).
+        Customer.objects.filter(pk=customer.pk).update(notify_events=listened)
+        customer.notify_events = listened

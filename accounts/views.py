@@ -34,8 +34,10 @@ from accounts.selectors import (
     webhook_get_for_user,
     webhook_list_for_user,
 )
-from accounts.services import api_token_create, api_token_revoke, legacy_token_revoke
-from vvm_worker.services.notifications import (
+from accounts.services import (
+    api_token_create,
+    api_token_revoke,
+    legacy_token_revoke,
     user_set_email_events,
     webhook_create,
     webhook_delete,

@@ -28,8 +28,8 @@ from accounts.selectors import (
     webhook_get_for_user,
     webhook_list_for_user,
 )
+from accounts.services import webhook_create, webhook_delete
 from cpcc_site.api import DetailSerializer, StrictCharField, object_id, refusal
-from vvm_worker.services.notifications import webhook_create, webhook_delete
 
 # An http(s) URL, which the schema says too (the service checks more: that its host resolves,
 # and to which addresses).

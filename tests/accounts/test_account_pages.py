@@ -12,7 +12,7 @@ from rest_framework.authtoken.models import Token
 from rest_framework.test import APIClient
 
 from accounts.models import ApiToken, Customer, Webhook, WebhookDelivery
-from vvm_worker.services.notifications import webhook_create
+from accounts.services import webhook_create
 
 pytestmark = pytest.mark.django_db
 

@@ -8,8 +8,7 @@ from django.urls import reverse
 from rest_framework.test import APIClient
 
 from accounts.models import ApiToken, Customer, Webhook
-from accounts.services import api_token_create
-from vvm_worker.services.notifications import webhook_create
+from accounts.services import api_token_create, webhook_create
 
 pytestmark = pytest.mark.django_db
 

@@ -19,6 +19,7 @@ from django.db import connection, transaction
 from django.test.utils import CaptureQueriesContext
 
 from accounts.models import WebhookDelivery
+from accounts.services import user_set_email_events, webhook_create
 from cpcc_site.celery import app
 from missions.models import VirtualVehicle, VVStatus
 from tests.broker import queued
@@ -26,11 +27,7 @@ from vvm_worker import tasks
 from vvm_worker.celery_dispatch import CeleryNotifier
 from vvm_worker.delivery import NOTIFY_QUEUE, retry_delay_s
 from vvm_worker.services import vv_submit
-from vvm_worker.services.notifications import (
-    user_set_email_events,
-    vv_notify,
-    webhook_create,
-)
+from vvm_worker.services.notifications import vv_notify
 
 pytestmark = pytest.mark.django_db
 

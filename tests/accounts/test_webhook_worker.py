@@ -16,11 +16,11 @@ from collections.abc import Iterator
 import pytest
 
 from accounts.models import WebhookDelivery
+from accounts.services import webhook_create
 from tests.factories import GroundStationFactory
 from tests.polling import wait_until
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import vv_submit
-from vvm_worker.services.notifications import webhook_create
 
 pytestmark = [pytest.mark.django_db(transaction=True, serialized_rollback=True), pytest.mark.slow]
 

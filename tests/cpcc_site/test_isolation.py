@@ -504,10 +504,9 @@ def _finish(side: Side, prefix: str, vvm: Any) -> None:
     """After the flights: the customer's queued VV (submitted now, or the simulation would
     start it), the user's named API token, the customer's webhook (made now, or the flights
     would notify it) with an attempt of its own, and what only its data holds."""
-    from accounts.services import api_token_create
+    from accounts.services import api_token_create, webhook_create
     from vvm_worker.services import vv_submit
     from vvm_worker.services.messages import message_send
-    from vvm_worker.services.notifications import webhook_create
 
     side.queued = vv_submit(
         customer=side.customer,

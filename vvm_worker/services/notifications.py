@@ -13,8 +13,9 @@ The way of an event:
 3. ``webhook_attempt`` POSTs a job's body, signed, records the attempt in the webhook's
    delivery log and says after how long to try again, if at all.
 
-``Customer.notify_events`` is kept by the services here, in the transaction of every change of
-a webhook or of a user's e-mail choice, with the customer's row held.
+``Customer.notify_events`` is kept by the accounts' services (accounts/services.py), in the
+transaction of every change of a webhook or of a user's e-mail choice, with the customer's row
+held.
 """
 
 from __future__ import annotations
@@ -22,18 +23,13 @@ from __future__ import annotations
 import datetime as dt
 import json
 import logging
-import secrets
 import uuid
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 from django.conf import settings
 from django.core import mail
-from django.core.exceptions import ValidationError
-from django.core.validators import EmailValidator
-from django.db import transaction
 
-from accounts.models import Customer, NotifyEvent, User, Webhook, WebhookDelivery
+from accounts.models import NotifyEvent, User, Webhook, WebhookDelivery
 from missions.models import Task, VirtualVehicle, VVStatus
 from vvm_worker import delivery
 from vvm_worker.services.base import VVM
@@ -41,7 +37,6 @@ from vvm_worker.services.base import VVM
 logger = logging.getLogger("cpcc.notify")
 
 EVENTS = tuple(NotifyEvent.values)
-MAX_WEBHOOKS_PER_CUSTOMER = 20
 # The newest attempts kept per webhook: enough to see what went wrong this week.
 DELIVERY_LOG_KEPT = 1_000
 # One namespace for delivery ids: the same event to the same webhook has the same id, however
@@ -68,127 +63,6 @@ def ended_event(status: str) -> str | None:
     if status in (VVStatus.FAILED, VVStatus.KILLED):
         return NotifyEvent.VV_FAILED
     return None
-
-
-# --- the customer's choices -------------------------------------------------------------------
-
-
-def webhook_create(
-    *, customer: Customer, url: str, events: Sequence[str], allow_private: bool
-) -> Webhook:
-    """Add a webhook: ``url`` hears of ``events`` by a POST signed with a new secret (the
-    returned webhook's ``secret``, to be shown to the customer once).
-
-    Raises ValidationError on ``url`` for a URL that is not http(s), is too long, or whose
-    host does not resolve or (unless ``allow_private``) has an address not on the public
-    internet; one the customer already has (code ``unique``); on ``events`` for none or an
-    unknown one; and when the customer has MAX_WEBHOOKS_PER_CUSTOMER webhooks.
-    """
-    url = url.strip()
-    chosen = _events(events, field="events")
-    if not chosen:
-        raise ValidationError({"events": f"Choose at least one of {', '.join(EVENTS)}."})
-    _check_url(url, allow_private=allow_private)
-    with transaction.atomic():
-        customer = Customer.objects.select_for_update().get(pk=customer.pk)
-        if customer.webhooks.count() >= MAX_WEBHOOKS_PER_CUSTOMER:
-            raise ValidationError(
-                f"You have {MAX_WEBHOOKS_PER_CUSTOMER} webhooks, the most one may have: remove "
-                "one first (a webhook hears of several events)."
-            )
-        if customer.webhooks.filter(url=url).exists():
-            raise ValidationError(
-                {
-                    "url": ValidationError(
-                        "You already have a webhook for this URL: remove it first to change it.",
-                        code="unique",
-                    )
-                }
-            )
-        webhook = Webhook.objects.create(
-            customer=customer, url=url, events=chosen, secret=_new_secret()
-        )
-        _listen(customer)
-    logger.info("webhook added", extra={"customer": customer.slug, "webhook": webhook.pk})
-    return webhook
-
-
-def _new_secret() -> str:
-    return "whsec_" + secrets.token_hex(32)
-
-
-def _check_url(url: str, *, allow_private: bool) -> None:
-    max_length = Webhook._meta.get_field("url").max_length or 2000
-    if len(url) > max_length:
-        raise ValidationError({"url": f"A webhook URL has at most {max_length} characters."})
-    if any(char.isspace() or ord(char) < 32 or ord(char) == 127 for char in url):
-        raise ValidationError(
-            {"url": "A URL has no spaces or control characters (percent-encode them)."}
-        )
-    try:
-        delivery.check_url(url, allow_private=allow_private)
-    except delivery.UnsafeURL as exc:
-        raise ValidationError({"url": str(exc)}) from None
-
-
-def _events(events: Sequence[str], *, field: str) -> list[str]:
-    unknown = [e for e in events if e not in EVENTS]
-    if unknown:
-        raise ValidationError(
-            {
-                field: f"Unknown event(s) {', '.join(map(repr, unknown))}; events: {', '.join(EVENTS)}."
-            }
-        )
-    return [e for e in EVENTS if e in events]  # in the usual order, each once
-
-
-def webhook_delete(*, webhook: Webhook) -> None:
-    """Remove a webhook (one the caller selected for its customer) with its delivery log;
-    attempts under way end unsent."""
-    with transaction.atomic():
-        customer = Customer.objects.select_for_update().get(pk=webhook.customer_id)
-        webhook.delete()
-        _listen(customer)
-
-
-def user_set_email_events(*, user: User, email: str, events: Sequence[str]) -> User:
-    """Set the address a customer's user gets e-mails at and the events it is e-mailed
-    (none: no e-mail). Raises ValidationError on ``email`` for an address that is not one, or
-    is missing while events are chosen; on ``email_events`` for an unknown event."""
-    email = email.strip()
-    chosen = _events(events, field="email_events")
-    if email:
-        try:
-            EmailValidator()(email)
-        except ValidationError:
-            raise ValidationError({"email": f"{email!r} is not an e-mail address."}) from None
-    elif chosen:
-        raise ValidationError({"email": "Give the address the e-mails should go to."})
-    if user.customer_id is None:
-        raise ValidationError("Only a customer's users have VVs to hear about.")
-    with transaction.atomic():
-        customer = Customer.objects.select_for_update().get(pk=user.customer_id)
-        user = User.objects.select_for_update().get(pk=user.pk)
-        user.email = email
-        user.email_events = chosen
-        user.save(update_fields=["email", "email_events"])
-        _listen(customer)
-    return user
-
-
-def _listen(customer: Customer) -> None:
-    """Write which events someone of the customer listens for (its row held by the caller)."""
-    events: set[str] = set()
-    for chosen in Webhook.objects.filter(customer=customer).values_list("events", flat=True):
-        events.update(chosen)
-    users = User.objects.filter(customer=customer, is_active=True).exclude(email="")
-    for chosen in users.values_list("email_events", flat=True):
-        events.update(chosen)
-    listened = [e for e in EVENTS if e in events]
-    if listened != customer.notify_events:
-        # An UPDATE of its own: no audit-log entry, no customer signal (Customer.save).
-        Customer.objects.filter(pk=customer.pk).update(notify_events=listened)
-        customer.notify_events = listened
 
 
 # --- 2. the event's fan-out (a worker on the notify queue) -------------------------------------
