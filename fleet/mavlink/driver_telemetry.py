@@ -8,7 +8,6 @@ import math
 from typing import Any
 
 from fleet.geo import Position, distance_m, ground_distance_m, headings_deg, turn_deg
-from fleet.kinematics import from_ground_s, leg_s
 from fleet.mavlink.driver_state import (
     _LANDING_RADIUS_M,
     _ODOMETER_STEP_M,
@@ -233,15 +232,7 @@ class Telemetry(DriverState):
             target = self._reachable(target)
             return self._turn_s(here, target) + self.leg_s(here, target)
         if self.is_landed_at(now_s):
-            spec = self.spec
-            return from_ground_s(
-                here,
-                target,
-                takeoff_alt_m=spec.takeoff_alt_m,
-                speed_mps=spec.max_speed_mps,
-                climb_mps=spec.climb_rate_mps,
-                descent_mps=spec.descent_rate_mps,
-            )
+            return self.spec.from_ground_s(here, target)
         return self.leg_s(here, target)
 
     def time_home_s(self, start: Position) -> float:
@@ -259,14 +250,7 @@ class Telemetry(DriverState):
     def leg_s(self, a: Position, b: Position) -> float:
         """Estimated seconds of a straight leg in the air (or water) from ``a`` to ``b``: up
         at the climb rate, down at the dive rate (the climb rate without one). No turn."""
-        spec = self.spec
-        return leg_s(
-            a,
-            b,
-            speed_mps=spec.max_speed_mps,
-            climb_mps=spec.climb_rate_mps,
-            descent_mps=spec.descent_rate_mps,
-        )
+        return self.spec.leg_s(a, b)
 
     def _turn_s(self, here: Position, target: Position) -> float:
         """A rover's or boat's turn in place towards ``target``, from the heading it last

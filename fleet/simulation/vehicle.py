@@ -99,6 +99,28 @@ class VehicleSpec:
         """Vertical speed going down: the dive rate, else the climb rate."""
         return self.climb_rate_mps if self.dive_rate_mps is None else self.dive_rate_mps
 
+    def leg_s(self, start: Position, end: Position) -> float:
+        """Seconds of a straight leg at this vehicle's rates (``fleet.kinematics.leg_s``)."""
+        return leg_s(
+            start,
+            end,
+            speed_mps=self.max_speed_mps,
+            climb_mps=self.climb_rate_mps,
+            descent_mps=self.descent_rate_mps,
+        )
+
+    def from_ground_s(self, here: Position, target: Position) -> float:
+        """Seconds from the ground at ``here`` to ``target``: the take-off to this vehicle's
+        take-off altitude, then the leg (``fleet.kinematics.from_ground_s``)."""
+        return from_ground_s(
+            here,
+            target,
+            takeoff_alt_m=self.takeoff_alt_m,
+            speed_mps=self.max_speed_mps,
+            climb_mps=self.climb_rate_mps,
+            descent_mps=self.descent_rate_mps,
+        )
+
     @property
     def turning_rate_dps(self) -> float | None:
         """How fast the vehicle turns in place before a leg (None: it turns as it moves, at
@@ -305,15 +327,7 @@ class SimVehicle:
         if self._in_plane:
             seconds += self._turn_s(self._heading_at(now_s), here, target)
         elif self.is_landed_at(now_s) and not self._submerges:
-            spec = self.spec
-            return from_ground_s(
-                here,
-                target,
-                takeoff_alt_m=spec.takeoff_alt_m,
-                speed_mps=spec.max_speed_mps,
-                climb_mps=spec.climb_rate_mps,
-                descent_mps=spec.descent_rate_mps,
-            )
+            return self.spec.from_ground_s(here, target)
         return seconds + self._duration(here, target)
 
     def time_home_s(self, start: Position) -> float:
@@ -435,14 +449,7 @@ class SimVehicle:
     def _duration(self, start: Position, end: Position) -> float:
         """A straight leg's duration (``fleet.kinematics``): cruise at max speed while climbing
         at the climb rate (descending at the dive rate)."""
-        spec = self.spec
-        return leg_s(
-            start,
-            end,
-            speed_mps=spec.max_speed_mps,
-            climb_mps=spec.climb_rate_mps,
-            descent_mps=spec.descent_rate_mps,
-        )
+        return self.spec.leg_s(start, end)
 
     def _reachable(self, target: Position) -> Position:
         """``target`` as the vehicle's kind reaches it; ValueError where it cannot go."""
