@@ -8,6 +8,7 @@ description and the date in docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import platform
@@ -16,13 +17,20 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from fleet.geo import Position
 from fleet.simulation import SensorSpec, render_camera
-from vvm_worker.runtime import Outcome, Runtime, StepInput, answer_task, run_step
+from vvm_worker.runtime import (
+    Outcome,
+    Runtime,
+    StepInput,
+    TaskRequest,
+    answer_task,
+    run_step,
+)
 from vvm_worker.scenario_gen import grid_box, grid_scenario, original_style_program
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,7 +43,7 @@ def program(tasks: int) -> str:
 
 
 def step_input(
-    source: str, journal: list[dict[str, Any]], applied: int, vv_id: str = "bench"
+    source: str, journal: Sequence[Mapping[str, Any] | str], applied: int, vv_id: str = "bench"
 ) -> StepInput:
     return StepInput(
         vv_id=vv_id,
@@ -49,7 +57,7 @@ def step_input(
     )
 
 
-def reading(task: Any) -> dict[str, Any]:
+def reading(task: TaskRequest) -> dict[str, Any]:
     return {"sensor": "GPS", "kind": "gps", "time": "2025-01-01T00:00:00.000Z",
             "position": {"lat": task.lat, "lng": task.lng, "alt": task.alt},
             "lat": task.lat, "lng": task.lng, "alt": task.alt, "satellites": 9, "hdop": 0.8}  # fmt: skip
@@ -130,7 +138,7 @@ def cameras() -> None:
         )
         show(
             f"camera picture 640x480, {view} view (render and PNG encoding)",
-            repeat(lambda s=sensor: render_camera(s, position, 0.0, seed=1), 20),
+            repeat(functools.partial(render_camera, sensor, position, 0.0, seed=1), 20),
         )
 
 
@@ -166,7 +174,7 @@ def main() -> None:
         fixed = step_input(program(n), [json.dumps(e) for e in small], n)
         show(
             f"replay of a {n}-task journal in a new context",
-            repeat(lambda r=fixed: run_step(r), 20, pause_s=0.02),
+            repeat(functools.partial(run_step, fixed), 20, pause_s=0.02),
         )
 
     idle = Runtime(max_contexts=1000)

@@ -31,9 +31,19 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import TypedDict
 
 ROOT = Path(__file__).resolve().parents[1]
 CUSTOMERS = 10
+
+
+class Results(TypedDict):
+    """What the sockets saw: every vehicle state's latency (s), the frames lost at each gap,
+    and per socket the (vehicle, ``t``) pairs it received."""
+
+    latency: list[float]
+    lost: list[int]
+    seen: list[set[tuple[str | int, float]]]
 
 
 def _free_port() -> int:
@@ -61,7 +71,9 @@ def _setup(n_clients: int) -> list[tuple[str, int | None]]:
         user = User.objects.create_user(f"user{n}", password="x", is_staff=staff, customer=customer)
         client = Client()
         client.force_login(user)
-        sessions.append((client.cookies["sessionid"].value, None if staff else customer.pk))
+        sessions.append(
+            (client.cookies["sessionid"].value, None if customer is None else customer.pk)
+        )
     return sessions
 
 
@@ -109,9 +121,7 @@ def _publisher(
     Path(log).write_text(json.dumps(published))
 
 
-async def _client(
-    url: str, session: str, until: float, results: dict[str, list], index: int
-) -> None:
+async def _client(url: str, session: str, until: float, results: Results, index: int) -> None:
     import websockets
 
     latencies, lost_frames, seen = results["latency"], results["lost"], results["seen"]
@@ -125,7 +135,7 @@ async def _client(
         max_size=None,
     ) as ws:
         seq = None
-        mine: set[tuple[int, float]] = set()
+        mine: set[tuple[str | int, float]] = set()
         while time.time() < until:
             try:
                 raw = await asyncio.wait_for(ws.recv(), timeout=max(0.1, until - time.time()))
@@ -144,8 +154,10 @@ async def _client(
         seen[index] = mine
 
 
-def _measure(port: int, sessions: list, seconds: float, warmup: float) -> dict[str, list]:
-    results: dict[str, list] = {"latency": [], "lost": [], "seen": [set()] * len(sessions)}
+def _measure(
+    port: int, sessions: list[tuple[str, int | None]], seconds: float, warmup: float
+) -> Results:
+    results: Results = {"latency": [], "lost": [], "seen": [set()] * len(sessions)}
     until = time.time() + warmup + seconds
 
     async def run() -> None:

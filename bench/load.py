@@ -65,9 +65,10 @@ import statistics
 import sys
 import time
 from collections import Counter, defaultdict
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 from urllib.parse import urlparse
 
 from bench._live import (
@@ -206,7 +207,9 @@ def _load_platform(args: argparse.Namespace) -> Setup:
         user = staff if n % 5 == 0 else customer_users[n % len(customer_users)]
         client = Client()
         client.force_login(user)
-        sessions.append((client.cookies["sessionid"].value, user.customer_id))
+        # customer_id: Django's foreign-key column, which django-stubs types only through its
+        # mypy plugin (not enabled here).
+        sessions.append((client.cookies["sessionid"].value, user.customer_id))  # type: ignore[attr-defined]
     common = set.intersection(*(set(v.sensors) for v in scenario.vehicles))
     sensors = [s for s in PREFERRED_SENSORS if s in common] or sorted(
         s for s in common if "camera" not in s.lower()
@@ -348,7 +351,7 @@ async def _request(
 
 
 async def _customer(
-    run: Run, token: str, index: int, period: float, stop: float, programs: Any
+    run: Run, token: str, index: int, period: float, stop: float, programs: Iterator[str]
 ) -> None:
     """One customer's client: a request on each turn of its schedule (every ``period``
     seconds, or at once when the previous answer came late)."""
@@ -413,7 +416,12 @@ async def _customer(
 
 
 async def _clients(
-    run: Run, tokens: list[tuple[str, str]], n: int, stop: float, programs: Any, progress: Any
+    run: Run,
+    tokens: list[tuple[str, str]],
+    n: int,
+    stop: float,
+    programs: Iterator[str],
+    progress: Callable[[Run], None] | None,
 ) -> None:
     period = n / run.rate
     tasks = [
@@ -770,6 +778,18 @@ def _wait_until_ready(children: Children, setup: Setup, port: int) -> None:
         time.sleep(0.2)
 
 
+class Snapshot(TypedDict):
+    """The counters at one edge of the measurement window."""
+
+    t: float
+    cpu: dict[str, float]  # CPU seconds so far by role
+    self: float  # this process's user + system CPU seconds
+    pg: dict[int, float]  # CPU seconds so far of each backend of the bench's database
+    machine: tuple[int, int]  # (busy, total) jiffies of all cores
+    sessions: int  # database connections made so far
+    backends: int  # connections to the bench's database now
+
+
 @dataclass
 class Figures:
     seconds: float  # between the two snapshots of the counters (about the window)
@@ -804,7 +824,7 @@ def _measure(
 
     redis_port = str(urlparse(args.redis).port or 6379)
     web = "web (daphne)" if args.http == "daphne" else "web (gunicorn)"
-    roles = {
+    roles: dict[str, Callable[[], list[int]]] = {
         web: lambda: _with_descendants(children.pids("web")),
         "Redis server": lambda: pids_of("redis-server", f":{redis_port}"),
         "RV workers": lambda: children.pids("rvworker"),
@@ -813,7 +833,7 @@ def _measure(
     }
     if args.http == "gunicorn":
         roles["map sockets (daphne)"] = lambda: children.pids("ws")
-    edges: list[dict[str, Any]] = []
+    edges: list[Snapshot] = []
 
     def snapshot() -> None:
         sessions, backends = pg_counters()
@@ -831,7 +851,7 @@ def _measure(
 
     rng = random.Random(1)
 
-    def programs() -> Any:
+    def programs() -> Iterator[str]:
         while True:
             yield _program(rng, setup.areas, setup.sensors)
 

@@ -47,9 +47,9 @@ import tempfile
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from bench._live import (
     REQUEST_TIMEOUT_S,
@@ -137,7 +137,9 @@ def _commits(database: str) -> int | None:
         return int(cursor.fetchone()[0])
 
 
-def _idle(seconds: float, cpu_by_role: Any, rvs: int, database: str) -> None:
+def _idle(
+    seconds: float, cpu_by_role: Callable[[], dict[str, float]], rvs: int, database: str
+) -> None:
     """What the workers cost with nothing to do: CPU by role and, with PostgreSQL, commits."""
     cpu, commits = cpu_by_role(), _commits(database)
     time.sleep(seconds)
@@ -343,6 +345,7 @@ def main() -> None:
 
     env = {**os.environ, "REDIS_URL": redis_url}
     children: list[subprocess.Popen[bytes]] = []
+    role_of: dict[int, str] = {}  # a child's pid: its role
     logs = []
     posts: list[Post] = []
     speed_before = machine_speed_s()
@@ -364,6 +367,7 @@ def main() -> None:
             pass_fds=pass_fds,
         )
         children.append(child)
+        role_of[child.pid] = command[1] if command[0] == "manage.py" else "web (daphne)"
         return child
 
     # The workers as in production: DEBUG off (Django then keeps no statement log).
@@ -376,7 +380,7 @@ def main() -> None:
         processes that have exited, such as a connection's backend, no longer count)."""
         spent = {role: sum(cpu_s(p) for p in pids_of(*what)) for role, what in servers.items()}
         for child in children:
-            role = child.args[2] if child.args[1] == "manage.py" else "web (daphne)"
+            role = role_of[child.pid]
             own = [child.pid, *children_of(child.pid)]  # an RV worker's planner process too
             spent[role] = spent.get(role, 0.0) + sum(cpu_s(pid) for pid in own)
         spent["this benchmark"] = time.process_time()
@@ -393,10 +397,10 @@ def main() -> None:
         rv_names = list(loaded.vehicles)
         for first in range(0, len(rv_names), args.group):
             group = rv_names[first : first + args.group]
-            station = ["--station", stations[0]] if args.station_in_group and not first else []
+            station_flag = ["--station", stations[0]] if args.station_in_group and not first else []
             start(
                 f"rvworker-{group[0]}",
-                ["manage.py", "rvworker", *group, *station],
+                ["manage.py", "rvworker", *group, *station_flag],
                 extra_env=worker_env,
             )
         workers = len(children)
@@ -559,4 +563,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

@@ -22,6 +22,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -81,7 +82,7 @@ def main() -> None:
 
     use_fresh_database(Path(tmp))
     count: collections.Counter[str] = collections.Counter()
-    spent: collections.Counter[str] = collections.Counter()
+    spent: collections.defaultdict[str, float] = collections.defaultdict(float)
     sites: collections.Counter[str] = collections.Counter()
 
     def measure(execute: Any, sql: str, params: Any, many: bool, context: Any) -> Any:
@@ -131,8 +132,8 @@ def main() -> None:
 
 def _project_frames(depth: int = 3) -> str:
     """The innermost project functions on the stack (file:function), innermost first."""
-    frames = []
-    frame = sys._getframe(2)
+    frames: list[str] = []
+    frame: FrameType | None = sys._getframe(2)
     while frame is not None and len(frames) < depth:
         name = frame.f_code.co_filename
         if name.startswith(str(ROOT)) and "/.venv/" not in name and "/bench/" not in name:

@@ -77,7 +77,9 @@ def _setup(database: str) -> list[str]:
     return tokens
 
 
-def _burst(url: str, tokens: list[str], clients: int, count: int, offset: int):
+def _burst(
+    url: str, tokens: list[str], clients: int, count: int, offset: int
+) -> list[tuple[int, int | str, float]]:
     import requests
 
     def client(c: int) -> list[tuple[int, int | str, float]]:
@@ -87,8 +89,9 @@ def _burst(url: str, tokens: list[str], clients: int, count: int, offset: int):
         for n in range(offset + c, offset + count, clients):
             started = time.perf_counter()
             try:
-                status: int | str = api.post(f"{url}/api/v1/vvs/", json=_body(n), timeout=60)
-                status = status.status_code  # type: ignore[union-attr]
+                status: int | str = api.post(
+                    f"{url}/api/v1/vvs/", json=_body(n), timeout=60
+                ).status_code
             except requests.RequestException as exc:
                 status = type(exc).__name__
             out.append((n, status, time.perf_counter() - started))

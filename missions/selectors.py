@@ -10,12 +10,11 @@ import uuid
 from collections.abc import Sequence
 from typing import Any, TypeVar
 
-from django.db import connection
 from django.db.models import Count, F, Model, Q, QuerySet, TextField, Window
 from django.db.models.functions import Cast, RowNumber
 
 from accounts.models import User
-from cpcc_site.prepared import PreparedPages, PreparedRead
+from cpcc_site.prepared import Many, PreparedPages, PreparedRead
 from fleet.models import GroundStation, Vehicle, VehicleStatus
 from missions.events import event_for, migration_event, task_event, vv_event
 from missions.models import (
@@ -135,26 +134,29 @@ def with_task_counts(vvs: Sequence[VirtualVehicle]) -> Sequence[VirtualVehicle]:
     return vvs
 
 
+# The tasks done and open of some VVs: a read of every list of VVs, compiled once for each
+# number of VVs.
+_TASK_COUNTS = PreparedRead(
+    lambda vv_ids: (
+        Task.objects.filter(vv_id__in=vv_ids)
+        .order_by()
+        .values("vv_id")
+        .annotate(
+            done=Count("pk", filter=Q(status=TaskStatus.DONE)),
+            open=Count("pk", filter=Q(status=TaskStatus.OPEN)),
+        )
+        .values_list("vv_id", "done", "open")
+    ),
+    samples=[("vv", Many(lambda i: uuid.UUID(int=7_000_000 + i)))],
+)
+
+
 def task_counts(*, vv_ids: Sequence[uuid.UUID]) -> dict[uuid.UUID, tuple[int, int]]:
     """The tasks done and open of each of these VVs (none: not in the answer), counted in one
-    statement written once (not compiled by the ORM at every request)."""
+    statement."""
     if not vv_ids:
         return {}
-    quote = connection.ops.quote_name
-    status, vv = Task._meta.get_field("status").column, Task._meta.get_field("vv").column
-    sql = (
-        f"SELECT {quote(vv)}, COUNT(*) FILTER (WHERE {quote(status)} = %s),"
-        f" COUNT(*) FILTER (WHERE {quote(status)} = %s)"
-        f" FROM {quote(Task._meta.db_table)}"
-        f" WHERE {quote(vv)} IN ({', '.join(['%s'] * len(vv_ids))}) GROUP BY {quote(vv)}"
-    )
-    pk = VirtualVehicle._meta.pk
-    keys = [pk.get_db_prep_value(vv_id, connection) for vv_id in vv_ids]  # type: ignore[union-attr]
-    with connection.cursor() as cursor:
-        cursor.execute(sql, [TaskStatus.DONE.value, TaskStatus.OPEN.value, *keys])
-        rows = cursor.fetchall()
-    to_python = pk.to_python  # type: ignore[union-attr]
-    return {to_python(key): (int(done), int(open_)) for key, done, open_ in rows}
+    return {vv_id: (done, open_) for vv_id, done, open_ in _TASK_COUNTS.rows(list(vv_ids))}
 
 
 # The read of every API request about one VV (``vv_get_for_user``), compiled once: staff's,

@@ -11,8 +11,6 @@ from typing import Any
 from django.db import transaction
 
 from cpcc_site.celery import app
-from cpcc_site.prepared import PreparedRead
-from missions.models import VirtualVehicle
 from missions.selectors import customer_has_queued_vv
 from vvm_worker.delivery import NOTIFY_QUEUE, NOTIFY_TASK
 from vvm_worker.dispatch import (
@@ -25,14 +23,9 @@ from vvm_worker.dispatch import (
     gs_queue,
     rv_queue,
 )
+from vvm_worker.services.store import vv_hosts
 
 logger = logging.getLogger("cpcc.dispatch")
-
-# Where a VV is, read after the commit that moved it (SQL written once: one read a message).
-_HOSTS = PreparedRead(
-    lambda vv_id: VirtualVehicle.objects.filter(pk=vv_id).values_list("host_gs_id", "host_rv_id"),
-    samples=[("pk", uuid.UUID(int=0))],
-)
 
 
 class CeleryDispatcher:
@@ -71,10 +64,10 @@ class CeleryDispatcher:
         # otherwise. (The read, right after that commit, says the same but for a move
         # committed in between, which sends a message of its own.)
         if on is None:
-            hosts = _HOSTS.rows(vv_id)
-            if not hosts:
+            hosts = vv_hosts(vv_id)
+            if hosts is None:
                 return
-            ((gs_id, rv_id),) = hosts
+            gs_id, rv_id = hosts
         else:
             gs_id, rv_id = on.gs_id, on.rv_id
         local = self.local

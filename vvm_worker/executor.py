@@ -20,7 +20,6 @@ from django.db import transaction
 from django.db.models import F
 
 from accounts.models import Customer
-from cpcc_site.prepared import PreparedRead
 from fleet.airspace import Airspace
 from fleet.driving import Driver, Sample, SensorFailure, SensorRead
 from fleet.geo import Position, within_m
@@ -31,7 +30,7 @@ from fleet.plugins import SensorPlugin, plugin_class
 from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
 from fleet.sources import FIELD, PLUGIN, SensorSource, source_for
-from missions.models import ACTIVE_STATUSES, Task, TaskStatus, VirtualVehicle
+from missions.models import ACTIVE_STATUSES, Task, VirtualVehicle
 from vvm_worker.control import (
     REACH_SLACK_M,
     Area,
@@ -55,23 +54,12 @@ from vvm_worker.services import (
 )
 from vvm_worker.services.base import LocalRV, Settled
 from vvm_worker.services.routing import fleet_airspace, planned_order
+from vvm_worker.services.store import vehicle_tasks
 from vvm_worker.services.waiting import vvs_record_next_task_eta
 
 _SDC_TTL_S = 10.0
 # An estimate of when an RV reaches a VV's task is written again when it moves by more.
 ESTIMATE_SLACK_S = 1.0
-_TASK_FIELDS = ("id", "lat", "lng", "alt", "tolerance_m", "requested_s", "sensors", "vv_id", "q")
-# The weight the planner gives a task: its customer's service class's, read with the task.
-_WEIGHT = "vv__customer__service_class__weight"
-# An RV's open tasks, oldest request first (read again whenever they may have changed).
-_OPEN_TASKS = PreparedRead(
-    lambda vehicle_id: (
-        Task.objects.filter(vehicle_id=vehicle_id, status=TaskStatus.OPEN)
-        .order_by("requested_s", "id")
-        .values_list(*_TASK_FIELDS, _WEIGHT)
-    ),
-    samples=[("vehicle", -7_654_321)],
-)
 
 
 def _loop_task(task: Task, weight: float) -> LoopTask:
@@ -207,7 +195,7 @@ class DatabaseStore:
                     weight=1.0 if weight is None else weight,
                 )
                 for pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q, weight in (
-                    _OPEN_TASKS.rows(self.vehicle_id)
+                    vehicle_tasks(self.vehicle_id)
                 )
             ]
             self._weights.update((t.vv, t.weight) for t in self._tasks)

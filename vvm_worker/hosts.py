@@ -64,8 +64,8 @@ from vvm_worker.services import (
     vv_advance,
     vvs_reroute_waiting,
 )
-from vvm_worker.services.base import db_time_ago
 from vvm_worker.services.routing import fleet_airspace, online_vehicles
+from vvm_worker.services.store import db_time_ago
 
 logger = logging.getLogger("cpcc.hosts")
 

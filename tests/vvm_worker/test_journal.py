@@ -8,7 +8,8 @@ from django.db import transaction
 from cpcc_site.prepared import pipelined
 from missions.models import VirtualVehicle
 from vvm_worker.services import vv_submit
-from vvm_worker.services.journal import JournalView, journal_append, jsonb_text
+from vvm_worker.services.journal import JournalView, journal_append
+from vvm_worker.services.store import jsonb_text
 
 # Answers as sensors and programs make them: keys of every length and alphabet, numbers that
 # JSON writes with an exponent, negative zero, text with control characters and beyond ASCII.

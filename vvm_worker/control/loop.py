@@ -92,6 +92,12 @@ class ControlLoop(Planning):
         # The end of the leg is on the track of the VVs aboard, before any of them leaves, and
         # the store says the vehicle is here: a VV migrating off it now records this position.
         self._record(now)
+        self._serve_here(now)
+        self._plan(now)
+
+    def _serve_here(self, now: float) -> None:
+        """Read the sensors for every open task within reach of where the vehicle is, and
+        answer each (with its readings, or with why they failed)."""
         here = self.driver.position_at(now)
         served = [
             t
@@ -115,7 +121,6 @@ class ControlLoop(Planning):
                 self.store.fail(task, failure.reason, now)
             else:
                 self.store.complete(task, readings, now)
-        self._plan(now)
 
     def _landed(self, token: int, due_s: float) -> None:
         if token != self._token:

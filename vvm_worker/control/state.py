@@ -63,6 +63,16 @@ class LoopState:
         self.on_estimates = on_estimates
         # Endurance kept for the unexpected: never planned away (seconds of flight).
         self.reserve_s = config.reserve * config.battery_s if config.battery_s else 0.0
+        self.plan_timer = plan_timer
+        # Where a retargeting planner's plans are made (None: here, at once; see PlanElsewhere)
+        # and which request is the latest: an answer to an older one is dropped.
+        self.plan_elsewhere = plan_elsewhere if planner.retargets else None
+        self._plan_request = 0
+        self._start_on_the_ground()
+        self._start_the_view()
+
+    def _start_on_the_ground(self) -> None:
+        """The flight's state as a loop starts: no leg, no target, no command."""
         self.standby_until: float | None = None  # waiting in the air for work until then
         self.recent_alts: list[float] = []
         self._charged_at: float | None = None  # when a charge under way is done
@@ -80,6 +90,9 @@ class LoopState:
         self._landing_due: float | None = None
         self.command: OperatorCommand | None = None  # the operator's last, as obeyed
         self._token = 0  # invalidates the arrival of a leg that was replaced
+
+    def _start_the_view(self) -> None:
+        """What the live map and the benchmarks see of a loop that has not planned yet."""
         # What the live map shows between two plans: the status and the open tasks in the
         # order the vehicle means to serve them.
         self.status = ACTIVE
@@ -88,12 +101,7 @@ class LoopState:
         self._changes = 0  # changes announced by `changed`
         self._planned_at_change = 0  # how many of them the last plan had seen
         # Wall time of each planner call, when `plan_timer` is given (the arena's sweeps).
-        self.plan_timer = plan_timer
         self.planning_s: list[float] = []
-        # Where a retargeting planner's plans are made (None: here, at once; see PlanElsewhere)
-        # and which request is the latest: an answer to an older one is dropped.
-        self.plan_elsewhere = plan_elsewhere if planner.retargets else None
-        self._plan_request = 0
 
     def _log(self) -> dict[str, Any]:
         return {"vehicle": self.name}

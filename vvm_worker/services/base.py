@@ -12,10 +12,9 @@ from typing import Any, Protocol
 
 from django.core.exceptions import ValidationError
 from django.db import transaction
-from django.db.models import Count, DateTimeField, ExpressionWrapper, OuterRef, Subquery
-from django.db.models.functions import Coalesce, Now
+from django.db.models import Count, OuterRef, Subquery
+from django.db.models.functions import Coalesce
 
-from cpcc_site.prepared import PreparedRead
 from fleet.geo import Position, distance_m
 from fleet.models import GroundStation, SensorType
 from fleet.selectors import UnknownSensors, sensors_by_name
@@ -32,6 +31,7 @@ from vvm_worker.runtime import (
     Runtime,
     SyntaxProblem,
 )
+from vvm_worker.services.store import ground_stations
 
 logger = logging.getLogger("cpcc.vvm")
 
@@ -162,15 +162,11 @@ class ProgramRejected(ValueError):
         self.problem = problem
 
 
-# Every ground station (SQL written once: read for every VV that ends on an RV).
-_STATIONS = PreparedRead(lambda: GroundStation.objects.all(), samples=[])
-
-
 def ground_station_for(vv: VirtualVehicle, near: Position | None = None) -> GroundStation | None:
     """The ground station for a VV: the nearest to ``near`` (an RV it leaves), else the one
     with the fewest VVs; None when there is none."""
     if near is not None:
-        stations = _STATIONS.all()
+        stations = ground_stations()
         if not stations:
             return None
         return min(stations, key=lambda gs: (distance_m(near, gs.position), gs.name))
@@ -207,12 +203,6 @@ def customer_named(vv: VirtualVehicle) -> str:
     if VirtualVehicle.customer.is_cached(vv):
         return vv.customer.slug
     return f"#{vv.customer_id}"
-
-
-def db_time_ago(seconds: float) -> ExpressionWrapper:
-    """That long ago by the database's clock: the same for every worker, whatever its own
-    clock says (leases, sweeps)."""
-    return ExpressionWrapper(Now() - dt.timedelta(seconds=seconds), output_field=DateTimeField())
 
 
 def as_datetime(vvm: VVM, t_s: float) -> dt.datetime:

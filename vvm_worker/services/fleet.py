@@ -3,18 +3,16 @@ service, their workers' leases and live state, and what each change means for th
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import time
 from collections.abc import Sequence
 from typing import Any, TypedDict
 
 from django.core.exceptions import ValidationError
-from django.db import connection, transaction
+from django.db import transaction
 from django.db.models.functions import Now
 from django.utils import timezone
 
-from cpcc_site.prepared import deferred, update_row, update_row_with
 from fleet.geo import Position
 from fleet.models import (
     GroundStation,
@@ -31,7 +29,6 @@ from missions.models import (
     ENDED_STATUSES,
     Task,
     TaskStatus,
-    TrackPoint,
     VirtualVehicle,
     VVStatus,
 )
@@ -46,6 +43,7 @@ from vvm_worker.services.routing import (
     vv_record_migration,
     vv_release_tasks,
 )
+from vvm_worker.services.store import track_points_aboard, vehicle_report
 
 # Changing any of these may leave tasks planned on the RV that it can no longer serve.
 REACH_FIELDS = ("area", "min_altitude_m", "max_altitude_m")
@@ -496,43 +494,8 @@ def vehicle_record_state(
         "planner_state": state.planner_state,
     }
     add = {"tasks_done": tasks_done} if tasks_done else None
-    if not track_aboard:
-        with deferred():
-            update_row(Vehicle, vehicle_id, values=values, add=add)
-        return
-    # One commit for the track points and the row (a lone UPDATE commits by itself); on
-    # PostgreSQL one statement.
-    alone = connection.get_autocommit()
-    with transaction.atomic() if alone else contextlib.nullcontext(), deferred():
-        track = _track_points_statement(vehicle_id, [(state.t_s, here)])
-        update_row_with(Vehicle, vehicle_id, values=values, add=add, write=track)
-
-
-def _track_points_aboard(vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:
-    """Track points (time, position) for every VV aboard the RV now: one INSERT ... SELECT."""
-    sql, params = _track_points_statement(vehicle_id, points)
-    with connection.cursor() as cursor:
-        cursor.execute(sql, params)
-
-
-def _track_points_statement(
-    vehicle_id: int, points: Sequence[tuple[float, Position]]
-) -> tuple[str, list[Any]]:
-    """``_track_points_aboard``'s statement and its parameters."""
-    track, vvs = TrackPoint._meta.db_table, VirtualVehicle._meta.db_table
-    statuses = [str(status) for status in ACTIVE_STATUSES]
-    marks = ", ".join(["%s"] * len(statuses))
-    rows = " UNION ALL ".join(
-        ['SELECT %s AS "t_s", %s AS "lat", %s AS "lng", %s AS "alt"'] * len(points)
-    )
-    values = [v for t_s, p in points for v in (t_s, p.lat, p.lng, p.alt)]
-    return (
-        f'INSERT INTO "{track}" ("vv_id", "t_s", "lat", "lng", "alt") '
-        f'SELECT v."id", p."t_s", p."lat", p."lng", p."alt" FROM "{vvs}" v, ({rows}) p '
-        f'WHERE v."host_rv_id" = %s AND v."status" IN ({marks}) '
-        'ORDER BY p."t_s", v."submitted_s", v."id"',
-        [*values, vehicle_id, *statuses],
-    )
+    track_point = (state.t_s, here) if track_aboard else None
+    vehicle_report(vehicle_id, values=values, add=add, track_point=track_point)
 
 
 def vehicle_record_track(*, vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:
@@ -540,4 +503,4 @@ def vehicle_record_track(*, vehicle_id: int, points: Sequence[tuple[float, Posit
     legs it flew since it last wrote them, in order. Inside the caller's transaction, which is
     about to change who is aboard."""
     if points:
-        _track_points_aboard(vehicle_id, points)
+        track_points_aboard(vehicle_id, points)

@@ -18,12 +18,12 @@ from typing import Any
 from django.db import transaction
 
 from accounts.models import User
-from cpcc_site.prepared import deferred, insert_rows
 from missions.events import message_event
 from missions.models import ENDED_STATUSES, Message, VirtualVehicle
 from missions.selectors import vv_get_for_user
 from vvm_worker.sensing import iso_time
 from vvm_worker.services.base import VVM, VVAlreadyEnded, customer_named, logger
+from vvm_worker.services.store import rows_add
 from vvm_worker.services.values import Unstorable, check_text, json_value
 
 
@@ -53,6 +53,24 @@ def _recipient(customer_id: int, to: str) -> VirtualVehicle | None:
     return vvs.filter(name=to).order_by("-submitted_s", "-created").first()
 
 
+def _checked_size(value_json: str, max_bytes: int | None) -> int:
+    """The message's size in bytes, once its text is checked to be a JSON value a VV can
+    store, within ``max_bytes`` (None: not checked here). Raises MessageError."""
+    where = "VV.message.send(to, value): the value"
+    try:
+        check_text(value_json, where=where)
+        json_value(value_json, where=where)
+    except Unstorable as exc:
+        raise MessageError(str(exc)) from None
+    size = len(value_json.encode())
+    if max_bytes is not None and size > max_bytes:
+        raise MessageError(
+            f"{where} is {size:,} bytes as JSON, more than the {max_bytes:,} allowed "
+            "(quota: bytes per message)"
+        )
+    return size
+
+
 def message_send(
     *,
     customer_id: int,
@@ -67,18 +85,7 @@ def message_send(
     is woken once this commits, wherever it is (if it waits in ``receive`` it takes the
     message; otherwise it finds it at its next ``receive``). ``max_bytes``: the customer's
     quota of a message's size, when the caller has not checked it. Raises MessageError."""
-    where = "VV.message.send(to, value): the value"
-    try:
-        check_text(value_json, where=where)
-        json_value(value_json, where=where)
-    except Unstorable as exc:
-        raise MessageError(str(exc)) from None
-    size = len(value_json.encode())
-    if max_bytes is not None and size > max_bytes:
-        raise MessageError(
-            f"{where} is {size:,} bytes as JSON, more than the {max_bytes:,} allowed "
-            "(quota: bytes per message)"
-        )
+    size = _checked_size(value_json, max_bytes)
     if isinstance(to, VirtualVehicle):
         recipient: VirtualVehicle | None = to
     else:
@@ -94,8 +101,7 @@ def message_send(
         bytes=size,
         sent_s=vvm.clock.now_s(),
     )
-    with deferred():  # its key is read by the end of the unit of work
-        insert_rows([message])
+    rows_add([message])  # its key is read by the end of the unit of work
     vvm.dispatcher.vv_arrived(recipient.pk)
     if sender is not None:  # (the map draws a line from one VV to the other)
         vvm.announce_at_commit(lambda: [e for e in [message_event(message)] if e is not None])

@@ -5,19 +5,16 @@ from __future__ import annotations
 import contextlib
 import copy
 import dataclasses
-import functools
 import itertools
 import time
-import uuid
 from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
-from django.db.models import BooleanField, Count, ExpressionWrapper, Max, Q, QuerySet
+from django.db.models import Count, Max, QuerySet
 from django.db.models.signals import m2m_changed, post_delete, post_save
 from shapely import STRtree
 from shapely.geometry import Point
 
-from cpcc_site.prepared import Many, PreparedRead, deferred, insert_rows, update_row
 from fleet.airspace import Airspace
 from fleet.geo import Position
 from fleet.models import GroundStation, NoFlyZone, Vehicle, VehicleStatus
@@ -40,13 +37,23 @@ from vvm_worker.runtime import (
 )
 from vvm_worker.services.base import (
     VVM,
+    LocalRV,
     customer_named,
-    db_time_ago,
     ground_station_for,
     logger,
     pending_of,
 )
 from vvm_worker.services.journal import journal_append
+from vvm_worker.services.store import (
+    db_time_ago,
+    open_tasks_of_vehicles,
+    request_tasks_of,
+    rows_add,
+    tasks_assigned,
+    vehicle_statuses,
+    vehicle_statuses_later,
+    vehicles_in_fleet,
+)
 from vvm_worker.services.waiting import vv_wait_end, vv_wait_start
 
 
@@ -211,13 +218,52 @@ def fleet_caps_and_rows(
     known = {
         pk: live for pk in wanted if local and (live := local.live(pk, route=ranked)) is not None
     }
-    rows: dict[int, Vehicle] = {}
-    routes: dict[int, tuple[Position, ...]] = {}
-    online: dict[int, bool] = {}
+    found = _rows_hosted_here(vvm, known, shape)
+    found.add(_rows_hosted_elsewhere(vvm, sorted(wanted - set(known)), ranked=ranked))
+    caps = []
+    for pk, static in shape.caps.items():
+        vehicle = found.rows.get(pk)
+        if vehicle is None:
+            continue
+        reported = vehicle.lat is not None and vehicle.lng is not None
+        route = found.routes.get(pk, ())
+        caps.append(
+            dataclasses.replace(
+                static,
+                active=vehicle.status == VehicleStatus.ACTIVE and found.online[pk],
+                position=vehicle.position if reported else static.position,
+                open_tasks=len(route),
+                route=route,
+            )
+        )
+    return caps, found.rows
+
+
+@dataclasses.dataclass
+class _FleetRows:
+    """Some RVs as routing sees them: their rows, their routes, whether their worker is
+    online (by id)."""
+
+    rows: dict[int, Vehicle] = dataclasses.field(default_factory=dict)
+    routes: dict[int, tuple[Position, ...]] = dataclasses.field(default_factory=dict)
+    online: dict[int, bool] = dataclasses.field(default_factory=dict)
+
+    def add(self, other: _FleetRows) -> None:
+        self.rows.update(other.rows)
+        self.routes.update(other.routes)
+        self.online.update(other.online)
+
+
+def _rows_hosted_here(vvm: VVM, known: dict[int, LocalRV], shape: _FleetShape) -> _FleetRows:
+    """The RVs this process hosts (``known``: what their loops know), their rows as the
+    fleet's shape has them with the loops' positions and statuses (a status a loop does not
+    know is read: ahead, when the unit of work sent that read); their worker is this process.
+    A removed RV is left out."""
     unsure = sorted(pk for pk, live in known.items() if live.status is None)
     statuses = vvm.statuses_ahead() if unsure and vvm.statuses_ahead is not None else {}
     if any(pk not in statuses for pk in unsure):
-        statuses = dict(_STATUSES.rows(unsure))
+        statuses = dict(vehicle_statuses(unsure))
+    found = _FleetRows()
     for pk, live in known.items():
         status = live.status if live.status is not None else statuses.get(pk)
         if status is None or status == VehicleStatus.REMOVED or pk not in shape.rows:
@@ -226,39 +272,24 @@ def fleet_caps_and_rows(
         row._state = copy.copy(row._state)
         row.status = status
         row.lat, row.lng, row.alt = live.position.lat, live.position.lng, live.position.alt
-        rows[pk], routes[pk], online[pk] = row, live.route, True  # its worker is this process
-    remote = sorted(wanted - set(known))
-    if remote:
-        read = {v.pk: v for v in _remote_read(vvm.lease_s).all(remote)}
-        if ranked:
-            routes.update(planned_routes({pk: v.planner_state for pk, v in read.items()})[0])
-        for pk, vehicle in read.items():
-            rows[pk] = vehicle
-            online[pk] = vvm.lease_s is None or bool(getattr(vehicle, "online", False))
-    caps = []
-    for pk, static in shape.caps.items():
-        vehicle = rows.get(pk)
-        if vehicle is None:
-            continue
-        reported = vehicle.lat is not None and vehicle.lng is not None
-        route = routes.get(pk, ())
-        caps.append(
-            dataclasses.replace(
-                static,
-                active=vehicle.status == VehicleStatus.ACTIVE and online[pk],
-                position=vehicle.position if reported else static.position,
-                open_tasks=len(route),
-                route=route,
-            )
-        )
-    return caps, rows
+        found.rows[pk], found.routes[pk], found.online[pk] = row, live.route, True
+    return found
 
 
-# The statuses of some RVs (of this process, when their loops do not know theirs).
-_STATUSES = PreparedRead(
-    lambda vehicle_ids: Vehicle.objects.filter(pk__in=vehicle_ids).values_list("pk", "status"),
-    samples=[("pk", Many(lambda i: -7_000_000 - i))],
-)
+def _rows_hosted_elsewhere(vvm: VVM, vehicle_ids: list[int], *, ranked: bool) -> _FleetRows:
+    """These RVs as read (the removed left out), with their planned routes when ``ranked``,
+    online when their worker renewed its lease in time (always, without leases)."""
+    found = _FleetRows()
+    if not vehicle_ids:
+        return found
+    found.rows = {v.pk: v for v in vehicles_in_fleet(vehicle_ids, lease_s=vvm.lease_s)}
+    if ranked:
+        found.routes = planned_routes({pk: v.planner_state for pk, v in found.rows.items()})[0]
+    found.online = {
+        pk: vvm.lease_s is None or bool(getattr(vehicle, "online", False))
+        for pk, vehicle in found.rows.items()
+    }
+    return found
 
 
 @contextlib.contextmanager
@@ -272,7 +303,7 @@ def rv_statuses_read_ahead(*, vvm: VVM) -> Iterator[None]:
     if not vvm.local_rvs or vvm.statuses_ahead is not None:
         yield
         return
-    read = _STATUSES.rows_later(sorted(vvm.local_rvs))
+    read = vehicle_statuses_later(sorted(vvm.local_rvs))
     read_once: dict[int, str] | None = None
 
     def statuses() -> dict[int, str]:
@@ -289,46 +320,13 @@ def rv_statuses_read_ahead(*, vvm: VVM) -> Iterator[None]:
         vvm.statuses_ahead = None
 
 
-# A VV's open tasks of one request, by index (a VV that arrives with its request made).
-_REQUEST_TASKS = PreparedRead(
-    lambda vv_id, q: Task.objects.filter(vv_id=vv_id, q=q, status=TaskStatus.OPEN).order_by(
-        "index"
-    ),
-    samples=[("vv", uuid.UUID(int=0)), ("q", 7_654_321)],
-)
-
-# The open tasks of some RVs, oldest first, and the rows of RVs another process hosts (with
-# ``online``: whose worker renewed its lease within lease_s, by the database's clock): reads
-# of every routing, compiled once for each number of RVs.
-_ROUTES = PreparedRead(
-    lambda vehicle_ids: (
-        Task.objects.filter(status=TaskStatus.OPEN, vehicle_id__in=vehicle_ids)
-        .order_by("requested_s", "id")
-        .values_list("pk", "vehicle_id", "lat", "lng", "alt")
-    ),
-    samples=[("vehicle", Many(lambda i: -7_000_000 - i))],
-)
-
-
-@functools.cache
-def _remote_read(lease_s: float | None) -> PreparedRead[Vehicle]:
-    def build(ids: list[int]) -> QuerySet[Vehicle]:
-        vehicles = Vehicle.objects.filter(pk__in=ids).exclude(status=VehicleStatus.REMOVED)
-        if lease_s is None:
-            return vehicles
-        online = Q(worker_seen__gte=db_time_ago(lease_s))
-        return vehicles.annotate(online=ExpressionWrapper(online, output_field=BooleanField()))
-
-    return PreparedRead(build, samples=[("pk", Many(lambda i: -7_000_000 - i))])
-
-
 def planned_routes(
     plans: dict[int, Any],
 ) -> tuple[dict[int, tuple[Position, ...]], dict[int, int]]:
     """The open tasks of these RVs (id -> the planner state it saved), in the order its planner
     last meant to serve them (tasks the plan does not know yet come last, oldest first), and
     how many each has."""
-    rows = _ROUTES.rows(sorted(plans)) if plans else []
+    rows = open_tasks_of_vehicles(sorted(plans))
     tasks: dict[int, list[tuple[int, Position]]] = {}
     for pk, vehicle_id, lat, lng, alt in rows:
         tasks.setdefault(vehicle_id, []).append((pk, Position(lat, lng, alt)))
@@ -382,25 +380,14 @@ def _route(
     pending = pending_of(vv)
     assert pending is not None
     if open_tasks is None:
-        open_tasks = _REQUEST_TASKS.all(vv.pk, pending.q)
-    host = vv.host_rv
-    mine: list[Task] = []
+        open_tasks = request_tasks_of(vv.pk, pending.q)
     shape = _fleet_shape()
-    if host is not None and host.status == VehicleStatus.ACTIVE:
-        # The common case needs no look at the rest of the fleet: the RV aboard can go on, and
-        # no other RV's area overlaps its own. (Its area, altitudes and sensors are the
-        # shape's, of the version just read.)
-        caps = shape.caps.get(host.pk) or dataclasses.replace(
-            vehicle_caps(host), no_fly=shape.airspace.zones
-        )
-        mine = _servable(caps, open_tasks)
-        if mine and not shape.overlaps.get(host.pk):
-            tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
-            return False, None
-        if not mine and any(t.vehicle_id == host.pk for t in open_tasks):
-            return False, None
+    stays, mine = _stays_aboard_alone(vv, open_tasks, shape, vvm)
+    if stays:
+        return False, None
     fleet, rows = fleet_caps_and_rows(vvm, [request_of(t) for t in open_tasks], shape)
     decisions = [map_task(request_of(t), fleet) for t in open_tasks]
+    host = vv.host_rv
     if host is not None and mine and _stays(host, open_tasks, mine, fleet, decisions):
         tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
         return False, None
@@ -414,20 +401,9 @@ def _route(
             return False, None
         vv_reject_request(vv=vv, pending=pending, rejected=rejected, open_tasks=open_tasks, vvm=vvm)
         return True, None
-
     best = _best_vehicle(open_tasks, decisions)
     if best is not None:
-        vehicle = rows[best.id]
-        vv_release_tasks(vv=vv, vvm=vvm, open_tasks=open_tasks)
-        vv_record_migration(vv=vv, to=vehicle, reason="its next task", vvm=vvm)
-        if vvm.keeps_context(vehicle.pk):
-            # The RV's host runs in this process: the VV is there at once, its tasks on the
-            # RV's list (what the RV's host would do with it next, without a message).
-            vv.status = VVStatus.RUNNING
-            tasks_assign(tasks=_servable(best, open_tasks), vehicle=vehicle, vvm=vvm)
-            return False, None
-        vv.status = VVStatus.MIGRATING
-        vvm.dispatcher.vv_arrived(vv.id, on=HostRef(rv_id=vehicle.pk))
+        _move_to(vv, rows[best.id], _servable(best, open_tasks), open_tasks, vvm)
         return False, None
     # Only RVs in maintenance could serve it: park on a ground station until one returns.
     if vv.host_rv is not None:
@@ -435,6 +411,43 @@ def _route(
             vv=vv, reason="waiting for a vehicle", vvm=vvm, open_tasks=open_tasks
         )
     return False, next((t for t, d in zip(open_tasks, decisions, strict=True) if d.parked), None)
+
+
+def _stays_aboard_alone(
+    vv: VirtualVehicle, open_tasks: Sequence[Task], shape: _FleetShape, vvm: VVM
+) -> tuple[bool, list[Task]]:
+    """The common case, which needs no look at the rest of the fleet: the RV aboard is in
+    service and can serve the tasks (``mine``: those it can), and no other RV's area overlaps
+    its own, so they go on its list; or it serves none of them but has them on its list
+    already. Gives back whether the VV stays so, and ``mine``. (The RV's area, altitudes and
+    sensors are the shape's, of the version just read.)"""
+    host = vv.host_rv
+    if host is None or host.status != VehicleStatus.ACTIVE:
+        return False, []
+    caps = shape.caps.get(host.pk) or dataclasses.replace(
+        vehicle_caps(host), no_fly=shape.airspace.zones
+    )
+    mine = _servable(caps, open_tasks)
+    if mine and not shape.overlaps.get(host.pk):
+        tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
+        return True, mine
+    return not mine and any(t.vehicle_id == host.pk for t in open_tasks), mine
+
+
+def _move_to(
+    vv: VirtualVehicle, vehicle: Vehicle, served: list[Task], open_tasks: Sequence[Task], vvm: VVM
+) -> None:
+    """The VV moves to the RV that serves its next tasks (``served`` of ``open_tasks``)."""
+    vv_release_tasks(vv=vv, vvm=vvm, open_tasks=open_tasks)
+    vv_record_migration(vv=vv, to=vehicle, reason="its next task", vvm=vvm)
+    if vvm.keeps_context(vehicle.pk):
+        # The RV's host runs in this process: the VV is there at once, its tasks on the RV's
+        # list (what the RV's host would do with it next, without a message).
+        vv.status = VVStatus.RUNNING
+        tasks_assign(tasks=served, vehicle=vehicle, vvm=vvm)
+        return
+    vv.status = VVStatus.MIGRATING
+    vvm.dispatcher.vv_arrived(vv.id, on=HostRef(rv_id=vehicle.pk))
 
 
 def _servable(caps: VehicleCaps, tasks: Sequence[Task]) -> list[Task]:
@@ -506,10 +519,7 @@ def tasks_assign(*, tasks: Iterable[Task], vehicle: Vehicle, vvm: VVM) -> None:
         return
     for task in moved:
         task.vehicle, task.assigned_s = vehicle, now
-    with deferred():  # nothing in the unit of work reads them back
-        for task in moved:
-            if task.pk is not None:
-                update_row(Task, task.pk, values={"vehicle": vehicle.pk, "assigned_s": now})
+    tasks_assigned([t.pk for t in moved if t.pk is not None], vehicle_id=vehicle.pk, now=now)
     if vvm.local_fleet is None or not vvm.local_fleet.assigned(vehicle.pk, moved):
         vvm.dispatcher.vehicle_changed(vehicle.pk)
 
@@ -601,8 +611,7 @@ def vv_record_migration(
             to_lat=there.lat,
             to_lng=there.lng,
         )
-        with deferred():  # its key is read by the end of the unit of work
-            insert_rows([migration])
+        rows_add([migration])  # its key is read by the end of the unit of work
         vvm.announce_at_commit(lambda: migration_event(migration, vv.customer_id))
     if isinstance(to, Vehicle):
         vv.host_rv, vv.host_gs = to, None

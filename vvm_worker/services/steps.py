@@ -38,7 +38,7 @@ from vvm_worker.services.journal import JournalView, journal_full
 from vvm_worker.services.store import (
     StepBroke,
     effects_write,
-    tasks_write,
+    rows_add,
 )
 from vvm_worker.services.values import Unstorable, check_text, json_value
 
@@ -206,5 +206,5 @@ def tasks_save(*, vv: VirtualVehicle, tasks: list[Task] | None, vvm: VVM) -> Non
     """Save the new ones of these tasks (as routing left them: on an RV's list, or rejected)."""
     new = [t for t in tasks or () if t.pk is None]
     if new:
-        tasks_write(new)
+        rows_add(new)  # their keys are read by the end of the unit of work
         vvm.announce_at_commit(lambda: [task_event(task, vv.customer_id) for task in new])

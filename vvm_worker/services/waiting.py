@@ -8,17 +8,13 @@ it is read when it is shown (``missions.waiting``).
 
 from __future__ import annotations
 
-import functools
 import uuid
 from collections.abc import Mapping
 
-from django.db import connection
-from django.db.models import Case, FloatField, Value, When
-
-from cpcc_site.prepared import deferred, insert_rows, save_fields
 from missions.models import LogEntry, Task, VirtualVehicle, WaitReason
 from missions.waiting import duration_text
 from vvm_worker.services.base import VVM, customer_named, logger
+from vvm_worker.services.store import next_task_etas_write, vv_fields_save
 
 # The level of the lines the platform adds to a VV's log (its program's lines are "info"):
 # its owner, and a comparison of two runs, can tell them apart.
@@ -49,9 +45,8 @@ def vv_wait_start(*, vv: VirtualVehicle, task: Task, vvm: VVM) -> None:
     if not vv.waiting_reason:
         vv.waiting_since_s = now
     vv.waiting_reason, vv.waiting_message = WaitReason.NO_VEHICLE, message
-    with deferred():
-        save_fields(vv, WAITING_FIELDS, held=True)
-        insert_rows([LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"waiting: {message}")])
+    note = LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"waiting: {message}")
+    vv_fields_save(vv, WAITING_FIELDS, note=note)
     logger.info(
         "vv waits: no vehicle in service covers its next task",
         extra={"vv": str(vv.id), "customer": customer_named(vv), "task": task.pk},
@@ -67,11 +62,8 @@ def vv_wait_end(*, vv: VirtualVehicle, vvm: VVM) -> None:
     now = vvm.clock.now_s()
     waited = duration_text(now - (vv.waiting_since_s if vv.waiting_since_s is not None else now))
     vv.waiting_reason, vv.waiting_message, vv.waiting_since_s = "", "", None
-    with deferred():
-        save_fields(vv, WAITING_FIELDS, held=True)
-        insert_rows(
-            [LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"continues: waited {waited}")]
-        )
+    note = LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"continues: waited {waited}")
+    vv_fields_save(vv, WAITING_FIELDS, note=note)
     logger.info(
         "vv continues after waiting %s",
         waited,
@@ -84,40 +76,6 @@ def vvs_record_next_task_eta(*, etas: Mapping[uuid.UUID, float]) -> dict[uuid.UU
     clock seconds), as the RVs' control loops last planned it. Gives back the estimates not
     written because another transaction holds their VV's row (for the caller to try again):
     an estimate never waits for a row, so it never holds one VV's row while waiting for
-    another's. On PostgreSQL one statement for all of them; on SQLite, where a writer holds
-    the whole database and nothing is left, one for as many as its limit of parameters
-    allows."""
-    if not etas:
-        return {}
-    ids = sorted(etas)
-    if connection.vendor != "postgresql":
-        # bulk_update's CASE, without the transaction it opens around its statements (a
-        # BEGIN more, where one statement commits by itself); its batches: three parameters
-        # an estimate (the IN's id, the WHEN's id, the value).
-        batch = connection.ops.bulk_batch_size(["pk", "pk", "next_task_eta_s"], ids)
-        for start in range(0, len(ids), batch):
-            some = ids[start : start + batch]
-            VirtualVehicle.objects.filter(pk__in=some).update(
-                next_task_eta_s=Case(
-                    *(When(pk=vv_id, then=Value(etas[vv_id])) for vv_id in some),
-                    output_field=FloatField(),
-                )
-            )
-        return {}
-    with connection.cursor() as cursor:
-        cursor.execute(_etas_sql(), [ids, [etas[i] for i in ids], ids])
-        written = {row[0] for row in cursor.fetchall()}
+    another's."""
+    written = next_task_etas_write(etas)
     return {vv_id: eta for vv_id, eta in etas.items() if vv_id not in written}
-
-
-@functools.cache
-def _etas_sql() -> str:
-    """``vvs_record_next_task_eta``'s statement on PostgreSQL: the rows nobody holds."""
-    meta, quote = VirtualVehicle._meta, connection.ops.quote_name
-    table, pk = quote(meta.db_table), quote(meta.pk.column)
-    eta = quote(meta.get_field("next_task_eta_s").column)
-    return (
-        f"UPDATE {table} SET {eta} = e.eta FROM unnest(%s::uuid[], %s::double precision[]) "
-        f"AS e(id, eta) WHERE {table}.{pk} = e.id AND {table}.{pk} IN (SELECT {pk} FROM {table} "
-        f"WHERE {pk} = ANY(%s::uuid[]) FOR NO KEY UPDATE SKIP LOCKED) RETURNING {table}.{pk}"
-    )

@@ -1,58 +1,19 @@
-"""The VVs' store: how a VV's unit of work reads and writes the database, by intent (a held
-VV, a task's answer, a step's effects, the VV's changed columns), behind which sit the SQL
-mechanics: statements compiled once (``cpcc_site.prepared``), writes sent without waiting in
-a pipelined transaction, a fenced UPDATE that answers a task and gives back what the answer
-needs. The services of a VV's life (``vvs``) say what happens; this module says how it is
-kept. It is the only service module that writes SQL by hand or uses the prepared statements
-of the task path.
-"""
+"""A VV's rows in the store: the held VV, its tasks, a task's answer (a fenced UPDATE that
+gives back what the answer needs), a step's effects, the VV's changed columns, why it waits
+and when its RV expects to reach its next task."""
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from django.db import DatabaseError, connection
+from django.db import connection
+from django.db.models import Case, FloatField, Value, When
 
-from cpcc_site import database
-from cpcc_site.prepared import (
-    PreparedRead,
-    deferred,
-    insert_rows,
-    pipelined_transaction,
-    save_fields,
-    send_later,
-)
+from cpcc_site.prepared import PreparedRead, deferred, insert_rows, save_fields, send_later
 from missions.models import LogEntry, StorageDocument, Task, TaskStatus, VirtualVehicle
-
-
-class StepBroke(Exception):
-    """The platform could not run a VV's step or apply its result: a bug of the platform (not
-    a database outage), which would happen again on every retry."""
-
-    def __init__(self, cause: Exception) -> None:
-        super().__init__(f"{type(cause).__name__}: {cause}")
-        self.cause = cause
-
-
-@contextlib.contextmanager
-def unit_of_work() -> Iterator[None]:
-    """A VV's unit of work: one transaction, pipelined. A statement the database refuses
-    (a platform bug: a step's writes are checked before they are sent; a deferred one is
-    refused at the next statement that waits, or when the block ends) raises StepBroke, as a
-    step the platform cannot apply does; a database outage is raised as it is, for the
-    caller to wait out and redo."""
-    try:
-        with pipelined_transaction():
-            yield
-    except DatabaseError as exc:
-        if database.is_outage(exc):
-            raise
-        raise StepBroke(exc) from exc
-
 
 # Every service holds a VV's row FOR NO KEY UPDATE (no_key): it never changes the row's key,
 # and the lock does not conflict with the key-share locks that rows referring to the VV take
@@ -91,6 +52,20 @@ def open_tasks_of(vv_id: uuid.UUID) -> list[Task]:
     return _OPEN_TASKS.all(vv_id)
 
 
+# A VV's open tasks of one request, by index (a VV that arrives with its request made).
+_REQUEST_TASKS = PreparedRead(
+    lambda vv_id, q: Task.objects.filter(vv_id=vv_id, q=q, status=TaskStatus.OPEN).order_by(
+        "index"
+    ),
+    samples=[("vv", uuid.UUID(int=0)), ("q", 7_654_321)],
+)
+
+
+def request_tasks_of(vv_id: uuid.UUID, q: int) -> list[Task]:
+    """The VV's open tasks of its request ``q``, by index."""
+    return _REQUEST_TASKS.all(vv_id, q)
+
+
 def take_answer(
     task_id: int,
     vv_id: uuid.UUID,
@@ -126,25 +101,36 @@ def take_answer(
 
     def read() -> Task | None:
         row = row_later()
-        if row is None:
-            return None
-        index, served_by, lat, lng, alt, requested_s = row
-        return Task(
-            id=task_id,
-            vv_id=vv_id,
-            q=q,
-            index=index,
-            lat=lat,
-            lng=lng,
-            alt=alt,
-            status=status,
-            vehicle_id=served_by,
-            requested_s=requested_s,
-            done_s=now,
-            readings=readings,
-        )
+        return None if row is None else _answered(row, task_id, vv_id, q, status, now, readings)
 
     return read
+
+
+def _answered(
+    row: tuple[Any, ...],
+    task_id: int,
+    vv_id: uuid.UUID,
+    q: int,
+    status: TaskStatus,
+    now: float,
+    readings: list[dict[str, Any]],
+) -> Task:
+    """The task ``take_answer`` answered, from what its UPDATE gave back."""
+    index, served_by, lat, lng, alt, requested_s = row
+    return Task(
+        id=task_id,
+        vv_id=vv_id,
+        q=q,
+        index=index,
+        lat=lat,
+        lng=lng,
+        alt=alt,
+        status=status,
+        vehicle_id=served_by,
+        requested_s=requested_s,
+        done_s=now,
+        readings=readings,
+    )
 
 
 @functools.cache
@@ -228,7 +214,49 @@ def effects_write(
             insert_rows(lines, on_conflict="ignore")
 
 
-def tasks_write(tasks: list[Task]) -> None:
-    """Insert new tasks; their keys are read by the end of the unit of work."""
+def vv_fields_save(vv: VirtualVehicle, fields: Sequence[str], *, note: LogEntry) -> None:
+    """These columns of the held VV as they are now, and a line in its log (``note``), sent
+    without waiting (a refusal fails the unit of work)."""
     with deferred():
-        insert_rows(tasks)
+        save_fields(vv, fields, held=True)
+        insert_rows([note])
+
+
+def next_task_etas_write(etas: Mapping[uuid.UUID, float]) -> set[uuid.UUID]:
+    """Write each VV's ``next_task_eta_s`` where no other transaction holds its row; gives back
+    the VVs written. On PostgreSQL one statement for all of them (the rows held elsewhere
+    skipped: it never waits for a row); on SQLite, where a writer holds the whole database,
+    one for as many as its limit of parameters allows."""
+    if not etas:
+        return set()
+    ids = sorted(etas)
+    if connection.vendor != "postgresql":
+        # bulk_update's CASE, without the transaction it opens around its statements (a
+        # BEGIN more, where one statement commits by itself); its batches: three parameters
+        # an estimate (the IN's id, the WHEN's id, the value).
+        batch = connection.ops.bulk_batch_size(["pk", "pk", "next_task_eta_s"], ids)
+        for start in range(0, len(ids), batch):
+            some = ids[start : start + batch]
+            VirtualVehicle.objects.filter(pk__in=some).update(
+                next_task_eta_s=Case(
+                    *(When(pk=vv_id, then=Value(etas[vv_id])) for vv_id in some),
+                    output_field=FloatField(),
+                )
+            )
+        return set(ids)
+    with connection.cursor() as cursor:
+        cursor.execute(_etas_sql(), [ids, [etas[i] for i in ids], ids])
+        return {row[0] for row in cursor.fetchall()}
+
+
+@functools.cache
+def _etas_sql() -> str:
+    """``next_task_etas_write``'s statement on PostgreSQL: the rows nobody holds."""
+    meta, quote = VirtualVehicle._meta, connection.ops.quote_name
+    table, pk = quote(meta.db_table), quote(meta.pk.column)
+    eta = quote(meta.get_field("next_task_eta_s").column)
+    return (
+        f"UPDATE {table} SET {eta} = e.eta FROM unnest(%s::uuid[], %s::double precision[]) "
+        f"AS e(id, eta) WHERE {table}.{pk} = e.id AND {table}.{pk} IN (SELECT {pk} FROM {table} "
+        f"WHERE {pk} = ANY(%s::uuid[]) FOR NO KEY UPDATE SKIP LOCKED) RETURNING {table}.{pk}"
+    )
