@@ -78,8 +78,9 @@ bench: $(STAMP)
 bench-simulate: $(STAMP)
 	$(PY) -m bench.simulate $(BENCH_SIMULATE)
 
-# A premium class (p95 30 s) on a busy 2x2 fleet that a standard customer floods, with the
-# service classes and without (bench/service_levels.py, ~2 minutes; JSON in var/bench/).
+# A premium class (p95 30 s) on a busy 2x2 fleet that a bulk customer floods, alone, with the
+# service classes and without, in three shapes and three seeds; issue 55's floor case by case
+# (bench/service_levels.py, ~5 minutes; JSON in var/bench/).
 bench-service-levels: $(STAMP)
 	$(PY) -m bench.service_levels $(BENCH_SERVICE_LEVELS)
 

@@ -1,23 +1,35 @@
 """``python -m bench.service_levels`` (``make bench-service-levels``): does a premium class keep
-its 30 s target on a busy fleet when a standard customer floods it (issue 28)?
+its 30 s target on a busy fleet when a standard customer floods it (issues 28 and 55)?
 
-One scenario, generated here, run twice in this process on discrete-event time (a fresh SQLite
-database each, the same seed): with the service classes, and with them removed (everyone
-weight 1, no admission hold). A grid of ``--rows`` x ``--cols`` RVs (200 m cells, 10 m/s);
-three customers submit one-task VVs (the original demo5 program) anywhere on the grid:
+Each case, generated here, runs in this process on discrete-event time (a fresh SQLite database
+each, planner ``latency``): the premium customer alone, then everyone with the service classes
+and everyone without them. A grid of ``--rows`` x ``--cols`` RVs (200 m cells,
+10 m/s); three customers submit VVs anywhere on the grid:
 
-- "Premium" (class premium: p95 30 s, weight ``--weight``), Poisson arrivals;
-- "Standard" (class standard: p95 120 s, weight 1), Poisson arrivals;
-- "Flood" (class standard too), ``--flood`` VVs submitted at once at ``--flood-at`` s, and
-  again ``--floods`` times every ``--flood-every`` s.
+- "Premium" (class premium: p95 30 s, weight ``--weight``), one-task VVs (the original demo5
+  program), Poisson arrivals;
+- "Standard" (class standard: p95 120 s, weight 1), one-task VVs, Poisson arrivals;
+- "Flood" (class bulk: p95 ``--bulk-target`` s, 600 by default, weight 1), ``--flood`` tasks
+  submitted at once at ``--flood-at`` s, and again ``--floods`` times every ``--flood-every``
+  s.
 
-By default 465 one-task VVs in about 30 minutes: a task every 15 s per RV on average, where
-an RV needs some 10 s for a lone task (100 m and a climb at 10 m/s), so the fleet keeps up,
-but not by much; each flood puts 15 more tasks on every RV at once, which take it a minute or
-two to clear. Prints and writes (``--out``, JSON) per class
-the requests read, median and p95 latency (request to reading) and the share within target,
-for both runs, as the platform's report computes it (``service_levels_report`` on each run's
-database: what the admin page and ``GET /api/v1/service-levels/`` show).
+The shapes (``--shapes``): ``cells``, one RV per cell, floods of one-task VVs (only the order of
+each RV's tasks and turning mid-leg can help premium); ``cells-long``, the same with floods of
+long VVs (``--long-tasks`` random points each, over the whole grid: they migrate); ``overlap``,
+every RV's area the whole grid (the mapper can give premium's request to the RV that reaches it
+in time). Each shape runs with every seed of ``--seeds``.
+
+By default 765 one-task VVs in about 30 minutes a case: premium and standard alone are a task
+every 27 s per RV on average, where an RV needs some 10 s for a lone task (100 m and a climb at
+10 m/s); each flood puts 40 more tasks on every RV at once, which take it several minutes to
+clear: without classes premium waits behind them.
+
+Per case it prints the report per class and customer (``service_levels_report`` on each run's
+database: what the admin page and ``GET /api/v1/service-levels/`` show), then a summary with the
+floor of issue 55: where premium alone has a p95 of at most 0.8 x its target and the other
+classes have slack (without classes each within 0.8 x its own target), premium with everyone
+within its target, the others within theirs, every VV finished; the goal: premium within 1.2 x
+its p95 alone. JSON in ``--out``.
 """
 
 from __future__ import annotations
@@ -40,10 +52,19 @@ STANDARD = {"name": "standard", "p95_s": 120.0, "weight": 1.0}
 CELL_M = 200.0
 
 
-def scenario(args: argparse.Namespace, *, classes: bool) -> dict[str, Any]:
-    """The benchmark's scenario; without ``classes`` the same one with no customer in a class."""
+def scenario(
+    args: argparse.Namespace, *, shape: str, seed: int, classes: bool, alone: bool = False
+) -> dict[str, Any]:
+    """A case's scenario; without ``classes`` the same one with no customer in a class;
+    ``alone``: only the premium customer's VVs."""
     from fleet.geo import Position
-    from vvm_worker.scenario_gen import ONE_TASK, grid_box, grid_scenario, poisson_tasks
+    from vvm_worker.scenario_gen import (
+        ONE_TASK,
+        grid_box,
+        grid_scenario,
+        original_style_program,
+        poisson_tasks,
+    )
 
     box = grid_box(rows=args.rows, cols=args.cols, cell_m=CELL_M)
 
@@ -57,16 +78,27 @@ def scenario(args: argparse.Namespace, *, classes: bool) -> dict[str, Any]:
 
     vvs = []
     streams = (("Premium", args.premium_gap, 1), ("Standard", args.standard_gap, 2))
-    for customer, gap, seed in streams:
+    for customer, gap, stream in streams:
         count = int(args.duration / gap)
-        arrivals = poisson_tasks(mean_gap_s=gap, seed=args.seed * 10 + seed, count=count, box=box)
+        arrivals = poisson_tasks(mean_gap_s=gap, seed=seed * 10 + stream, count=count, box=box)
         vvs += [
             one_task(customer, f"{customer} {k + 1:03d}", at_s, p)
             for k, (at_s, p) in enumerate(arrivals)
         ]
-    rng = random.Random(args.seed * 10 + 3)
+    rng = random.Random(seed * 10 + 3)
     for wave in range(args.floods):
         at_s = args.flood_at + wave * args.flood_every
+        if shape == "cells-long":
+            for k in range(max(1, args.flood // args.long_tasks)):
+                vvs.append(
+                    {
+                        "customer": "Flood",
+                        "name": f"Flood {wave + 1}.{k + 1:03d}",
+                        "source": original_style_program(box=box, tasks=args.long_tasks),
+                        "submit_at_s": at_s,
+                    }
+                )
+            continue
         for k in range(args.flood):
             p = Position(
                 rng.uniform(box["south"], box["north"]),
@@ -74,6 +106,8 @@ def scenario(args: argparse.Namespace, *, classes: bool) -> dict[str, Any]:
                 rng.uniform(5.0, 55.0),
             )
             vvs.append(one_task("Flood", f"Flood {wave + 1}.{k + 1:03d}", at_s, p))
+    if alone:
+        vvs = [vv for vv in vvs if vv["customer"] == "Premium"]
     data = grid_scenario(
         rows=args.rows,
         cols=args.cols,
@@ -82,12 +116,23 @@ def scenario(args: argparse.Namespace, *, classes: bool) -> dict[str, Any]:
         customers=3,
         max_parallel_vvs=len(vvs),
         vvs=vvs,
-        name=f"service levels: {len(vvs)} VVs on {args.rows}x{args.cols} RVs",
+        name=f"service levels, {shape}, seed {seed}: {len(vvs)} VVs on {args.rows}x{args.cols} RVs",
     )
+    if shape == "overlap":  # every RV's area the whole grid
+        corners = [
+            [box["south"], box["west"]],
+            [box["south"], box["east"]],
+            [box["north"], box["east"]],
+            [box["north"], box["west"]],
+            [box["south"], box["west"]],
+        ]
+        for vehicle in data["vehicles"]:
+            vehicle["area"] = corners
     for customer, (name, service_class) in zip(
         data["customers"], class_of(args).items(), strict=True
     ):
         customer["name"] = name
+        customer["max_queued_vvs"] = max(1, len(vvs))  # a flood held back waits in the queue
         if classes:
             customer["service_class"] = service_class
     return data
@@ -96,7 +141,9 @@ def scenario(args: argparse.Namespace, *, classes: bool) -> dict[str, Any]:
 def class_of(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     """Each customer's class."""
     premium = {**PREMIUM, "weight": args.weight}
-    return {"Premium": premium, "Standard": STANDARD, "Flood": STANDARD}
+    standard = {**STANDARD, "p95_s": args.standard_target}
+    bulk = {"name": "bulk", "p95_s": args.bulk_target, "weight": 1.0}
+    return {"Premium": premium, "Standard": standard, "Flood": bulk}
 
 
 def run(
@@ -153,6 +200,53 @@ def table(result: dict[str, Any], key: str = "customers") -> list[str]:
     return lines
 
 
+SHAPES = ("cells", "cells-long", "overlap")
+# The floor applies where premium alone keeps within this share of its target.
+ALONE_SHARE = 0.8
+# The goal: premium with everyone within this many times its p95 alone.
+GOAL_FACTOR = 1.2
+
+
+def class_row(result: dict[str, Any], name: str) -> dict[str, Any] | None:
+    return next((row for row in result["classes"] if row["service_class"] == name), None)
+
+
+def verdict(
+    alone: dict[str, Any], everyone: dict[str, Any], flat: dict[str, Any]
+) -> dict[str, Any]:
+    """The floor and the goal of issue 55 for one case (see the module)."""
+    premium_alone, premium = class_row(alone, "premium"), class_row(everyone, "premium")
+    if premium_alone is None or premium is None:
+        raise SystemExit("a case without premium requests read: nothing to measure")
+    target = float(premium["target_p95_s"])
+    others = [row for row in everyone["classes"] if row["service_class"] != "premium"]
+    # The other classes have slack: without any class (everyone weighs the same, nothing
+    # held) each keeps within ALONE_SHARE of its own target.
+    slack = all(
+        row["p95_s"] <= ALONE_SHARE * row["target_p95_s"]
+        for row in flat["classes"]
+        if row["service_class"] != "premium" and row["target_p95_s"] is not None
+    )
+    applies = premium_alone["p95_s"] <= ALONE_SHARE * target and slack
+    finished = everyone["finished"] == everyone["vvs"] and alone["finished"] == alone["vvs"]
+    floor = (
+        premium["p95_s"] <= target
+        and all(row["meets_target"] is not False for row in others)
+        and finished
+    )
+    return {
+        "premium_alone_p95_s": premium_alone["p95_s"],
+        "premium_p95_s": premium["p95_s"],
+        "target_p95_s": target,
+        "others": {row["service_class"]: row["p95_s"] for row in others},
+        "others_have_slack": slack,
+        "all_finished": finished,
+        "floor_applies": applies,
+        "floor_met": floor,
+        "goal_met": premium["p95_s"] <= GOAL_FACTOR * premium_alone["p95_s"],
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--rows", type=int, default=2)
@@ -160,12 +254,20 @@ def main() -> None:
     parser.add_argument("--weight", type=float, default=10.0, help="the premium class's weight")
     parser.add_argument("--premium-gap", type=float, default=30.0, help="mean s between VVs")
     parser.add_argument("--standard-gap", type=float, default=8.0, help="mean s between VVs")
-    parser.add_argument("--flood", type=int, default=60, help="VVs of one flood")
+    parser.add_argument(
+        "--standard-target", type=float, default=120.0, help="the standard class's p95 target"
+    )
+    parser.add_argument("--flood", type=int, default=160, help="tasks of one flood")
+    parser.add_argument(
+        "--bulk-target", type=float, default=600.0, help="the flooding customer's class's target"
+    )
     parser.add_argument("--floods", type=int, default=3)
     parser.add_argument("--flood-at", type=float, default=300.0)
     parser.add_argument("--flood-every", type=float, default=600.0)
+    parser.add_argument("--long-tasks", type=int, default=10, help="tasks of a long flood VV")
     parser.add_argument("--duration", type=float, default=1800.0, help="s of Poisson arrivals")
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--shapes", nargs="+", choices=SHAPES, default=list(SHAPES))
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
     parser.add_argument("--out", default="var/bench/service_levels.json")
     parser.add_argument(
         "--keep",
@@ -191,17 +293,31 @@ def main() -> None:
         f"Python {platform.python_version()} · {time.strftime('%Y-%m-%d')}"
     )
     print(f"# {machine}")
-    results: dict[str, Any] = {"machine": machine, "arguments": vars(args)}
-    for label, classes in (("with classes", True), ("without classes", False)):
-        data = scenario(args, classes=classes)
-        result = run(data, tmp / label.replace(" ", "-"), args.seed, class_of(args))
-        results[label] = result
-        print(
-            f"\n{data['name']}, {label}: {result['finished']}/{result['vvs']} VVs finished, "
-            f"makespan {result['makespan_s']:.0f} s, {result['wall_s']:.0f} s of wall time"
-        )
-        print("\n".join(table(result, "classes")))
-        print("\n".join(table(result)))
+    results: dict[str, Any] = {"machine": machine, "arguments": vars(args), "cases": []}
+    runs = [
+        ("premium alone", True, True),
+        ("with classes", True, False),
+        ("without classes", False, False),
+    ]
+    for shape in args.shapes:
+        for seed in args.seeds:
+            case: dict[str, Any] = {"shape": shape, "seed": seed}
+            for label, classes, alone in runs:
+                data = scenario(args, shape=shape, seed=seed, classes=classes, alone=alone)
+                where = tmp / f"{shape}-{seed}-{label.replace(' ', '-')}"
+                result = run(data, where, seed, class_of(args))
+                case[label] = result
+                print(
+                    f"\n{data['name']}, {label}: {result['finished']}/{result['vvs']} VVs "
+                    f"finished, makespan {result['makespan_s']:.0f} s, "
+                    f"{result['wall_s']:.0f} s of wall time"
+                )
+                print("\n".join(table(result, "classes")))
+            case["verdict"] = verdict(
+                case["premium alone"], case["with classes"], case["without classes"]
+            )
+            results["cases"].append(case)
+    print("\n" + "\n".join(summary(results["cases"])))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=1))
@@ -210,6 +326,36 @@ def main() -> None:
         print(f"the runs' databases: {tmp}/*/simulate.sqlite3")
     else:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def summary(cases: list[dict[str, Any]]) -> list[str]:
+    """The floor and the goal, case by case."""
+    lines = [
+        "| shape | seed | premium alone p95 | premium p95 (target) | others' p95 | all finished "
+        "| floor applies | floor met | goal met |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    yes = {True: "yes", False: "**no**"}
+    for case in cases:
+        v = case["verdict"]
+        others = ", ".join(f"{name} {p95:.1f} s" for name, p95 in v["others"].items())
+        lines.append(
+            f"| {case['shape']} | {case['seed']} | {v['premium_alone_p95_s']:.1f} s | "
+            f"{v['premium_p95_s']:.1f} s ({v['target_p95_s']:g} s) | {others} | "
+            f"{yes[v['all_finished']]} | {'yes' if v['floor_applies'] else 'no'} | "
+            f"{yes[v['floor_met']]} | {'yes' if v['goal_met'] else 'no'} |"
+        )
+    applied = [c for c in cases if c["verdict"]["floor_applies"]]
+    missed = [c for c in applied if not c["verdict"]["floor_met"]]
+    lines.append(
+        f"\nfloor: {len(applied) - len(missed)} of {len(applied)} cases where it applies met"
+        + (
+            ""
+            if not missed
+            else ": missed in " + ", ".join(f"{c['shape']} seed {c['seed']}" for c in missed)
+        )
+    )
+    return lines
 
 
 if __name__ == "__main__":

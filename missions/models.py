@@ -32,7 +32,7 @@ class WaitReason(models.TextChoices):
     QUEUE = "queue", "In the customer's queue"
     FLYING = "flying", "A vehicle flies to its task"
     MESSAGE = "message", "Its program waits for a message (VV.message.receive)"
-    SERVICE_LEVEL = "service_level", "Held: the fleet misses its service class's target"
+    SERVICE_LEVEL = "service_level", "Held back to keep other service levels"
 
 
 ACTIVE_STATUSES = (VVStatus.RUNNING, VVStatus.MIGRATING)

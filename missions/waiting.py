@@ -5,9 +5,9 @@
   station and keeps the reason on its row, ``vvm_worker.services.waiting``);
 - ``queue``: it waits in its customer's queue behind the customer's other VVs (its place is
   read when it is shown: it changes whenever one of them ends);
-- ``service_level``: it is queued and admission holds it because the fleet misses its
-  customer's service class's target (admission keeps the reason on its row,
-  ``vvm_worker.services.vvs``);
+- ``service_level``: it is queued and admission holds it back while another service class
+  misses its target and its customer's keeps its own with room to spare (admission keeps the
+  reason on its row, ``vvm_worker.services.admission``);
 - ``flying``: it is aboard an RV with an open task, which its RV's plan expects to reach at
   ``next_task_eta_s`` (written by the RV's control loop when its plan changes);
 - ``message``: its program waits in ``VV.message.receive`` (its pending request, kind

@@ -62,7 +62,27 @@ _SDC_TTL_S = 10.0
 ESTIMATE_SLACK_S = 1.0
 
 
-def _loop_task(task: Task, weight: float) -> LoopTask:
+@dataclass(frozen=True)
+class ClassTerms:
+    """What a VV's customer's service class asks of an RV: how much a second of its waiting
+    weighs, and the target its requests are to be read within (None: no class, no target)."""
+
+    weight: float = 1.0
+    target_s: float | None = None
+
+    @classmethod
+    def of(cls, weight: float | None, target_s: float | None) -> ClassTerms:
+        """From a class's columns as read (both None: the customer has no class)."""
+        return cls(1.0 if weight is None else float(weight), target_s)
+
+    def deadline(self, requested_s: float) -> float | None:
+        return None if self.target_s is None else requested_s + self.target_s
+
+
+NO_CLASS_TERMS = ClassTerms()
+
+
+def _loop_task(task: Task, terms: ClassTerms) -> LoopTask:
     return LoopTask(
         id=task.pk,
         position=Position(task.lat, task.lng, task.alt),
@@ -72,7 +92,8 @@ def _loop_task(task: Task, weight: float) -> LoopTask:
         vv=task.vv_id,
         # The tasks of one request (an executeAll batch) share a group.
         group=f"{task.vv_id}:{task.q}",
-        weight=weight,
+        weight=terms.weight,
+        deadline_s=terms.deadline(task.requested_s),
     )
 
 
@@ -84,9 +105,9 @@ def _request_of(task: LoopTask) -> int | None:
     return int(q) if q.isdigit() else None
 
 
-def _weight_held(task: Task) -> float | None:
-    """The weight of the task's VV's service class as its VV (the one its caller holds, read
-    with its customer and class) has it, or None if it was not read with them."""
+def _terms_held(task: Task) -> ClassTerms | None:
+    """The terms of the task's VV's service class as its VV (the one its caller holds, read
+    with its customer and class) has them, or None if it was not read with them."""
     if not Task.vv.is_cached(task):
         return None
     vv = task.vv
@@ -94,10 +115,10 @@ def _weight_held(task: Task) -> float | None:
         return None
     customer = vv.customer
     if customer.service_class_id is None:
-        return 1.0
+        return NO_CLASS_TERMS
     if not Customer.service_class.is_cached(customer):
         return None
-    return float(customer.service_class.weight)
+    return ClassTerms.of(customer.service_class.weight, customer.service_class.p95_s)
 
 
 def write_estimates(stores: Sequence[DatabaseStore]) -> None:
@@ -137,7 +158,7 @@ class DatabaseStore:
         self.settled_log: list[tuple[DatabaseStore, _Waiting]] | None = None
         self._tasks: list[LoopTask] | None = None
         self._added: list[Task] = []  # put on the list since (see `add`)
-        self._weights: dict[Any, float] = {}  # each VV's service class weight, as last read
+        self._terms: dict[Any, ClassTerms] = {}  # each VV's service class terms, as last read
         self._status: str | None = None
         self.status_reason = ""  # why the status is what it is, as read with it
         # An operator's command that waits for the RV, as read with the status: (command,
@@ -171,11 +192,11 @@ class DatabaseStore:
         if self._tasks is not None and any(t.pk is not None for t in self._added):
             # (One not saved yet is kept for later; the transaction saves it.)
             saved = [t for t in self._added if t.pk is not None]
-            self._weights.update(
-                (t.vv_id, weight) for t in saved if (weight := _weight_held(t)) is not None
+            self._terms.update(
+                (t.vv_id, terms) for t in saved if (terms := _terms_held(t)) is not None
             )
-            weights = self._class_weights({t.vv_id for t in saved})
-            added = [_loop_task(t, weights.get(t.vv_id, 1.0)) for t in saved]
+            terms_of = self._class_terms({t.vv_id for t in saved})
+            added = [_loop_task(t, terms_of.get(t.vv_id, NO_CLASS_TERMS)) for t in saved]
             self._added = [t for t in self._added if t.pk is None]
             have = {t.id for t in self._tasks}
             self._tasks = sorted(
@@ -183,34 +204,36 @@ class DatabaseStore:
                 key=lambda t: (t.requested_s, t.id),
             )
         if self._tasks is None:
-            self._tasks = [
-                LoopTask(
-                    id=pk,
-                    position=Position(lat, lng, alt),
-                    tolerance_m=tolerance_m,
-                    requested_s=requested_s,
-                    sensors=tuple(sensors),
-                    vv=vv_id,
-                    group=f"{vv_id}:{q}",
-                    weight=1.0 if weight is None else weight,
+            self._tasks = []
+            for row in vehicle_tasks(self.vehicle_id):
+                pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q, weight, p95_s = row
+                terms = ClassTerms.of(weight, p95_s)
+                self._terms[vv_id] = terms
+                self._tasks.append(
+                    LoopTask(
+                        id=pk,
+                        position=Position(lat, lng, alt),
+                        tolerance_m=tolerance_m,
+                        requested_s=requested_s,
+                        sensors=tuple(sensors),
+                        vv=vv_id,
+                        group=f"{vv_id}:{q}",
+                        weight=terms.weight,
+                        deadline_s=terms.deadline(requested_s),
+                    )
                 )
-                for pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q, weight in (
-                    vehicle_tasks(self.vehicle_id)
-                )
-            ]
-            self._weights.update((t.vv, t.weight) for t in self._tasks)
         return self._tasks
 
-    def _class_weights(self, vv_ids: set[Any]) -> dict[Any, float]:
-        """The service class weight of each of these VVs' customers (1 without a class): those
-        not known yet in one query."""
-        unknown = vv_ids - self._weights.keys()
+    def _class_terms(self, vv_ids: set[Any]) -> dict[Any, ClassTerms]:
+        """The service class terms of each of these VVs' customers (``NO_CLASS_TERMS``
+        without a class): those not known yet in one query."""
+        unknown = vv_ids - self._terms.keys()
         if unknown:
-            for vv_id, weight in VirtualVehicle.objects.filter(pk__in=unknown).values_list(
-                "pk", "customer__service_class__weight"
+            for vv_id, weight, p95_s in VirtualVehicle.objects.filter(pk__in=unknown).values_list(
+                "pk", "customer__service_class__weight", "customer__service_class__p95_s"
             ):
-                self._weights[vv_id] = 1.0 if weight is None else weight
-        return self._weights
+                self._terms[vv_id] = ClassTerms.of(weight, p95_s)
+        return self._terms
 
     def status(self) -> str:
         if self._status is None:

@@ -13,7 +13,7 @@ from shapely.geometry import Point, Polygon
 from fleet.airspace import ExclusionZone
 from fleet.geo import Position
 from fleet.kinds import AERIAL, DEFAULT_KIND, UNDERWATER
-from vvm_worker.planning import TravelTime, insertion_cost
+from vvm_worker.planning import TravelTime, best_insertion
 from vvm_worker.runtime.types import TaskRequest
 
 __all__ = ["QUEUE_PENALTY_S", "ExclusionZone", "MapDecision", "VehicleCaps", "map_task"]
@@ -57,18 +57,29 @@ class VehicleCaps:
             and not any(zone.holds(task) for zone in self.no_fly)
         )
 
+    def travel(self) -> TravelTime:
+        return TravelTime(self.max_speed_mps, self.climb_rate_mps, dive_rate_mps=self.dive_rate_mps)
+
+    def in_time(self, task: TaskRequest, due_in_s: float | None) -> bool:
+        """Whether this RV would reach the task within ``due_in_s`` (None: no deadline,
+        always), at the place in its route where the planner would fit it in (``cost_s``'s),
+        its tasks the mapper does not know counted as in ``cost_s``."""
+        if due_in_s is None:
+            return True
+        return self._insertion(task)[1] <= due_in_s
+
     def cost_s(self, task: TaskRequest) -> float:
         """What giving the task to this RV costs the customers, in seconds: the task's own wait
         plus the delay it causes the tasks already on the RV's route, where the planner would
         fit it in (`planning.insertion_cost` with the RV's travel times)."""
+        return self._insertion(task)[0]
+
+    def _insertion(self, task: TaskRequest) -> tuple[float, float]:
+        """(``cost_s``, when the RV would reach the task there), in seconds."""
         target = Position(task.lat, task.lng, task.alt)
-        unknown = max(0, self.open_tasks - len(self.route))
-        travel = TravelTime(
-            self.max_speed_mps, self.climb_rate_mps, dive_rate_mps=self.dive_rate_mps
-        )
-        return insertion_cost(travel, self.position, self.route, target) + (
-            QUEUE_PENALTY_S * unknown
-        )
+        unknown = QUEUE_PENALTY_S * max(0, self.open_tasks - len(self.route))
+        cost, wait = best_insertion(self.travel(), self.position, self.route, target)
+        return cost + unknown, wait + unknown
 
 
 @dataclass(frozen=True)
@@ -92,12 +103,19 @@ def _fmt(task: TaskRequest) -> str:
     return f"({task.lat:.6f}, {task.lng:.6f}) at {task.alt:g} m"
 
 
-def map_task(task: TaskRequest, fleet: Sequence[VehicleCaps]) -> MapDecision:
+def map_task(
+    task: TaskRequest, fleet: Sequence[VehicleCaps], *, due_in_s: float | None = None
+) -> MapDecision:
     """Which RVs can serve the task, ranked by what it costs the customers to give it to them
     (`VehicleCaps.cost_s`, then name): where areas overlap, the RV that serves it soonest
-    without holding up its other tasks more than another would."""
+    without holding up its other tasks more than another would. ``due_in_s``: the task's
+    deadline from now (its customer's class's target; None: none): the RVs that can reach it
+    in time come first."""
     able = [v for v in fleet if v.can_serve(task)]
-    active = sorted((v for v in able if v.active), key=lambda v: (v.cost_s(task), v.name))
+    active = sorted(
+        (v for v in able if v.active),
+        key=lambda v: (not v.in_time(task, due_in_s), v.cost_s(task), v.name),
+    )
     if active:
         return MapDecision(tuple(active), parked=False, reason=None)
     if able:

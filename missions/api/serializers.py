@@ -35,8 +35,9 @@ WAITING_SCHEMA = {
     "description": "What the VV waits for, in your words; null when it runs without waiting "
     "or has ended. `reason`: `no_vehicle` (no vehicle in service covers its next task; it "
     "continues when one does), `queue` (behind your other VVs: your limit of VVs in "
-    "parallel), `service_level` (queued and held while the fleet misses your service "
-    "class's target), `flying` (a vehicle flies to its task) or `message` (its program waits "
+    "parallel), `service_level` (queued and held back "
+    "while another service class misses its target and yours keeps its own with room to "
+    "spare, never longer than your class's target allows), `flying` (a vehicle flies to its task) or `message` (its program waits "
     "in VV.message.receive, at most until its timeout). `since`: when it started waiting "
     "(null when not known); `next_task_eta_s`: seconds until the vehicle is expected at its "
     "next task, by its plan (null when not known).",

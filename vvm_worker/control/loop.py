@@ -4,7 +4,7 @@ on its parts (vvm_worker/control/__init__.py says what it does)."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 from fleet.driving import SensorFailure
 from fleet.geo import Position, within_m
@@ -15,6 +15,7 @@ from vvm_worker.control.types import (
     CHARGING,
     REACH_SLACK_M,
     RECENT_TASKS,
+    LoopTask,
 )
 
 logger = logging.getLogger("cpcc.executor")
@@ -41,6 +42,9 @@ class ControlLoop(Planning):
         if not self.planner.retargets and self.target is not None:
             tasks = self.store.open_tasks()
             if any(t.id == self.target for t in tasks):
+                if self._late_unless_turning(now, tasks):
+                    self._plan(now)
+                    return
                 if self.config.live:  # the map shows new work at once
                     here = self.driver.position_at(now)
                     plan = [t.as_plan_task() for t in tasks]
@@ -48,6 +52,18 @@ class ControlLoop(Planning):
                     self._estimate(tasks)  # and its VVs when it gets to their tasks
                 return
         self._plan(now)
+
+    def _late_unless_turning(self, now: float, tasks: Sequence[LoopTask]) -> bool:
+        """Whether a task whose deadline is earlier than the target's would be late unless
+        the vehicle turned to it now (a planner that keeps its target is overruled then)."""
+        plan = [t.as_plan_task() for t in tasks]
+        if all(task.deadline_s is None for task in plan):
+            return False
+        here = self.driver.position_at(now)
+        kept = [t for t in plan if t.id == self.target]
+        kept += [t for t in plan if t.id != self.target]
+        route = self._in_time(here, now, kept)
+        return bool(route) and route[0].id != self.target
 
     def changed(self) -> Callable[[], None]:
         """The vehicle's tasks or status were just changed: the wake-up to run for it, which

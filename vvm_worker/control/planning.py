@@ -8,7 +8,7 @@ import logging
 from fleet.geo import Position, within_m
 from vvm_worker.control.battery import Battery
 from vvm_worker.control.types import ACTIVE, CHARGING, LAND, NO_WAY, TURN_TOLERANCE_M, LoopTask
-from vvm_worker.planning import PlanTask
+from vvm_worker.planning import PlanTask, by_deadline
 
 logger = logging.getLogger("cpcc.executor")
 
@@ -57,6 +57,7 @@ class Planning(Battery):
         here = self.driver.position_at(now)
         choice: LoopTask | None = None
         way: list[Position] | None = None  # to the choice, round the no-fly zones
+        route = self._in_time(here, now, route)
         self.route = route
         if route:
             first = route[0].id
@@ -97,6 +98,13 @@ class Planning(Battery):
             elif not self.driver.is_landed_at(now) and not self._stand_by(now, token):
                 self._go_home(now, token)
         self._record(now)
+
+    def _in_time(self, here: Position, now: float, route: list[PlanTask]) -> list[PlanTask]:
+        """The planner's route with the tasks it would reach after their deadlines moved
+        forward where they are in time (``planning.by_deadline``, with this vehicle's leg
+        times); the task flown to now is never put behind one whose deadline is later."""
+        flying_to = None if self.returning else self.target
+        return by_deadline(route, start=here, now_s=now, leg=self.driver.leg_s, flying_to=flying_to)
 
     def _obey_command(self, now: float) -> bool:
         """Obey the operator's command that waits, if any (True: one was obeyed). The RV is

@@ -49,7 +49,8 @@ NO_WAY = "no way around the no-fly zones reaches the task's position"
 class LoopTask:
     """An open task of the RV as the loop sees it. ``vv`` and ``group`` are the store's: the
     VV that asked for it and the request it belongs to (an executeAll batch is one);
-    ``weight``: its customer's service class weight (1 without a class)."""
+    ``weight``: its customer's service class weight (1 without a class); ``deadline_s``: when
+    it is to be read by (its request time plus the class's target; None: no class)."""
 
     id: int
     position: Position
@@ -59,10 +60,16 @@ class LoopTask:
     vv: Any = None
     group: str | None = None
     weight: float = 1.0
+    deadline_s: float | None = None
 
     def as_plan_task(self) -> PlanTask:
         return PlanTask(
-            self.id, self.position, self.requested_s, group=self.group, weight=self.weight
+            self.id,
+            self.position,
+            self.requested_s,
+            group=self.group,
+            weight=self.weight,
+            deadline_s=self.deadline_s,
         )
 
 

@@ -7,6 +7,7 @@ draws `route(...)` on the live map and persists `state()` / `restore()` with the
 
 from .base import CostFn, Planner, PlanTask
 from .costs import NO_WAY_COST, AroundZones, TravelTime
+from .deadlines import arrivals, by_deadline, deadline_of
 from .exact import ExactResult, solve_open_path
 from .planners import (
     DEFAULT_PLANNER,
@@ -19,7 +20,7 @@ from .planners import (
     TourPlanner,
     make_planner,
 )
-from .repairman import insertion_cost
+from .repairman import best_insertion, insertion_cost
 from .standby import STANDBY_S, standby_position
 
 __all__ = [
@@ -39,6 +40,10 @@ __all__ = [
     "Planner",
     "TourPlanner",
     "TravelTime",
+    "arrivals",
+    "best_insertion",
+    "by_deadline",
+    "deadline_of",
     "insertion_cost",
     "make_planner",
     "solve_open_path",

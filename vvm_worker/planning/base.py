@@ -29,8 +29,10 @@ class PlanTask:
     it and the batch is done when its last task is read; None means a request of its own.
     `weight` is how much a second of the request's waiting counts (its customer's service
     class; 1 without one): every planner weighs a request's waiting time by it, and with
-    every weight 1 plans as if there were no weights. Raises ValueError when `requested_s` is
-    not a finite number or `weight` not a positive finite one.
+    every weight 1 plans as if there were no weights. `deadline_s` is when the task must be
+    read by, on the same clock (its request time plus its customer's class's target; None:
+    no class, no deadline): see `planning.deadlines`. Raises ValueError when `requested_s` or
+    `deadline_s` is not a finite number or `weight` not a positive finite one.
     """
 
     id: int
@@ -38,12 +40,15 @@ class PlanTask:
     requested_s: float
     group: str | None = None
     weight: float = 1.0
+    deadline_s: float | None = None
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.requested_s):
             raise ValueError(f"task {self.id}: requested_s {self.requested_s!r} is not finite")
         if not (math.isfinite(self.weight) and self.weight > 0):
             raise ValueError(f"task {self.id}: weight {self.weight!r} is not a positive number")
+        if self.deadline_s is not None and not math.isfinite(self.deadline_s):
+            raise ValueError(f"task {self.id}: deadline_s {self.deadline_s!r} is not finite")
 
 
 class Planner(Protocol):

@@ -355,9 +355,17 @@ def insertion_cost(
     order costs the customers, in the units of `cost` (seconds for `TravelTime`): the new task's
     own wait plus the delay it causes the tasks after it, at the place in the route where that
     sum is least (the route's order is kept)."""
+    return best_insertion(cost, start, route, position)[0]
+
+
+def best_insertion(
+    cost: CostFn, start: Position, route: Sequence[Position], position: Position
+) -> tuple[float, float]:
+    """`insertion_cost`, and the new task's own wait at that place (when the vehicle would
+    reach it, in the units of `cost`)."""
     stops = [start, *route]
     arrival = 0.0
-    best = math.inf
+    best, wait = math.inf, math.inf
     for k, here in enumerate(stops):
         if k > 0:
             arrival += cost(stops[k - 1], here)
@@ -365,7 +373,9 @@ def insertion_cost(
         if k + 1 < len(stops):
             after = stops[k + 1]
             detour = to_new + cost(position, after) - cost(here, after)
-            best = min(best, arrival + to_new + detour * (len(stops) - k - 1))
+            value = arrival + to_new + detour * (len(stops) - k - 1)
         else:
-            best = min(best, arrival + to_new)
-    return best
+            value = arrival + to_new
+        if value < best:
+            best, wait = value, arrival + to_new
+    return best, wait

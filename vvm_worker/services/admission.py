@@ -1,7 +1,7 @@
 """A VV's way in: submitted into its customer's queue within the quota of queued VVs, and
 admitted to a ground station (the loader) while the customer runs fewer than its quota of
-parallel VVs allows and the fleet keeps its service class's target; a VV that ends frees its
-place (``slot_freed``)."""
+parallel VVs allows, unless its service class is held back for another that misses its
+target; a VV that ends frees its place (``slot_freed``)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 from django.core.exceptions import ValidationError
 from django.db import transaction
-from django.db.models import F, QuerySet, Value
+from django.db.models import F, Min, QuerySet, Value
 from django.db.models.functions import Coalesce
 from django.utils import timezone
 
@@ -37,7 +37,7 @@ from vvm_worker.services.base import (
     ground_stations_loaded,
     logger,
 )
-from vvm_worker.services.service_levels import class_held_nudge, class_level
+from vvm_worker.services.service_levels import class_held_nudge, holding_back
 
 
 class VVQueueFull(RuntimeError):
@@ -159,9 +159,9 @@ def _check_queue(customer: Customer, *, adding: int) -> None:
 
 def vv_admit_queued(*, customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
     """Start the customer's oldest queued VVs while it runs fewer than its quota allows,
-    unless the fleet misses its service class's target now: then none starts and each says
-    why it is held (``WaitReason.SERVICE_LEVEL``) until a later pass finds the class within
-    its target (one of its tasks ends: ``class_held_nudge``; a ground station's sweep)."""
+    unless admission holds back its class for another that misses its target now: then none
+    starts and each says why it is held (``WaitReason.SERVICE_LEVEL``) until a later pass
+    ends the hold (a task of a class ends: ``class_held_nudge``; a ground station's sweep)."""
     if not customer_has_queued_vv(customer_id=customer_id):
         return []  # nothing waits (a VV that is queued later asks again)
     return _admit(customer_id, vvm)
@@ -207,31 +207,35 @@ def _admit(customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
 
 
 def _held_by_service_level(customer: Customer, queued: QuerySet[VirtualVehicle], vvm: VVM) -> bool:
-    """Whether admission holds the customer's ``queued`` VVs because the fleet misses its
-    service class's target now: their rows say so in the customer's words (one UPDATE). Once
-    it keeps the target again, those held before are plain queued VVs again. A customer
-    without a class is never held (and costs no query)."""
+    """Whether admission holds back the customer's ``queued`` VVs for another class that
+    misses its target (``service_levels.holding_back``): their rows say so in the customer's
+    words (one UPDATE). Once the hold ends (the other class keeps its target again, or this
+    one has used its slack), those held before are plain queued VVs again. A customer without
+    a class is never held (and costs no query)."""
     if customer.service_class_id is None:
         return False
     now = vvm.clock.now_s()
-    level = class_level(service_class=customer.service_class, now_s=now)
-    if not level.missing:
+    since = queued.filter(waiting_reason=WaitReason.SERVICE_LEVEL).aggregate(
+        since=Min("waiting_since_s")
+    )["since"]
+    hold = holding_back(service_class=customer.service_class, now_s=now, held_since_s=since)
+    if hold is None:
         queued.filter(waiting_reason=WaitReason.SERVICE_LEVEL).update(
             waiting_reason="", waiting_message="", waiting_since_s=None
         )
         return False
     held = queued.update(
         waiting_reason=WaitReason.SERVICE_LEVEL,
-        waiting_message=level.hold_message(),
+        waiting_message=hold.message(),
         waiting_since_s=Coalesce(F("waiting_since_s"), Value(now)),
     )
     logger.info(
-        "vvs held: the fleet misses the service class's target",
+        "vvs held back for other service levels",
         extra={
             "customer": customer.slug,
-            "service_class": level.spec.name,
-            "target_p95_s": level.spec.p95_s,
-            "p95_s": level.p95_s,
+            "service_class": hold.level.spec.name,
+            "p95_s": hold.level.p95_s,
+            "for_classes": ",".join(hold.for_classes),
             "held": held,
         },
     )

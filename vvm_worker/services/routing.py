@@ -7,7 +7,7 @@ import copy
 import dataclasses
 import itertools
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
 from django.db.models import Count, Max, QuerySet
@@ -386,9 +386,10 @@ def _route(
     if stays:
         return False, None
     fleet, rows = fleet_caps_and_rows(vvm, [request_of(t) for t in open_tasks], shape)
-    decisions = [map_task(request_of(t), fleet) for t in open_tasks]
+    due = _due_in(vv, vvm)
+    decisions = [map_task(request_of(t), fleet, due_in_s=due(t)) for t in open_tasks]
     host = vv.host_rv
-    if host is not None and mine and _stays(host, open_tasks, mine, fleet, decisions):
+    if host is not None and mine and _stays(host, open_tasks, mine, fleet, decisions, due):
         tasks_assign(tasks=mine, vehicle=host, vvm=vvm)
         return False, None
     rejected = [(t, d) for t, d in zip(open_tasks, decisions, strict=True) if d.rejected]
@@ -459,16 +460,28 @@ def _servable(caps: VehicleCaps, tasks: Sequence[Task]) -> list[Task]:
 HANDOVER_MARGIN_S = 5.0
 
 
+def _due_in(vv: VirtualVehicle, vvm: VVM) -> Callable[[Task], float | None]:
+    """How long from now each of the VV's tasks has until its deadline (its request time plus
+    the VV's customer's class's target; None without a class)."""
+    service_class = vv.customer.service_class  # (read with the VV on the task path)
+    if service_class is None:
+        return lambda task: None
+    now, target_s = vvm.clock.now_s(), service_class.p95_s
+    return lambda task: task.requested_s + target_s - now
+
+
 def _stays(
     host: Vehicle,
     tasks: Sequence[Task],
     mine: Sequence[Task],
     fleet: Sequence[VehicleCaps],
     decisions: Sequence[MapDecision],
+    due: Callable[[Task], float | None],
 ) -> bool:
     """Whether the VV's RV keeps the tasks it can serve (``mine`` of ``tasks``, whose mapper's
     ``decisions`` are in the same order): unless another RV that can serve as many of them
-    would serve them at a cost lower by HANDOVER_MARGIN_S (where areas overlap)."""
+    would serve them at a cost lower by HANDOVER_MARGIN_S (where areas overlap), or in time
+    where this one would be late (``due``: each task's time to its deadline)."""
     kept = {id(t) for t in mine}
     best = _best_vehicle(mine, [d for t, d in zip(tasks, decisions, strict=True) if id(t) in kept])
     if best is None or best.id == host.pk:
@@ -479,6 +492,11 @@ def _stays(
     requests = [request_of(t) for t in mine]
     if not all(best.can_serve(r) for r in requests):
         return True
+    dues = [due(t) for t in mine]
+    if any(
+        best.in_time(r, d) and not own.in_time(r, d) for r, d in zip(requests, dues, strict=True)
+    ):
+        return False
     ours = sum(own.cost_s(r) for r in requests)
     theirs = sum(best.cost_s(r) for r in requests)
     return theirs + HANDOVER_MARGIN_S >= ours

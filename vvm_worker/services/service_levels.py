@@ -1,7 +1,9 @@
 """Service levels, the database side: a customer's class, and whether the fleet keeps a
-class's target now (the tasks of its customers read lately and those still open). Admission
-holds the queued VVs of a class that misses its target (``vvs._admit``) and asks again when
-one of the class's tasks ends (``class_held_nudge``) or a ground station sweeps.
+class's target now (the tasks of its customers read lately and those still open). While a
+class misses its target, admission holds back the new VVs of the classes with slack (their
+p95 well inside their own target: ``holding_back``), never those of the class that misses,
+and asks again when a task of a class ends (``class_held_nudge``) or a ground station
+sweeps.
 
 The figures themselves are computed in the pure core ``vvm_worker.level_figures``.
 """
@@ -75,23 +77,40 @@ def class_latencies(
     return ClassLatencies(recent=recent, open_ages=open_ages)
 
 
+# A class has slack while its p95 is at most this share of its target: its new VVs may then
+# be held back for a class that misses its own.
+SLACK_SHARE = 0.5
+# Why a VV held back waits, in its owner's words (never another customer or class).
+HELD_BACK = (
+    "held to keep other service levels; your class's target is met "
+    "(it starts within {wait} at most)"
+)
+
+
 @dataclass(frozen=True)
 class ClassLevel:
     """How the fleet keeps a class's target now: ``p95_s`` over its recent and open tasks
-    (None: none), and ``missing`` (admission holds the class's queued VVs)."""
+    (None: none), and ``missing`` (beyond the target: admission holds back the classes with
+    slack for it)."""
 
     spec: ServiceClassSpec
     p95_s: float | None
     missing: bool
 
-    def hold_message(self) -> str:
-        """Why a held VV waits, in its owner's words (never a vehicle or another customer)."""
-        target = f"{self.spec.p95_s or 0.0:g} s"  # as staff set it
-        now = duration_text(self.p95_s or 0.0)
-        return (
-            f"held: your service class '{self.spec.name}' targets {target} (p95) and the fleet "
-            f"is at {now} now; it starts when the fleet catches up"
-        )
+    @property
+    def spare_s(self) -> float:
+        """How much longer than now its requests could wait and the class still keep its
+        target: what a held VV of the class may wait at most (0 without slack)."""
+        if self.spec.p95_s is None or self.missing:
+            return 0.0
+        return max(0.0, self.spec.p95_s - (self.p95_s or 0.0))
+
+    @property
+    def has_slack(self) -> bool:
+        """Whether the class keeps its target with room to spare (``SLACK_SHARE``)."""
+        if self.spec.p95_s is None or self.missing:
+            return False
+        return (self.p95_s or 0.0) <= SLACK_SHARE * self.spec.p95_s
 
 
 def class_level(
@@ -112,16 +131,52 @@ def class_level(
     return ClassLevel(spec=spec, p95_s=percentile(values, 95) if values else None, missing=missing)
 
 
+@dataclass(frozen=True)
+class HoldBack:
+    """Admission holds back a customer's new VVs: ``level`` is its class's, ``for_classes``
+    the classes that miss their targets now."""
+
+    level: ClassLevel
+    for_classes: tuple[str, ...]
+
+    def message(self) -> str:
+        return HELD_BACK.format(wait=duration_text(self.level.spare_s))
+
+
+def holding_back(
+    *, service_class: ServiceClass, now_s: float, held_since_s: float | None
+) -> HoldBack | None:
+    """Whether admission holds back the new VVs of a customer of ``service_class`` now: while
+    another class misses its target and this one has slack, for no longer (since
+    ``held_since_s``, None: not held yet) than the class's requests could wait and it still
+    keep its own target. Never the class that misses, never a customer without a class. One
+    query per class with open tasks."""
+    level = class_level(service_class=service_class, now_s=now_s)
+    if not level.has_slack:
+        return None
+    if held_since_s is not None and now_s - held_since_s >= level.spare_s:
+        return None
+    others = ServiceClass.objects.exclude(pk=service_class.pk).filter(
+        customers__vvs__tasks__status=TaskStatus.OPEN
+    )
+    missing = tuple(
+        other.name
+        for other in others.distinct().order_by("name")
+        if class_level(service_class=other, now_s=now_s).missing
+    )
+    return HoldBack(level, missing) if missing else None
+
+
 def class_held_nudge(*, service_class_id: int | None, vvm: VVM, told: int | None = None) -> None:
-    """One of the class's tasks ended (read, rejected or cancelled with its VV): the fleet
-    may keep the target again, so admission looks again at each customer of the class whose
-    queued VVs it holds, except ``told`` (a customer the caller asked admission for). One
-    query; nothing for no class or when none is held."""
+    """A task of the class ended (read, rejected or cancelled with its VV): a class that
+    missed its target may keep it again, and the classes held back for it have used some of
+    their slack, so admission looks again at each customer whose queued VVs are held back,
+    except ``told`` (a customer the caller asked admission for). One query; nothing for a
+    task of no class or when none is held."""
     if service_class_id is None:
         return
     held = (
         VirtualVehicle.objects.filter(
-            customer__service_class_id=service_class_id,
             status=VVStatus.QUEUED,
             waiting_reason=WaitReason.SERVICE_LEVEL,
         )

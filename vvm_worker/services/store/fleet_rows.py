@@ -77,8 +77,8 @@ def open_tasks_of_vehicles(
     return _ROUTES.rows(vehicle_ids) if vehicle_ids else []
 
 
-# The columns of ``vehicle_tasks``' rows, in order; the last is the task's customer's service
-# class weight (None: no class).
+# The columns of ``vehicle_tasks``' rows, in order; the last two are the task's customer's
+# service class weight and target (None: no class).
 VEHICLE_TASK_COLUMNS = (
     "id",
     "lat",
@@ -90,6 +90,7 @@ VEHICLE_TASK_COLUMNS = (
     "vv_id",
     "q",
     "vv__customer__service_class__weight",
+    "vv__customer__service_class__p95_s",
 )
 _VEHICLE_TASKS = PreparedRead(
     lambda vehicle_id: (

@@ -1,0 +1,135 @@
+"""Deadlines: a request of a customer with a service class is to be read by its request time
+plus its class's target (`PlanTask.deadline_s`), and a vehicle keeps that promise whenever it
+physically can.
+
+A planner orders the open tasks by what keeps the customers waiting least (weighted by class);
+`by_deadline` then looks at when the vehicle would reach each task along that order (the
+vehicle's own leg times) and moves forward each task it would reach too late, earliest deadline
+first, to the latest place in the order where it is in time without making late a task that
+was in time. A task that cannot be in time anywhere stays where the planner put it (its
+weight and age already push it forward). A deadline never turns the vehicle away from the
+task it is flying to for a task whose deadline is later: it is put behind a task whose deadline
+is earlier when that one would be late otherwise (the vehicle turns mid-leg and comes back to
+it later), never behind one due later. (The planner's own order is another matter: the latency
+planner may serve a task on the way first, as it does without classes. Overruling it to keep
+the target first whenever a later deadline came first, or whenever the target would then be
+late, was measured: it made the premium class's p95 worse in 3 of 18 cases of
+`make bench-service-levels` and better in none; docs/benchmarks.md.)
+
+With no deadline among the tasks the order is the planner's, untouched: a fleet without
+service classes plans exactly as without this module.
+
+Cost: one pass over the order to time it, then for each late task one pass back from where it
+is (three leg times a place) and one pass to time the new order; nothing when no task is late.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+from fleet.geo import Position
+
+from .base import PlanTask
+
+LegTime = Callable[[Position, Position], float]
+"""Seconds the vehicle needs from the first position to the second."""
+
+# Rounding between the sum of legs and a deadline set to it exactly.
+_EPS_S = 1e-6
+
+
+def deadline_of(task: PlanTask) -> float:
+    """The task's deadline; a task without one can wait for ever."""
+    return math.inf if task.deadline_s is None else task.deadline_s
+
+
+def arrivals(
+    order: Sequence[PlanTask], *, start: Position, now_s: float, leg: LegTime
+) -> list[float]:
+    """When the vehicle, at ``start`` at ``now_s``, reaches each task flying ``order``."""
+    times, t_s, here = [], now_s, start
+    for task in order:
+        t_s += leg(here, task.position)
+        here = task.position
+        times.append(t_s)
+    return times
+
+
+def by_deadline(
+    order: Sequence[PlanTask],
+    *,
+    start: Position,
+    now_s: float,
+    leg: LegTime,
+    flying_to: int | None = None,
+) -> list[PlanTask]:
+    """``order`` (a planner's route from ``start`` at ``now_s``) with the tasks it would reach
+    after their deadlines moved forward where they are in time (see the module);
+    ``flying_to``: the task the vehicle is flying to now, if any."""
+    route = list(order)
+    if not any(task.deadline_s is not None for task in route):
+        return route
+    pinned = route[0] if flying_to is not None and route and route[0].id == flying_to else None
+    tried: set[int] = set()
+    while True:
+        times = arrivals(route, start=start, now_s=now_s, leg=leg)
+        late = [
+            k
+            for k, task in enumerate(route)
+            if times[k] > deadline_of(task) + _EPS_S and task.id not in tried
+        ]
+        if not late:
+            return route
+        j = min(late, key=lambda k: (deadline_of(route[k]), k))
+        tried.add(route[j].id)
+        i = _in_time_place(route, times, j, start=start, now_s=now_s, leg=leg, pinned=pinned)
+        if i is not None:
+            route.insert(i, route.pop(j))
+            if i == 0:
+                pinned = route[0] if flying_to is not None else None
+
+
+def _in_time_place(
+    route: list[PlanTask],
+    times: list[float],
+    j: int,
+    *,
+    start: Position,
+    now_s: float,
+    leg: LegTime,
+    pinned: PlanTask | None,
+) -> int | None:
+    """The latest place before ``j`` where ``route[j]`` would be in time, moved there, with
+    no task in time made late; None when there is none. Place 0 is taken from ``pinned`` (the
+    task flown to) only for an earlier deadline."""
+    task = route[j]
+    n = len(route)
+
+    def slack(k: int) -> float:
+        # How much later task k may be reached; a task late already sets no bound here.
+        spare = deadline_of(route[k]) - times[k]
+        return math.inf if spare < -_EPS_S else spare
+
+    # The tasks after j move by the insertion's delay plus what leaving j saves.
+    before_j = start if j == 0 else route[j - 1].position
+    if j + 1 < n:
+        after = route[j + 1].position
+        saved = leg(before_j, after) - leg(before_j, task.position) - leg(task.position, after)
+    else:
+        saved = -leg(before_j, task.position)
+    after_slack = min((slack(k) for k in range(j + 1, n)), default=math.inf)
+    between_slack = math.inf  # of the tasks at i..j-1, which move back
+    for i in range(j - 1, -1, -1):
+        between_slack = min(between_slack, slack(i))
+        if i == 0 and pinned is not None and not deadline_of(task) < deadline_of(pinned):
+            return None
+        prev, prev_s = (start, now_s) if i == 0 else (route[i - 1].position, times[i - 1])
+        there = leg(prev, task.position)
+        if prev_s + there > deadline_of(task) + _EPS_S:
+            continue
+        delay = there + leg(task.position, route[i].position) - leg(prev, route[i].position)
+        if delay > between_slack + _EPS_S or delay + saved > after_slack + _EPS_S:
+            continue
+        return i
+    return None
