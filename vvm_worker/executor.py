@@ -42,6 +42,7 @@ from vvm_worker.control import (
     Scheduler,
     VehicleState,
 )
+from vvm_worker.level_figures import NO_CLASS_TERMS, ClassTerms
 from vvm_worker.planning import Planner, TravelTime, make_planner
 from vvm_worker.sensing import read_sensors, vehicle_reading
 from vvm_worker.services import (
@@ -60,26 +61,6 @@ from vvm_worker.services.waiting import vvs_record_next_task_eta
 _SDC_TTL_S = 10.0
 # An estimate of when an RV reaches a VV's task is written again when it moves by more.
 ESTIMATE_SLACK_S = 1.0
-
-
-@dataclass(frozen=True)
-class ClassTerms:
-    """What a VV's customer's service class asks of an RV: how much a second of its waiting
-    weighs, and the target its requests are to be read within (None: no class, no target)."""
-
-    weight: float = 1.0
-    target_s: float | None = None
-
-    @classmethod
-    def of(cls, weight: float | None, target_s: float | None) -> ClassTerms:
-        """From a class's columns as read (both None: the customer has no class)."""
-        return cls(1.0 if weight is None else float(weight), target_s)
-
-    def deadline(self, requested_s: float) -> float | None:
-        return None if self.target_s is None else requested_s + self.target_s
-
-
-NO_CLASS_TERMS = ClassTerms()
 
 
 def _loop_task(task: Task, terms: ClassTerms) -> LoopTask:

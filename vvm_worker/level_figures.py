@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 __all__ = [
     "NO_CLASS",
+    "NO_CLASS_TERMS",
+    "ClassTerms",
     "LevelStats",
     "ServiceClassSpec",
     "level_stats",
@@ -39,6 +41,32 @@ class ServiceClassSpec:
             raise ValueError(f"p95_s: a positive number of seconds, got {self.p95_s!r}")
         if not (math.isfinite(self.weight) and self.weight > 0):
             raise ValueError(f"weight: a positive number, got {self.weight!r}")
+
+
+@dataclass(frozen=True)
+class ClassTerms:
+    """What a VV's customer's service class asks of an RV: how much a second of its waiting
+    weighs, and the target its requests are to be read within (None: no class, no target)."""
+
+    weight: float = 1.0
+    target_s: float | None = None
+
+    @classmethod
+    def of(cls, weight: float | None, target_s: float | None) -> ClassTerms:
+        """From a class's columns as read (both None: the customer has no class)."""
+        return cls(1.0 if weight is None else float(weight), target_s)
+
+    def deadline(self, requested_s: float) -> float | None:
+        """When a request made at ``requested_s`` is to be read by (None: no target)."""
+        return None if self.target_s is None else requested_s + self.target_s
+
+    def due_in(self, requested_s: float, now_s: float) -> float | None:
+        """How long from ``now_s`` that request has until its deadline (None: no target)."""
+        deadline = self.deadline(requested_s)
+        return None if deadline is None else deadline - now_s
+
+
+NO_CLASS_TERMS = ClassTerms()
 
 
 # What a customer without a class gets: no target, the weight of everybody.

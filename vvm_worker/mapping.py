@@ -60,22 +60,22 @@ class VehicleCaps:
     def travel(self) -> TravelTime:
         return TravelTime(self.max_speed_mps, self.climb_rate_mps, dive_rate_mps=self.dive_rate_mps)
 
-    def in_time(self, task: TaskRequest, due_in_s: float | None) -> bool:
-        """Whether this RV would reach the task within ``due_in_s`` (None: no deadline,
-        always), at the place in its route where the planner would fit it in (``cost_s``'s),
-        its tasks the mapper does not know counted as in ``cost_s``."""
-        if due_in_s is None:
-            return True
-        return self._insertion(task)[1] <= due_in_s
-
     def cost_s(self, task: TaskRequest) -> float:
         """What giving the task to this RV costs the customers, in seconds: the task's own wait
         plus the delay it causes the tasks already on the RV's route, where the planner would
         fit it in (`planning.insertion_cost` with the RV's travel times)."""
-        return self._insertion(task)[0]
+        return self.insertion(task)[0]
 
-    def _insertion(self, task: TaskRequest) -> tuple[float, float]:
-        """(``cost_s``, when the RV would reach the task there), in seconds."""
+    def rank(self, task: TaskRequest, due_in_s: float | None) -> tuple[bool, float]:
+        """How the mapper ranks this RV for the task (lower first): late, then ``cost_s``.
+        Late: it would reach the task after ``due_in_s`` (None: no deadline, never late), at
+        the place where the planner would fit it in."""
+        cost, wait = self.insertion(task)
+        return due_in_s is not None and wait > due_in_s, cost
+
+    def insertion(self, task: TaskRequest) -> tuple[float, float]:
+        """(``cost_s``, when the RV would reach the task there), in seconds; its tasks the
+        mapper does not know count ``QUEUE_PENALTY_S`` each in both."""
         target = Position(task.lat, task.lng, task.alt)
         unknown = QUEUE_PENALTY_S * max(0, self.open_tasks - len(self.route))
         cost, wait = best_insertion(self.travel(), self.position, self.route, target)
@@ -114,7 +114,7 @@ def map_task(
     able = [v for v in fleet if v.can_serve(task)]
     active = sorted(
         (v for v in able if v.active),
-        key=lambda v: (not v.in_time(task, due_in_s), v.cost_s(task), v.name),
+        key=lambda v: (*v.rank(task, due_in_s), v.name),
     )
     if active:
         return MapDecision(tuple(active), parked=False, reason=None)

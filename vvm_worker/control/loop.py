@@ -4,7 +4,7 @@ on its parts (vvm_worker/control/__init__.py says what it does)."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 
 from fleet.driving import SensorFailure
 from fleet.geo import Position, within_m
@@ -15,8 +15,8 @@ from vvm_worker.control.types import (
     CHARGING,
     REACH_SLACK_M,
     RECENT_TASKS,
-    LoopTask,
 )
+from vvm_worker.planning import PlanTask
 
 logger = logging.getLogger("cpcc.executor")
 
@@ -42,21 +42,21 @@ class ControlLoop(Planning):
         if not self.planner.retargets and self.target is not None:
             tasks = self.store.open_tasks()
             if any(t.id == self.target for t in tasks):
-                if self._late_unless_turning(now, tasks):
+                plan = [t.as_plan_task() for t in tasks]
+                if self._late_unless_turning(now, plan):
                     self._plan(now)
                     return
                 if self.config.live:  # the map shows new work at once
                     here = self.driver.position_at(now)
-                    plan = [t.as_plan_task() for t in tasks]
                     self.route = self.planner.route(here, plan, now)
                     self._estimate(tasks)  # and its VVs when it gets to their tasks
                 return
         self._plan(now)
 
-    def _late_unless_turning(self, now: float, tasks: Sequence[LoopTask]) -> bool:
-        """Whether a task whose deadline is earlier than the target's would be late unless
-        the vehicle turned to it now (a planner that keeps its target is overruled then)."""
-        plan = [t.as_plan_task() for t in tasks]
+    def _late_unless_turning(self, now: float, plan: list[PlanTask]) -> bool:
+        """Whether a task of ``plan`` (the open tasks) whose deadline is earlier than the
+        target's would be late unless the vehicle turned to it now (a planner that keeps its
+        target is overruled then)."""
         if all(task.deadline_s is None for task in plan):
             return False
         here = self.driver.position_at(now)

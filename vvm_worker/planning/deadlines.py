@@ -20,7 +20,8 @@ With no deadline among the tasks the order is the planner's, untouched: a fleet 
 service classes plans exactly as without this module.
 
 Cost: one pass over the order to time it, then for each late task one pass back from where it
-is (three leg times a place) and one pass to time the new order; nothing when no task is late.
+is (three leg times a place), and one pass to time the order again after each move; nothing
+more when no task is late.
 """
 
 from __future__ import annotations
@@ -72,8 +73,8 @@ def by_deadline(
         return route
     pinned = route[0] if flying_to is not None and route and route[0].id == flying_to else None
     tried: set[int] = set()
+    times = arrivals(route, start=start, now_s=now_s, leg=leg)
     while True:
-        times = arrivals(route, start=start, now_s=now_s, leg=leg)
         late = [
             k
             for k, task in enumerate(route)
@@ -86,6 +87,7 @@ def by_deadline(
         i = _in_time_place(route, times, j, start=start, now_s=now_s, leg=leg, pinned=pinned)
         if i is not None:
             route.insert(i, route.pop(j))
+            times = arrivals(route, start=start, now_s=now_s, leg=leg)
             if i == 0:
                 pinned = route[0] if flying_to is not None else None
 

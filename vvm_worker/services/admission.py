@@ -215,10 +215,13 @@ def _held_by_service_level(customer: Customer, queued: QuerySet[VirtualVehicle],
     if customer.service_class_id is None:
         return False
     now = vvm.clock.now_s()
-    since = queued.filter(waiting_reason=WaitReason.SERVICE_LEVEL).aggregate(
-        since=Min("waiting_since_s")
-    )["since"]
-    hold = holding_back(service_class=customer.service_class, now_s=now, held_since_s=since)
+    hold = holding_back(service_class=customer.service_class, now_s=now)
+    if hold is not None:
+        since = queued.filter(waiting_reason=WaitReason.SERVICE_LEVEL).aggregate(
+            since=Min("waiting_since_s")
+        )["since"]
+        if hold.used_up(held_since_s=since, now_s=now):
+            hold = None
     if hold is None:
         queued.filter(waiting_reason=WaitReason.SERVICE_LEVEL).update(
             waiting_reason="", waiting_message="", waiting_since_s=None

@@ -29,6 +29,7 @@ from missions.models import (
     VVStatus,
 )
 from vvm_worker.dispatch import HostRef
+from vvm_worker.level_figures import ClassTerms
 from vvm_worker.mapping import ExclusionZone, MapDecision, VehicleCaps, map_task
 from vvm_worker.runtime import (
     PendingRequest,
@@ -466,8 +467,8 @@ def _due_in(vv: VirtualVehicle, vvm: VVM) -> Callable[[Task], float | None]:
     service_class = vv.customer.service_class  # (read with the VV on the task path)
     if service_class is None:
         return lambda task: None
-    now, target_s = vvm.clock.now_s(), service_class.p95_s
-    return lambda task: task.requested_s + target_s - now
+    terms, now = ClassTerms.of(service_class.weight, service_class.p95_s), vvm.clock.now_s()
+    return lambda task: terms.due_in(task.requested_s, now)
 
 
 def _stays(
@@ -492,14 +493,13 @@ def _stays(
     requests = [request_of(t) for t in mine]
     if not all(best.can_serve(r) for r in requests):
         return True
-    dues = [due(t) for t in mine]
+    ours = [own.rank(r, due(t)) for r, t in zip(requests, mine, strict=True)]
+    theirs = [best.rank(r, due(t)) for r, t in zip(requests, mine, strict=True)]
     if any(
-        best.in_time(r, d) and not own.in_time(r, d) for r, d in zip(requests, dues, strict=True)
+        late and not other_late for (late, _), (other_late, _) in zip(ours, theirs, strict=True)
     ):
         return False
-    ours = sum(own.cost_s(r) for r in requests)
-    theirs = sum(best.cost_s(r) for r in requests)
-    return theirs + HANDOVER_MARGIN_S >= ours
+    return sum(cost for _, cost in theirs) + HANDOVER_MARGIN_S >= sum(cost for _, cost in ours)
 
 
 def _partly_answered(vv: VirtualVehicle, pending: PendingRequest) -> bool:

@@ -142,19 +142,19 @@ class HoldBack:
     def message(self) -> str:
         return HELD_BACK.format(wait=duration_text(self.level.spare_s))
 
+    def used_up(self, *, held_since_s: float | None, now_s: float) -> bool:
+        """Whether VVs held since ``held_since_s`` (None: none held yet) have waited as long as
+        their class's requests could and it still keep its own target: the hold ends."""
+        return held_since_s is not None and now_s - held_since_s >= self.level.spare_s
 
-def holding_back(
-    *, service_class: ServiceClass, now_s: float, held_since_s: float | None
-) -> HoldBack | None:
+
+def holding_back(*, service_class: ServiceClass, now_s: float) -> HoldBack | None:
     """Whether admission holds back the new VVs of a customer of ``service_class`` now: while
-    another class misses its target and this one has slack, for no longer (since
-    ``held_since_s``, None: not held yet) than the class's requests could wait and it still
-    keep its own target. Never the class that misses, never a customer without a class. One
-    query per class with open tasks."""
+    another class misses its target and this one has slack (for how long: ``HoldBack.used_up``).
+    Never the class that misses, never a customer without a class. One query per class with
+    open tasks."""
     level = class_level(service_class=service_class, now_s=now_s)
     if not level.has_slack:
-        return None
-    if held_since_s is not None and now_s - held_since_s >= level.spare_s:
         return None
     others = ServiceClass.objects.exclude(pk=service_class.pk).filter(
         customers__vvs__tasks__status=TaskStatus.OPEN
