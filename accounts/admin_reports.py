@@ -17,9 +17,15 @@ from django.http import HttpRequest
 from django.template.response import TemplateResponse
 from django.urls import URLPattern, path
 
+from missions.api.service_levels import hold_shown
 from vvm_worker.clock import SystemClock
 from vvm_worker.level_figures import LevelStats
-from vvm_worker.services.service_levels import service_levels_report
+from vvm_worker.services.service_levels import (
+    HoldShown,
+    service_level_holds,
+    service_levels_by_class,
+    service_levels_report,
+)
 
 PERIODS = {"hour": 3_600.0, "day": 86_400.0}
 
@@ -86,11 +92,13 @@ class ServiceLevelsReportMixin:
         if not self.has_view_permission(request):
             raise PermissionDenied
         form = PeriodForm(request.GET or {"period": "day"})
-        customers, classes, since, until = [], [], None, None
+        customers, classes, holds, since, until = [], [], [], None, None
         if form.is_valid():
-            since_s, until_s = form.period_s(SystemClock().now_s())
+            now_s = SystemClock().now_s()
+            since_s, until_s = form.period_s(now_s)
             customers = service_levels_report(since_s=since_s, until_s=until_s)
-            classes = service_levels_report(since_s=since_s, until_s=until_s, by_customer=False)
+            holds = service_level_holds(since_s=since_s, until_s=until_s, now_s=now_s)
+            classes = service_levels_by_class(since_s=since_s, until_s=until_s, holds=holds)
             since = dt.datetime.fromtimestamp(since_s, dt.UTC)
             until = dt.datetime.fromtimestamp(until_s, dt.UTC)
         context = {
@@ -101,14 +109,26 @@ class ServiceLevelsReportMixin:
             "since": since,
             "until": until,
             "customers": [_shown(s) for s in customers],
-            "classes": [_shown(s) for s in classes],
+            "classes": [_shown(c.got, c.as_dict()) for c in classes],
+            "holds": [_hold_shown(h) for h in holds],
         }
         return TemplateResponse(request, "admin/service_levels.html", context)
 
 
-def _shown(stats: LevelStats) -> dict[str, object]:
-    """A row of the report as the page shows it: the API's figures and the share in percent."""
-    row = stats.as_dict()
+def _hold_shown(hold: HoldShown) -> dict[str, object]:
+    """A hold as the page shows it: the API's figures, its times as UTC datetimes."""
+    row = hold_shown(hold)
+    row["started_at"] = dt.datetime.fromtimestamp(hold.started_s, dt.UTC)
+    row["ended_at"] = (
+        None if hold.ended_s is None else dt.datetime.fromtimestamp(hold.ended_s, dt.UTC)
+    )
+    return row
+
+
+def _shown(stats: LevelStats, row: dict[str, object] | None = None) -> dict[str, object]:
+    """A row of the report as the page shows it: the API's figures (``row``; by default the
+    stats') and the share in percent."""
+    row = stats.as_dict() if row is None else row
     within = stats.within_target
     row["within_target_percent"] = None if within is None else round(100 * within, 1)
     return row

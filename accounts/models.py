@@ -176,6 +176,32 @@ class Customer(models.Model):
         super().save(*args, **kwargs)  # type: ignore[arg-type]
 
 
+class ServiceLevelHold(models.Model):
+    """A time admission held back a customer's new VVs to keep other classes' targets: its
+    class had slack while ``for_classes`` missed theirs. Open (no ``ended_s``) while it
+    holds; the service-level report lists each hold of the period."""
+
+    customer = models.ForeignKey(Customer, on_delete=models.CASCADE, related_name="holds")
+    service_class = models.CharField(max_length=60, help_text="The customer's class then.")
+    for_classes = models.JSONField(
+        default=list, help_text="The classes missing their targets it was held for."
+    )
+    class_p95_s = models.FloatField(
+        null=True, blank=True, help_text="Its class's p95 (s) over its recent and open tasks then."
+    )
+    spare_s = models.FloatField(help_text="How long its VVs could wait at most (its slack, s).")
+    started_s = models.FloatField(help_text="Platform clock.")
+    ended_s = models.FloatField(null=True, blank=True, help_text="Empty while it holds.")
+    vvs_held = models.PositiveIntegerField(default=0, help_text="Most of its VVs held at once.")
+
+    class Meta:
+        ordering = ["-started_s"]
+        indexes = [models.Index(fields=["customer", "ended_s"])]
+
+    def __str__(self) -> str:
+        return f"{self.customer} held from {self.started_s:.0f}"
+
+
 class User(AbstractUser):
     """A person who logs in: a customer's user, or platform staff (no customer)."""
 

@@ -157,7 +157,7 @@ def test_an_rv_added_mid_mission_takes_over_work_in_its_area(
     data["vehicles"][0]["area"] = FIELD  # Heli One alone covers the whole field at first
     # ... slowly, so that a task in Heli Two's area is still waiting for it however long Heli
     # Two's worker takes to start.
-    data["vehicles"][0]["max_speed_mps"] = 1.0
+    data["vehicles"][0]["max_speed_mps"] = 3.0
     load(data, tmp_path, monkeypatch)
     workers.start("gsworker", "GS Base")
     workers.start("rvworker", "Heli One")

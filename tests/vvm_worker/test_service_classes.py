@@ -27,6 +27,8 @@ from vvm_worker.services.service_levels import (
     LEVEL_MIN_SAMPLES,
     LEVEL_WINDOW_S,
     class_held_nudge,
+    service_level_holds,
+    service_levels_by_class,
 )
 
 NOW = 10_000.0
@@ -240,18 +242,32 @@ def test_held_back_vvs_start_once_the_other_class_is_back_within_target(
 ) -> None:
     customer_class_set(customer=customer_a, service_class=standard, vvm=vvm)
     held = vv_submit(customer=customer_a, name="held", program=PROGRAM, vvm=vvm)
+    vv_submit(customer=customer_a, name="held too", program=PROGRAM, vvm=vvm)
     vvm.clock.t += 60  # premium still late: only the time passes
     assert vv_admit_queued(customer_id=customer_a.pk, vvm=vvm) == []
     assert waiting_of(held).since_s == NOW, "held since it was first held"
+    # One hold, recorded once however often admission looks again, for the report.
+    (hold,) = service_level_holds(since_s=0.0, until_s=NOW + 1_000, now_s=vvm.clock.t)
+    assert (hold.customer, hold.service_class, hold.for_classes) == (
+        "Customer A",
+        "standard",
+        ("premium",),
+    )
+    assert (hold.started_s, hold.ended_s, hold.held_s, hold.vvs_held) == (NOW, None, 60.0, 2)
     # The fleet catches up with premium: many of its tasks read fast.
     load_of(slow_premium, latencies=[5.0] * 60)
     vvm.dispatcher.slots.clear()
     class_held_nudge(service_class_id=premium.pk, vvm=vvm)
     assert vvm.dispatcher.slots == [customer_a.pk], "only the customer whose VVs are held"
-    (started,) = vv_admit_queued(customer_id=customer_a.pk, vvm=vvm)
-    assert started.pk == held.pk
+    vvm.clock.t += 5
+    started = vv_admit_queued(customer_id=customer_a.pk, vvm=vvm)
+    assert {vv.name for vv in started} == {"held", "held too"}
     held.refresh_from_db()
     assert held.status == VVStatus.RUNNING and waiting_of(held) is None
+    (hold,) = service_level_holds(since_s=NOW + 30, until_s=NOW + 1_000, now_s=NOW + 1_000)
+    assert (hold.ended_s, hold.held_s) == (NOW + 65, 35.0), "the hold ended; the period's part"
+    classes = {c.got.service_class: c for c in service_levels_by_class(holds=[hold])}
+    assert (classes["premium"].holds_for_it, classes["premium"].holds) == (1, 0)
 
 
 def test_a_held_back_vv_waits_no_longer_than_its_class_has_slack(

@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 from django.test import Client
 
-from accounts.models import Customer, ServiceClass
+from accounts.models import Customer, ServiceClass, ServiceLevelHold
 from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.api_fixtures import token_client
 from tests.conftest import SCENARIOS
@@ -208,6 +208,63 @@ def test_the_admin_page_shows_the_report_to_staff_only(classed, staff, user_a) -
     customer.force_login(user_a)
     assert customer.get(page, query).status_code == 302  # to the admin's login
     assert "Customer A" not in customer.get(page, query, follow=True).content.decode()
+
+
+def test_the_report_says_what_a_class_would_get_alone_and_lists_the_holds(
+    customer_a, customer_b, premium, staff, staff_api, vvm_factory
+) -> None:
+    # Premium's four requests, all at once at one point (where the RV waits), were read 5, 10,
+    # 20 and 40 s later by one RV; Customer B's standard class was held back for premium.
+    rv = VehicleFactory(depot_lat=48.0, depot_lng=12.0, depot_alt=50.0)
+    customer_class_set(customer=customer_a, service_class=premium, vvm=vvm_factory())
+    standard = service_class_save(name="standard", p95_s=120.0)
+    customer_class_set(customer=customer_b, service_class=standard, vvm=vvm_factory())
+    served(customer_a, [5.0, 10.0, 20.0, 40.0], vehicle=rv)
+    ServiceLevelHold.objects.create(
+        customer=customer_b,
+        service_class="standard",
+        for_classes=["premium"],
+        class_p95_s=20.0,
+        spare_s=100.0,
+        started_s=T0 + 10,
+        ended_s=T0 + 50,
+        vvs_held=3,
+    )
+    answer = staff_api.get("/api/v1/service-levels/", {"since": T0 - 60, "until": T0 + 60})
+    assert answer.status_code == 200, answer.content
+    body = answer.json()
+    (row,) = (c for c in body["classes"] if c["service_class"] == "premium")
+    # Alone, each reading still costs what one cost that RV (the median gap between readings
+    # it went straight on to: 10 s), so the fourth is read after 40 s: above the 30 s target,
+    # which no order and no hold could keep with this fleet.
+    assert row["alone"] == {
+        "requests": 4,
+        "median_s": 20.0,
+        "p95_s": 40.0,
+        "within_target": 0.75,
+        "meets_target": False,
+    }
+    assert row["holds"] == {"count": 0, "held_s": 0.0, "for_this_class": 1}
+    assert body["holds"] == [
+        {
+            "customer": "Customer B",
+            "service_class": "standard",
+            "for_classes": ["premium"],
+            "started": "2026-01-01T00:00:10Z",
+            "ended": "2026-01-01T00:00:50Z",
+            "held_s": 40.0,
+            "vvs_held": 3,
+            "class_p95_s": 20.0,
+            "spare_s": 100.0,
+        }
+    ]
+    client = Client()
+    client.force_login(staff)
+    query = {"period": "custom", "since": "2025-12-31 23:59", "until": "2026-01-01 00:01"}
+    html = client.get("/admin/accounts/serviceclass/levels/", query).content.decode()
+    assert "no: more vehicles needed" in html
+    assert '<tr data-customer="Customer B">' in html
+    assert "2026-01-01 00:00:10" in html and "2026-01-01 00:00:50" in html
 
 
 # --- the planner's tasks carry their class weight ---------------------------------------------

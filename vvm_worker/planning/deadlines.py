@@ -6,8 +6,11 @@ A planner orders the open tasks by what keeps the customers waiting least (weigh
 `by_deadline` then looks at when the vehicle would reach each task along that order (the
 vehicle's own leg times) and moves forward each task it would reach too late, earliest deadline
 first, to the latest place in the order where it is in time without making late a task that
-was in time. A task that cannot be in time anywhere stays where the planner put it (its
-weight and age already push it forward). A deadline never turns the vehicle away from the
+was in time. A task that cannot be in time anywhere goes as early as it can without making
+late a task that was in time and without passing a task due as early or earlier: when not
+every promise can be kept, the one already broken is broken as little as it can be, at the
+cost of tasks due later that stay in time (the planner alone would leave a far, late task
+behind near ones for as long as its weight lets it). A deadline never turns the vehicle away from the
 task it is flying to for a task whose deadline is later: it is put behind a task whose deadline
 is earlier when that one would be late otherwise (the vehicle turns mid-leg and comes back to
 it later), never behind one due later. (The planner's own order is another matter: the latency
@@ -92,6 +95,13 @@ def by_deadline(
                 pinned = route[0] if flying_to is not None else None
 
 
+def _may_pass(task: PlanTask, other: PlanTask) -> bool:
+    """Whether ``task``, late wherever it goes, may be read before ``other`` (when that keeps
+    ``other`` in time if it is): when ``other`` is due later, or weighs less (a request of a
+    lower class, late too, waits for one of a higher class)."""
+    return deadline_of(other) > deadline_of(task) or other.weight < task.weight
+
+
 def _in_time_place(
     route: list[PlanTask],
     times: list[float],
@@ -103,8 +113,11 @@ def _in_time_place(
     pinned: PlanTask | None,
 ) -> int | None:
     """The latest place before ``j`` where ``route[j]`` would be in time, moved there, with
-    no task in time made late; None when there is none. Place 0 is taken from ``pinned`` (the
-    task flown to) only for an earlier deadline."""
+    no task in time made late. Where it is in time nowhere: the earliest such place that is not
+    ahead of a task due as early or earlier (it is read as little late as it can be, at
+    nobody's cost but of those due later and still in time after it); None when there is no
+    such place. Place 0 is taken from ``pinned`` (the task flown to) only for an earlier
+    deadline."""
     task = route[j]
     n = len(route)
 
@@ -122,16 +135,20 @@ def _in_time_place(
         saved = -leg(before_j, task.position)
     after_slack = min((slack(k) for k in range(j + 1, n)), default=math.inf)
     between_slack = math.inf  # of the tasks at i..j-1, which move back
+    earliest = None  # the earliest place that makes nobody late, if late everywhere
+    passing = True  # no task due as early or earlier between here and j
     for i in range(j - 1, -1, -1):
         between_slack = min(between_slack, slack(i))
+        passing = passing and _may_pass(task, route[i])
         if i == 0 and pinned is not None and not deadline_of(task) < deadline_of(pinned):
-            return None
+            return earliest
         prev, prev_s = (start, now_s) if i == 0 else (route[i - 1].position, times[i - 1])
         there = leg(prev, task.position)
-        if prev_s + there > deadline_of(task) + _EPS_S:
-            continue
         delay = there + leg(task.position, route[i].position) - leg(prev, route[i].position)
         if delay > between_slack + _EPS_S or delay + saved > after_slack + _EPS_S:
             continue
-        return i
-    return None
+        if prev_s + there <= deadline_of(task) + _EPS_S:
+            return i
+        if passing:
+            earliest = i
+    return earliest

@@ -37,7 +37,12 @@ from vvm_worker.services.base import (
     ground_stations_loaded,
     logger,
 )
-from vvm_worker.services.service_levels import class_held_nudge, holding_back
+from vvm_worker.services.service_levels import (
+    class_held_nudge,
+    holding_back,
+    service_level_hold_end,
+    service_level_hold_keep,
+)
 
 
 class VVQueueFull(RuntimeError):
@@ -209,9 +214,10 @@ def _admit(customer_id: int, vvm: VVM) -> list[VirtualVehicle]:
 def _held_by_service_level(customer: Customer, queued: QuerySet[VirtualVehicle], vvm: VVM) -> bool:
     """Whether admission holds back the customer's ``queued`` VVs for another class that
     misses its target (``service_levels.holding_back``): their rows say so in the customer's
-    words (one UPDATE). Once the hold ends (the other class keeps its target again, or this
-    one has used its slack), those held before are plain queued VVs again. A customer without
-    a class is never held (and costs no query)."""
+    words (one UPDATE) and the customer's hold is recorded for the service-level report. Once
+    the hold ends (the other class keeps its target again, or this one has used its slack),
+    those held before are plain queued VVs again and the hold has ended. A customer without a
+    class is never held (and costs no query)."""
     if customer.service_class_id is None:
         return False
     now = vvm.clock.now_s()
@@ -226,12 +232,14 @@ def _held_by_service_level(customer: Customer, queued: QuerySet[VirtualVehicle],
         queued.filter(waiting_reason=WaitReason.SERVICE_LEVEL).update(
             waiting_reason="", waiting_message="", waiting_since_s=None
         )
+        service_level_hold_end(customer_id=customer.pk, now_s=now)
         return False
     held = queued.update(
         waiting_reason=WaitReason.SERVICE_LEVEL,
         waiting_message=hold.message(),
         waiting_since_s=Coalesce(F("waiting_since_s"), Value(now)),
     )
+    service_level_hold_keep(customer_id=customer.pk, hold=hold, held=held, now_s=now)
     logger.info(
         "vvs held back for other service levels",
         extra={

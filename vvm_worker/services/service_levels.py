@@ -11,22 +11,35 @@ The figures themselves are computed in the pure core ``vvm_worker.level_figures`
 from __future__ import annotations
 
 import uuid
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from django.db.models import Q
 
-from accounts.models import ServiceClass
+from accounts.models import ServiceClass, ServiceLevelHold
+from fleet.geo import Position
+from fleet.kinds import AERIAL
+from fleet.models import Vehicle
+from fleet.simulation import VehicleSpec
 from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus, WaitReason
 from missions.waiting import duration_text
 from vvm_worker.level_figures import (
     NO_CLASS,
+    ClassTerms,
     LevelStats,
     ServiceClassSpec,
     level_stats,
     misses_target,
     percentile,
+)
+from vvm_worker.planning import DEFAULT_PLANNER, TravelTime, make_planner, standby_position
+from vvm_worker.planning.alone import (
+    AloneRequest,
+    AloneVehicle,
+    Reading,
+    alone_latencies,
+    reading_overhead,
 )
 from vvm_worker.services.base import VVM
 
@@ -167,6 +180,37 @@ def holding_back(*, service_class: ServiceClass, now_s: float) -> HoldBack | Non
     return HoldBack(level, missing) if missing else None
 
 
+def service_level_hold_keep(*, customer_id: int, hold: HoldBack, held: int, now_s: float) -> None:
+    """Admission holds back ``held`` queued VVs of the customer (``hold``): the customer's open
+    hold goes on (the most VVs held at once, every class it was held for) or a new one begins
+    now. One or two queries."""
+    row = ServiceLevelHold.objects.filter(customer_id=customer_id, ended_s__isnull=True).first()
+    if row is None:
+        if not held:
+            return  # its queued VVs started or were cancelled meanwhile: nothing is held
+        ServiceLevelHold.objects.create(
+            customer_id=customer_id,
+            service_class=hold.level.spec.name,
+            for_classes=list(hold.for_classes),
+            class_p95_s=hold.level.p95_s,
+            spare_s=hold.level.spare_s,
+            started_s=now_s,
+            vvs_held=held,
+        )
+        return
+    for_classes = sorted({*row.for_classes, *hold.for_classes})
+    if held > row.vvs_held or for_classes != row.for_classes:
+        row.vvs_held, row.for_classes = max(held, row.vvs_held), for_classes
+        row.save(update_fields=["vvs_held", "for_classes"])
+
+
+def service_level_hold_end(*, customer_id: int, now_s: float) -> None:
+    """Admission no longer holds the customer's VVs back: its open hold (if any) ends now."""
+    ServiceLevelHold.objects.filter(customer_id=customer_id, ended_s__isnull=True).update(
+        ended_s=now_s
+    )
+
+
 def class_held_nudge(*, service_class_id: int | None, vvm: VVM, told: int | None = None) -> None:
     """A task of the class ended (read, rejected or cancelled with its VV): a class that
     missed its target may keep it again, and the classes held back for it have used some of
@@ -248,3 +292,211 @@ def service_levels_classed(*, vv_ids: Collection[uuid.UUID]) -> bool:
     return VirtualVehicle.objects.filter(
         pk__in=list(vv_ids), customer__service_class__isnull=False
     ).exists()
+
+
+# --- the report's additions per class: what it would get alone, and the holds ------------------
+
+
+@dataclass(frozen=True)
+class HoldShown:
+    """A hold as the report shows it: ``held_s`` is how long it held within the period (an
+    open one: until the period's end or now, whichever is first)."""
+
+    customer: str
+    service_class: str
+    for_classes: tuple[str, ...]
+    started_s: float
+    ended_s: float | None
+    held_s: float
+    vvs_held: int
+    class_p95_s: float | None
+    spare_s: float
+
+
+def service_level_holds(*, since_s: float, until_s: float, now_s: float) -> list[HoldShown]:
+    """Every hold that held during the period (from ``since_s`` to ``until_s``, platform
+    clock), oldest first. One query."""
+    rows = (
+        ServiceLevelHold.objects.filter(started_s__lt=until_s)
+        .filter(Q(ended_s__isnull=True) | Q(ended_s__gt=since_s))
+        .select_related("customer")
+        .order_by("started_s", "pk")
+    )
+    return [
+        HoldShown(
+            customer=row.customer.name,
+            service_class=row.service_class,
+            for_classes=tuple(row.for_classes),
+            started_s=row.started_s,
+            ended_s=row.ended_s,
+            held_s=max(
+                0.0,
+                min(until_s, now_s if row.ended_s is None else row.ended_s)
+                - max(since_s, row.started_s),
+            ),
+            vvs_held=row.vvs_held,
+            class_p95_s=row.class_p95_s,
+            spare_s=row.spare_s,
+        )
+        for row in rows
+    ]
+
+
+@dataclass(frozen=True)
+class ClassFigures:
+    """A class's row of the report: what it got (``got``), what it would have got alone
+    (``alone``, ``planning.alone``'s estimate from the period's requests; None: none read
+    by an RV), its customers' holds (``holds``, seconds ``held_s``) and the holds of other
+    classes made for it (``holds_for_it``)."""
+
+    got: LevelStats
+    alone: LevelStats | None
+    holds: int = 0
+    held_s: float = 0.0
+    holds_for_it: int = 0
+
+    def as_dict(self) -> dict[str, object]:
+        alone = None
+        if self.alone is not None:
+            figures = self.alone.as_dict()
+            alone = {k: figures[k] for k in ALONE_FIELDS}
+        return {
+            **self.got.as_dict(),
+            "alone": alone,
+            "holds": {
+                "count": self.holds,
+                "held_s": round(self.held_s, 3),
+                "for_this_class": self.holds_for_it,
+            },
+        }
+
+
+ALONE_FIELDS = ("requests", "median_s", "p95_s", "within_target", "meets_target")
+
+
+def service_levels_by_class(
+    *,
+    since_s: float | None = None,
+    until_s: float | None = None,
+    holds: Sequence[HoldShown] = (),
+) -> list[ClassFigures]:
+    """The report per class (``service_levels_report(by_customer=False)``) with each class's
+    latency alone (``class_alone_stats``) and the ``holds`` of the period counted per class:
+    those of its customers and those made for it. Three queries."""
+    alone = class_alone_stats(since_s=since_s, until_s=until_s)
+    rows = []
+    for got in service_levels_report(since_s=since_s, until_s=until_s, by_customer=False):
+        own = [h for h in holds if h.service_class == got.service_class]
+        rows.append(
+            ClassFigures(
+                got=got,
+                alone=alone.get(got.service_class),
+                holds=len(own),
+                held_s=sum(h.held_s for h in own),
+                holds_for_it=sum(1 for h in holds if got.service_class in h.for_classes),
+            )
+        )
+    return rows
+
+
+def class_alone_stats(
+    *, since_s: float | None = None, until_s: float | None = None
+) -> dict[str, LevelStats]:
+    """Per class, the figures its requests of the period would have had if the fleet served
+    nobody else (``planning.alone``): the RVs that read tasks in the period replay the class's
+    requests, each sent where the mapper would send it among the RVs whose area covers it,
+    from their depots, with the default planner and their own travel times, each reading
+    costing what a reading cost the RV in the period (``reading_overhead`` over all its
+    readings). Two queries."""
+    rows = Task.objects.filter(status=TaskStatus.DONE, done_s__isnull=False, vehicle__isnull=False)
+    if since_s is not None:
+        rows = rows.filter(requested_s__gte=since_s)
+    if until_s is not None:
+        rows = rows.filter(requested_s__lt=until_s)
+    read: dict[int, list[Reading]] = {}
+    asked: dict[ServiceClassSpec, list[AloneRequest]] = {}
+    specs: dict[tuple[Any, ...], ServiceClassSpec] = {}
+    for (
+        pk,
+        vehicle_id,
+        lat,
+        lng,
+        alt,
+        requested_s,
+        assigned_s,
+        done_s,
+        name,
+        p95_s,
+        weight,
+    ) in rows.order_by().values_list(
+        "pk",
+        "vehicle_id",
+        "lat",
+        "lng",
+        "alt",
+        "requested_s",
+        "assigned_s",
+        "done_s",
+        "vv__customer__service_class__name",
+        "vv__customer__service_class__p95_s",
+        "vv__customer__service_class__weight",
+    ):
+        where = Position(lat, lng, alt)
+        read.setdefault(vehicle_id, []).append(Reading(where, requested_s, done_s))
+        key = (name, p95_s, weight)
+        spec = specs.get(key)
+        if spec is None:
+            spec = specs[key] = NO_CLASS if name is None else ServiceClassSpec(name, p95_s, weight)
+        terms = ClassTerms.of(weight, p95_s)
+        asked.setdefault(spec, []).append(
+            AloneRequest(
+                pk,
+                where,
+                requested_s,
+                ready_s=requested_s if assigned_s is None else max(requested_s, assigned_s),
+                read_by=vehicle_id,
+                weight=terms.weight,
+                deadline_s=terms.deadline(requested_s),
+            )
+        )
+    vehicles = Vehicle.objects.in_bulk(list(read))
+    latencies: list[tuple[str, ServiceClassSpec, float]] = []
+    for spec, requests in asked.items():
+        # A new replay a class: fresh planners, every RV at its depot.
+        waits = alone_latencies(requests, [_alone_vehicle(v, read[k]) for k, v in vehicles.items()])
+        latencies += [(ALL_CUSTOMERS, spec, wait) for wait in waits.values()]
+    return {stats.service_class: stats for stats in level_stats(latencies)}
+
+
+def _alone_vehicle(vehicle: Vehicle, readings: Sequence[Reading]) -> AloneVehicle:
+    leg = TravelTime(vehicle.max_speed_mps, vehicle.climb_rate_mps, vehicle.dive_rate_mps)
+    low, high = vehicle.min_altitude_m, vehicle.max_altitude_m
+
+    def covers(where: Position) -> bool:
+        return low <= where.alt <= high and vehicle.covers(where)
+
+    planner = make_planner(DEFAULT_PLANNER, travel_time=leg, time_limit_s=ALONE_PLAN_S)
+    standby = None
+    if planner.stands_by:
+        standby = standby_position(
+            vehicle.area_polygon,
+            [r.position.alt for r in readings],
+            min_altitude_m=low,
+            max_altitude_m=high,
+        )
+    return AloneVehicle(
+        vehicle.pk,
+        vehicle.depot,
+        leg,
+        planner,
+        overhead_s=reading_overhead(readings, leg=leg),
+        covers=covers,
+        standby=standby,
+        # Aerial RVs take off as the simulator's (and the MAVLink driver's) do.
+        takeoff_alt_m=VehicleSpec.takeoff_alt_m if vehicle.kind == AERIAL else None,
+    )
+
+
+# The most a replay spends planning one decision (many open tasks: a class that cannot be
+# served alone in time; a few are planned exactly whatever this is).
+ALONE_PLAN_S = 0.02

@@ -62,9 +62,27 @@ def test_no_task_in_time_is_made_late_for_another() -> None:
     assert ids(by_deadline(route, start=HOME, now_s=0.0, leg=leg)) == [1, 9]
 
 
-def test_a_task_that_cannot_be_in_time_anywhere_stays_where_the_planner_put_it() -> None:
-    route = [task(1, 100.0), task(9, 1000.0, 50.0)]  # 1 km away, due in 50 s at 10 m/s
+def test_a_task_late_everywhere_goes_as_early_as_it_can_without_making_another_late() -> None:
+    # Task 9 is 1 km away and due in 50 s at 10 m/s: late wherever it goes. It goes first,
+    # read 100 s late instead of 190 s, ahead of a task without a deadline...
+    route = [task(1, 100.0), task(9, 1000.0, 50.0)]
+    assert ids(by_deadline(route, start=HOME, now_s=0.0, leg=leg)) == [9, 1]
+    # ... or of one that stays in time after it (due by 300 s, read at 290 s)...
+    route = [task(1, 100.0, 300.0), task(9, 1000.0, 50.0)]
+    assert ids(by_deadline(route, start=HOME, now_s=0.0, leg=leg)) == [9, 1]
+    assert late(by_deadline(route, start=HOME, now_s=0.0, leg=leg)) == [9]
+    # ... but not ahead of one it would make late (due by 20 s, read at 10 s)...
+    route = [task(1, 100.0, 20.0), task(9, 1000.0, 50.0)]
     assert ids(by_deadline(route, start=HOME, now_s=0.0, leg=leg)) == [1, 9]
+    # ... nor ahead of one due earlier, late too, unless that one weighs less (a request of a
+    # lower class, late anyway, waits for one of a higher class).
+    route = [task(2, -500.0, 20.0), task(9, 1000.0, 50.0)]
+    assert ids(by_deadline(route, start=HOME, now_s=0.0, leg=leg)) == [2, 9]
+    premium = PlanTask(
+        9, offset(HOME, north_m=0.0, east_m=1000.0), 0.0, weight=10.0, deadline_s=50.0
+    )
+    route = [task(2, -500.0, 20.0), premium]
+    assert ids(by_deadline(route, start=HOME, now_s=0.0, leg=leg)) == [9, 2]
 
 
 def test_the_task_flown_to_gives_way_to_an_earlier_deadline_only() -> None:
