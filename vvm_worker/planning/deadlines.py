@@ -6,7 +6,9 @@ A planner orders the open tasks by what keeps the customers waiting least (weigh
 `by_deadline` then looks at when the vehicle would reach each task along that order (the
 vehicle's own leg times) and moves forward each task it would reach too late, earliest deadline
 first, to the latest place in the order where it is in time without making late a task that
-was in time. A task that cannot be in time anywhere goes as early as it can without making
+was in time. A vehicle flying to a task it will reach late anyway keeps flying to it where the
+planner would turn it to one due later (unless that makes late a task in time). A task that
+cannot be in time anywhere goes as early as it can without making
 late a task that was in time and without passing a task due as early or earlier: when not
 every promise can be kept, the one already broken is broken as little as it can be, at the
 cost of tasks due later that stay in time (the planner alone would leave a far, late task
@@ -74,6 +76,8 @@ def by_deadline(
     route = list(order)
     if not any(task.deadline_s is not None for task in route):
         return route
+    times = arrivals(route, start=start, now_s=now_s, leg=leg)
+    _keep_late_target(route, times, flying_to, (start, now_s, leg))
     pinned = route[0] if flying_to is not None and route and route[0].id == flying_to else None
     tried: set[int] = set()
     times = arrivals(route, start=start, now_s=now_s, leg=leg)
@@ -93,6 +97,36 @@ def by_deadline(
             times = arrivals(route, start=start, now_s=now_s, leg=leg)
             if i == 0:
                 pinned = route[0] if flying_to is not None else None
+
+
+def _keep_late_target(
+    route: list[PlanTask],
+    times: list[float],
+    flying_to: int | None,
+    at: tuple[Position, float, LegTime],
+) -> None:
+    """The vehicle flies to ``flying_to``; where the planner's order turns it to a task due
+    later and would read the target late, it keeps flying to the target (put first), unless
+    that makes late a task that was in time."""
+    if flying_to is None or not route or route[0].id == flying_to:
+        return
+    k = next((k for k, task in enumerate(route) if task.id == flying_to), None)
+    if k is None:
+        return
+    target = route[k]
+    if deadline_of(route[0]) <= deadline_of(target) or times[k] <= deadline_of(target) + _EPS_S:
+        return
+    kept = [target, *route[:k], *route[k + 1 :]]
+    start, now_s, leg = at
+    after = dict(
+        zip((t.id for t in kept), arrivals(kept, start=start, now_s=now_s, leg=leg), strict=True)
+    )
+    if all(
+        after[task.id] <= deadline_of(task) + _EPS_S
+        for task, t_s in zip(route, times, strict=True)
+        if task is not target and t_s <= deadline_of(task) + _EPS_S
+    ):
+        route[:] = kept
 
 
 def _may_pass(task: PlanTask, other: PlanTask) -> bool:

@@ -118,6 +118,18 @@ def test_a_task_due_later_never_takes_the_place_of_the_target_even_when_it_would
     assert ids(by_deadline([target, later], start=HOME, now_s=0.0, leg=leg)) == [2, 1]
 
 
+def test_the_vehicle_keeps_flying_to_a_late_target_the_planner_would_leave_for_one_due_later():
+    # Flying to task 1 (300 m east, due by 20 s: late anyway); the planner would turn to task
+    # 2 (20 m west, due by 500 s) first. The target stays first.
+    target, later = task(1, 300.0, 20.0), task(2, -20.0, 500.0)
+    repaired = by_deadline([later, target], start=HOME, now_s=0.0, leg=leg, flying_to=1)
+    assert ids(repaired) == [1, 2]
+    # In time after the detour (due by 40 s, reached at 34 s): the planner's order stands.
+    target = task(1, 300.0, 40.0)
+    repaired = by_deadline([later, target], start=HOME, now_s=0.0, leg=leg, flying_to=1)
+    assert ids(repaired) == [2, 1]
+
+
 def test_the_planners_order_stands_where_no_task_is_late() -> None:
     # The planner serves the near task 2 (due in 120 s) on the way to the target (due in
     # 60 s): both in time, nothing to change.
