@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from itertools import pairwise
 
 from fleet.geo import Position, interpolate
+from fleet.kinematics import take_off_top
 
 from .base import Planner, PlanTask
 from .deadlines import by_deadline
@@ -59,15 +60,15 @@ class AloneRequest:
 
 @dataclass(frozen=True)
 class AloneVehicle:
-    """An RV of the replay: where it starts (its depot), its leg times, a new planner of its
-    kind, what a reading costs it, which points it may serve, and where it waits when it has
+    """An RV of the replay: where it starts (its depot), its leg times, how to make a planner
+    of its kind (a fresh one each replay), what a reading costs it, which points it may serve, and where it waits when it has
     nothing to do (``standby``, for ``standby_s`` before it flies home; None: where it is).
     It starts on the ground at its depot and lands there when it comes home."""
 
     id: int
     start: Position
     leg: LegTime
-    planner: Planner
+    new_planner: Callable[[], Planner]
     overhead_s: float = 0.0
     covers: Callable[[Position], bool] = lambda _: True
     standby: Position | None = None
@@ -80,7 +81,7 @@ class AloneVehicle:
         take-off altitude), as the simulator and the autopilots fly it."""
         if not grounded or self.takeoff_alt_m is None:
             return self.leg(here, target)
-        top = here.with_alt(max(target.alt, self.takeoff_alt_m, here.alt))
+        top = take_off_top(here, target, takeoff_alt_m=self.takeoff_alt_m)
         return self.leg(here, top) + self.leg(top, target)
 
 
@@ -137,6 +138,7 @@ class _Rv:
 
     def __init__(self, vehicle: AloneVehicle) -> None:
         self.vehicle = vehicle
+        self.planner = vehicle.new_planner()
         self.here = vehicle.start
         self.grounded = True
         self.free_s = -math.inf
@@ -165,16 +167,8 @@ class _Rv:
         vehicle = self.vehicle
         if vehicle.standby is None or self.free_s >= now or self.free_s == -math.inf:
             return self.here
-        return _along(
-            [
-                (self.here, self.free_s),
-                (vehicle.standby, self.free_s + vehicle.leg(self.here, vehicle.standby)),
-            ],
-            vehicle.standby_s,
-            vehicle.start,
-            vehicle.leg,
-            now,
-        )
+        at_spot_s = self.free_s + vehicle.leg(self.here, vehicle.standby)
+        return _along(self.here, self.free_s, vehicle.standby, at_spot_s, vehicle, now)
 
     def idle_until(self, now: float) -> None:
         """The RV, idle, gets work at ``now``: it is where ``idle_at`` says (on the ground if
@@ -191,7 +185,7 @@ class _Rv:
         vehicle = self.vehicle
         while self.open and self.free_s < now:
             tasks = [r.plan_task() for r in self.open.values()]
-            plan = vehicle.planner.plan(self.here, tasks, self.free_s)
+            plan = self.planner.plan(self.here, tasks, self.free_s)
             order = by_deadline(plan, start=self.here, now_s=self.free_s, leg=vehicle.leg)
             chosen = self.open.pop(order[0].id)
             self.order = [t.id for t in order[1:]]
@@ -202,21 +196,21 @@ class _Rv:
 
 
 def _along(
-    first_leg: list[tuple[Position, float]],
-    wait_s: float,
-    home: Position,
-    leg: LegTime,
+    start: Position,
+    left_s: float,
+    spot: Position,
+    at_spot_s: float,
+    vehicle: AloneVehicle,
     now: float,
 ) -> Position:
-    """Where an RV is at ``now`` that flies the first leg (from, then to, with the times it is
-    at each), waits ``wait_s`` at its end, then flies ``home``."""
-    (start, left_s), (spot, at_spot_s) = first_leg
+    """Where an RV is at ``now`` that left ``start`` at ``left_s`` for ``spot`` (there at
+    ``at_spot_s``), waits there ``vehicle.standby_s``, then flies home."""
     if now < at_spot_s:
         return interpolate(start, spot, (now - left_s) / (at_spot_s - left_s))
-    leaves_s = at_spot_s + wait_s
-    home_s = leg(spot, home)
+    leaves_s = at_spot_s + vehicle.standby_s
+    home_s = vehicle.leg(spot, vehicle.start)
     if now < leaves_s:
         return spot
     if now < leaves_s + home_s:
-        return interpolate(spot, home, (now - leaves_s) / home_s)
-    return home
+        return interpolate(spot, vehicle.start, (now - leaves_s) / home_s)
+    return vehicle.start

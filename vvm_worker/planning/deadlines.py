@@ -77,10 +77,9 @@ def by_deadline(
     if not any(task.deadline_s is not None for task in route):
         return route
     times = arrivals(route, start=start, now_s=now_s, leg=leg)
-    _keep_late_target(route, times, flying_to, (start, now_s, leg))
+    times = _keep_late_target(route, times, flying_to, start=start, now_s=now_s, leg=leg)
     pinned = route[0] if flying_to is not None and route and route[0].id == flying_to else None
     tried: set[int] = set()
-    times = arrivals(route, start=start, now_s=now_s, leg=leg)
     while True:
         late = [
             k
@@ -103,30 +102,34 @@ def _keep_late_target(
     route: list[PlanTask],
     times: list[float],
     flying_to: int | None,
-    at: tuple[Position, float, LegTime],
-) -> None:
+    *,
+    start: Position,
+    now_s: float,
+    leg: LegTime,
+) -> list[float]:
     """The vehicle flies to ``flying_to``; where the planner's order turns it to a task due
     later and would read the target late, it keeps flying to the target (put first), unless
-    that makes late a task that was in time."""
+    that makes late a task that was in time. Returns the arrival times of ``route`` as it is
+    then."""
     if flying_to is None or not route or route[0].id == flying_to:
-        return
+        return times
     k = next((k for k, task in enumerate(route) if task.id == flying_to), None)
     if k is None:
-        return
+        return times
     target = route[k]
     if deadline_of(route[0]) <= deadline_of(target) or times[k] <= deadline_of(target) + _EPS_S:
-        return
+        return times
     kept = [target, *route[:k], *route[k + 1 :]]
-    start, now_s, leg = at
-    after = dict(
-        zip((t.id for t in kept), arrivals(kept, start=start, now_s=now_s, leg=leg), strict=True)
-    )
+    kept_times = arrivals(kept, start=start, now_s=now_s, leg=leg)
+    after = {task.id: t_s for task, t_s in zip(kept, kept_times, strict=True)}
     if all(
         after[task.id] <= deadline_of(task) + _EPS_S
         for task, t_s in zip(route, times, strict=True)
         if task is not target and t_s <= deadline_of(task) + _EPS_S
     ):
         route[:] = kept
+        return kept_times
+    return times
 
 
 def _may_pass(task: PlanTask, other: PlanTask) -> bool:

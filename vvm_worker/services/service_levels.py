@@ -33,7 +33,13 @@ from vvm_worker.level_figures import (
     misses_target,
     percentile,
 )
-from vvm_worker.planning import DEFAULT_PLANNER, TravelTime, make_planner, standby_position
+from vvm_worker.planning import (
+    DEFAULT_PLANNER,
+    Planner,
+    TravelTime,
+    make_planner,
+    standby_position,
+)
 from vvm_worker.planning.alone import (
     AloneRequest,
     AloneVehicle,
@@ -459,11 +465,10 @@ def class_alone_stats(
                 deadline_s=terms.deadline(requested_s),
             )
         )
-    vehicles = Vehicle.objects.in_bulk(list(read))
+    fleet = [_alone_vehicle(v, read[k]) for k, v in Vehicle.objects.in_bulk(list(read)).items()]
     latencies: list[tuple[str, ServiceClassSpec, float]] = []
-    for spec, requests in asked.items():
-        # A new replay a class: fresh planners, every RV at its depot.
-        waits = alone_latencies(requests, [_alone_vehicle(v, read[k]) for k, v in vehicles.items()])
+    for spec, requests in asked.items():  # a replay a class: fresh planners, RVs at their depots
+        waits = alone_latencies(requests, fleet)
         latencies += [(ALL_CUSTOMERS, spec, wait) for wait in waits.values()]
     return {stats.service_class: stats for stats in level_stats(latencies)}
 
@@ -475,9 +480,11 @@ def _alone_vehicle(vehicle: Vehicle, readings: Sequence[Reading]) -> AloneVehicl
     def covers(where: Position) -> bool:
         return low <= where.alt <= high and vehicle.covers(where)
 
-    planner = make_planner(DEFAULT_PLANNER, travel_time=leg, time_limit_s=ALONE_PLAN_S)
+    def new_planner() -> Planner:
+        return make_planner(DEFAULT_PLANNER, travel_time=leg, time_limit_s=ALONE_PLAN_S)
+
     standby = None
-    if planner.stands_by:
+    if new_planner().stands_by:
         standby = standby_position(
             vehicle.area_polygon,
             [r.position.alt for r in readings],
@@ -488,7 +495,7 @@ def _alone_vehicle(vehicle: Vehicle, readings: Sequence[Reading]) -> AloneVehicl
         vehicle.pk,
         vehicle.depot,
         leg,
-        planner,
+        new_planner,
         overhead_s=reading_overhead(readings, leg=leg),
         covers=covers,
         standby=standby,

@@ -36,7 +36,7 @@ def request(rid: int, east_m: float, requested_s: float, **terms: float) -> Alon
 
 def rv(rid: int = 1, *, start: Position = HOME, overhead_s: float = 0.0, **more) -> AloneVehicle:
     return AloneVehicle(
-        rid, start, leg, make_planner("latency", cost=leg), overhead_s=overhead_s, **more
+        rid, start, leg, lambda: make_planner("latency", cost=leg), overhead_s=overhead_s, **more
     )
 
 
