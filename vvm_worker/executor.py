@@ -75,6 +75,7 @@ def _loop_task(task: Task, terms: ClassTerms) -> LoopTask:
         group=f"{task.vv_id}:{task.q}",
         weight=terms.weight,
         deadline_s=terms.deadline(task.requested_s),
+        service_class=terms.class_id,
     )
 
 
@@ -99,7 +100,8 @@ def _terms_held(task: Task) -> ClassTerms | None:
         return NO_CLASS_TERMS
     if not Customer.service_class.is_cached(customer):
         return None
-    return ClassTerms.of(customer.service_class.weight, customer.service_class.p95_s)
+    service_class = customer.service_class
+    return ClassTerms.of(service_class.weight, service_class.p95_s, service_class.pk)
 
 
 def write_estimates(stores: Sequence[DatabaseStore]) -> None:
@@ -187,8 +189,8 @@ class DatabaseStore:
         if self._tasks is None:
             self._tasks = []
             for row in vehicle_tasks(self.vehicle_id):
-                pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q, weight, p95_s = row
-                terms = ClassTerms.of(weight, p95_s)
+                pk, lat, lng, alt, tolerance_m, requested_s, sensors, vv_id, q, *of_class = row
+                terms = ClassTerms.of(*of_class)
                 self._terms[vv_id] = terms
                 self._tasks.append(
                     LoopTask(
@@ -201,6 +203,7 @@ class DatabaseStore:
                         group=f"{vv_id}:{q}",
                         weight=terms.weight,
                         deadline_s=terms.deadline(requested_s),
+                        service_class=terms.class_id,
                     )
                 )
         return self._tasks
@@ -210,10 +213,13 @@ class DatabaseStore:
         without a class): those not known yet in one query."""
         unknown = vv_ids - self._terms.keys()
         if unknown:
-            for vv_id, weight, p95_s in VirtualVehicle.objects.filter(pk__in=unknown).values_list(
-                "pk", "customer__service_class__weight", "customer__service_class__p95_s"
+            for vv_id, *of_class in VirtualVehicle.objects.filter(pk__in=unknown).values_list(
+                "pk",
+                "customer__service_class__weight",
+                "customer__service_class__p95_s",
+                "customer__service_class_id",
             ):
-                self._terms[vv_id] = ClassTerms.of(weight, p95_s)
+                self._terms[vv_id] = ClassTerms.of(*of_class)
         return self._terms
 
     def status(self) -> str:
@@ -602,13 +608,13 @@ class RigFleet:
         store, state = rig.store, rig.loop.last_state
         if state is None:  # it has reported nothing yet: its row says where it is
             return None
-        planned = (
-            planned_order([(t.id, t.position) for t in store.open_tasks()], state.planner_state)
-            if route
-            else ()
-        )
+        tasks = store.open_tasks() if route else ()
+        planned = planned_order([(t.id, t.position) for t in tasks], state.planner_state)
         return LocalRV(
-            status=store.status() if self.alone else None, position=state.position, route=planned
+            status=store.status() if self.alone else None,
+            position=state.position,
+            route=planned,
+            classes=tuple(t.service_class for t in tasks),
         )
 
     def add(self, rig: VehicleRig) -> None:

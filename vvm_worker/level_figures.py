@@ -46,15 +46,19 @@ class ServiceClassSpec:
 @dataclass(frozen=True)
 class ClassTerms:
     """What a VV's customer's service class asks of an RV: how much a second of its waiting
-    weighs, and the target its requests are to be read within (None: no class, no target)."""
+    weighs, and the target its requests are to be read within (None: no class, no target);
+    ``class_id``: which class it is (None: none), for the mapper's reserve."""
 
     weight: float = 1.0
     target_s: float | None = None
+    class_id: int | None = None
 
     @classmethod
-    def of(cls, weight: float | None, target_s: float | None) -> ClassTerms:
-        """From a class's columns as read (both None: the customer has no class)."""
-        return cls(1.0 if weight is None else float(weight), target_s)
+    def of(
+        cls, weight: float | None, target_s: float | None, class_id: int | None = None
+    ) -> ClassTerms:
+        """From a class's columns as read (all None: the customer has no class)."""
+        return cls(1.0 if weight is None else float(weight), target_s, class_id)
 
     def deadline(self, requested_s: float) -> float | None:
         """When a request made at ``requested_s`` is to be read by (None: no target)."""

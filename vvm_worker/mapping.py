@@ -16,7 +16,14 @@ from fleet.kinds import AERIAL, DEFAULT_KIND, UNDERWATER
 from vvm_worker.planning import TravelTime, best_insertion
 from vvm_worker.runtime.types import TaskRequest
 
-__all__ = ["QUEUE_PENALTY_S", "ExclusionZone", "MapDecision", "VehicleCaps", "map_task"]
+__all__ = [
+    "QUEUE_PENALTY_S",
+    "ExclusionZone",
+    "MapDecision",
+    "Reserve",
+    "VehicleCaps",
+    "map_task",
+]
 
 # Cost of one task queued on a vehicle whose route the mapper does not know, in seconds.
 QUEUE_PENALTY_S = 30.0
@@ -45,6 +52,8 @@ class VehicleCaps:
     no_fly: tuple[ExclusionZone, ...] = ()
     kind: str = DEFAULT_KIND
     dive_rate_mps: float | None = None  # how fast it goes down (None: its climb rate)
+    # The service class of each of its open tasks the mapper knows (None: no class).
+    task_classes: tuple[int | None, ...] = ()
 
     def covers(self, task: TaskRequest) -> bool:
         return bool(self.area.covers(Point(task.lng, task.lat)))
@@ -83,6 +92,37 @@ class VehicleCaps:
 
 
 @dataclass(frozen=True)
+class Reserve:
+    """The service classes that give way now (``classes``; None stands for the customers
+    without a class): while another class without slack is being served, their tasks leave a
+    reserve of RVs to it, so that its next request finds an RV that is free or serving it,
+    standing by in the middle of the area, instead of every RV out at a flood's far tasks.
+
+    The reserve for a task is half of the active RVs that can serve it (rounded down: none
+    where one can), those that hold the fewest tasks of the classes giving way (then by
+    name). A task of such a class goes to another RV, and to a reserve RV only where every
+    other would be late for it (its own class's deadline): giving way never makes a class
+    miss its own target. ``services.service_levels.classes_giving_way`` says who gives way."""
+
+    classes: frozenset[int | None]
+
+    def gives_way(self, service_class: int | None) -> bool:
+        return service_class in self.classes
+
+    def held(self, vehicle: VehicleCaps) -> int:
+        """How many tasks of the classes giving way the RV holds."""
+        return sum(1 for c in vehicle.task_classes if c in self.classes)
+
+    def kept(self, able: Sequence[VehicleCaps]) -> frozenset[int]:
+        """The ids of the RVs of ``able`` (the active RVs that can serve a task) kept free."""
+        ordered = sorted(able, key=lambda v: (self.held(v), v.name))
+        return frozenset(v.id for v in ordered[: len(able) // 2])
+
+
+NO_RESERVE = Reserve(frozenset())
+
+
+@dataclass(frozen=True)
 class MapDecision:
     """The mapper's answer for one task.
 
@@ -104,18 +144,24 @@ def _fmt(task: TaskRequest) -> str:
 
 
 def map_task(
-    task: TaskRequest, fleet: Sequence[VehicleCaps], *, due_in_s: float | None = None
+    task: TaskRequest,
+    fleet: Sequence[VehicleCaps],
+    *,
+    due_in_s: float | None = None,
+    service_class: int | None = None,
+    reserve: Reserve = NO_RESERVE,
 ) -> MapDecision:
     """Which RVs can serve the task, ranked by what it costs the customers to give it to them
     (`VehicleCaps.cost_s`, then name): where areas overlap, the RV that serves it soonest
     without holding up its other tasks more than another would. ``due_in_s``: the task's
     deadline from now (its customer's class's target; None: none): the RVs that can reach it
-    in time come first."""
+    in time come first. A task of a class giving way (``service_class`` in ``reserve``) puts
+    the reserve's RVs after the others that reach it in time."""
     able = [v for v in fleet if v.can_serve(task)]
-    active = sorted(
-        (v for v in able if v.active),
-        key=lambda v: (*v.rank(task, due_in_s), v.name),
-    )
+    active = [v for v in able if v.active]
+    ranks = {v.id: v.rank(task, due_in_s) for v in active}
+    kept = reserve.kept(active) if reserve.gives_way(service_class) else frozenset()
+    active.sort(key=lambda v: (ranks[v.id][0], v.id in kept, ranks[v.id][1], v.name))
     if active:
         return MapDecision(tuple(active), parked=False, reason=None)
     if able:

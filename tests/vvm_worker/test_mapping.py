@@ -5,7 +5,7 @@ from __future__ import annotations
 from shapely.geometry import Polygon
 
 from fleet.geo import Position
-from vvm_worker.mapping import VehicleCaps, map_task
+from vvm_worker.mapping import Reserve, VehicleCaps, map_task
 from vvm_worker.planning import TravelTime
 from vvm_worker.runtime import TaskRequest
 
@@ -104,3 +104,65 @@ def test_where_areas_overlap_the_rv_that_serves_the_task_soonest_gets_it() -> No
     # Ranked by distance plus 30 s per queued task, as the mapper once did, Idle would win.
     blind = caps("Passing", ONE, position=passing.position, open_tasks=2)
     assert blind.cost_s(point) > idle.cost_s(point)
+
+
+BULK, PREMIUM = 7, 8  # service class ids
+
+
+def test_a_class_giving_way_leaves_half_the_rvs_free_unless_the_others_would_be_late() -> None:
+    # Four RVs over one area, all equally near the task; two carry bulk work (Flood A, B),
+    # one carries premium work, one is idle. Bulk gives way: its task goes to the RVs outside
+    # the reserve (the two with the fewest bulk tasks: Idle and Premium's), the nearest first.
+    here = Position(48.1111, 12.8619, 50.0)
+    near = Position(48.1111, 12.8622, 50.0)
+    flood_a = caps(
+        "Flood A", ONE, position=near, open_tasks=2, route=(here, here), task_classes=(BULK, BULK)
+    )
+    flood_b = caps(
+        "Flood B",
+        ONE,
+        position=Position(48.1100, 12.8600, 50.0),
+        open_tasks=1,
+        route=(here,),
+        task_classes=(BULK,),
+    )
+    serving = caps(
+        "Serving", ONE, position=here, open_tasks=1, route=(here,), task_classes=(PREMIUM,)
+    )
+    idle = caps("Idle", ONE, position=here)
+    fleet = [flood_a, flood_b, serving, idle]
+    reserve = Reserve(frozenset({BULK, None}))
+    assert reserve.kept(fleet) == {serving.id, idle.id}
+
+    def ranked(service_class, due_in_s=None, give_way=reserve):
+        decision = map_task(
+            task(here.lat, here.lng, here.alt),
+            fleet,
+            due_in_s=due_in_s,
+            service_class=service_class,
+            reserve=give_way,
+        )
+        return [v.name for v in decision.candidates]
+
+    # Without the reserve an RV on the spot is the cheapest; bulk's task passes it by.
+    by_cost = sorted(fleet, key=lambda v: (v.cost_s(task(here.lat, here.lng, here.alt)), v.name))
+    assert by_cost[0].id in reserve.kept(fleet)
+    assert ranked(BULK, give_way=Reserve(frozenset()))[0] == by_cost[0].name
+    kept_back = [v.name for v in by_cost if v.id in reserve.kept(fleet)]
+    others = [v.name for v in by_cost if v.id not in reserve.kept(fleet)]
+    assert ranked(BULK) == others + kept_back
+    # A customer without a class gives way too; premium (not giving way) takes the cheapest.
+    assert ranked(None) == others + kept_back
+    assert ranked(PREMIUM)[0] == by_cost[0].name
+    # Giving way never makes a class late: where only the reserve reaches the task in time,
+    # it goes there (Flood A and B have tasks to fly first: 1 s is too little for them).
+    assert ranked(BULK, due_in_s=1.0)[:2] == ["Idle", "Serving"]
+
+
+def test_one_rv_that_can_serve_the_task_is_never_kept_back() -> None:
+    only = caps("Only", ONE, task_classes=())
+    other_area = caps("Elsewhere", TWO)
+    reserve = Reserve(frozenset({BULK}))
+    assert reserve.kept([only]) == frozenset()
+    decision = map_task(task(), [only, other_area], service_class=BULK, reserve=reserve)
+    assert [v.name for v in decision.candidates] == ["Only"]

@@ -14,19 +14,20 @@ import pytest
 from django.core.exceptions import ValidationError
 
 from accounts.models import Customer, ServiceClass
-from missions.models import Task, TaskStatus, VirtualVehicle, VVStatus, WaitReason
+from missions.models import Migration, Task, TaskStatus, VirtualVehicle, VVStatus, WaitReason
 from missions.waiting import vv_waiting
 from tests.api_fixtures import token_client
 from tests.factories import CustomerFactory, VehicleFactory
 from vvm_worker.level_figures import ServiceClassSpec
 from vvm_worker.scenario import Scenario, ScenarioError, parse_scenario
-from vvm_worker.services import vv_admit_queued, vv_cancel, vv_submit
+from vvm_worker.services import vv_admit_queued, vv_advance, vv_cancel, vv_submit
 from vvm_worker.services.customers import customer_class_set, service_class_save
 from vvm_worker.services.scenarios import scenario_apply
 from vvm_worker.services.service_levels import (
     LEVEL_MIN_SAMPLES,
     LEVEL_WINDOW_S,
     class_held_nudge,
+    classes_giving_way,
     service_level_holds,
     service_levels_by_class,
 )
@@ -440,3 +441,70 @@ def test_an_rv_weighs_a_task_routed_to_it_by_its_class_without_reading_it_again(
     with django_assert_num_queries(0):
         weights = [t.weight for t in store.open_tasks()]
     assert weights == [2.5, 1.0]
+
+
+# --- the mapper's reserve ----------------------------------------------------------------------
+
+ONE_TASK = """var co2 = VV.sensor.get('CO2');
+VV.task.execute({position: new VV.types.LatLngAlt(48.1111, 12.8619, 50), sensors: [co2]});
+"""
+
+
+def test_classes_with_slack_give_way_while_a_class_without_it_is_served(
+    customer_a, standard, slow_premium, vvm
+) -> None:
+    customer_class_set(customer=customer_a, service_class=standard, vvm=vvm)
+    load_of(customer_a, latencies=[10.0] * LEVEL_MIN_SAMPLES, open_ages=[5.0])
+    # Premium reads at 41 s for its 30 s: standard (10 s of 120) and customers without a class
+    # give way to it.
+    assert classes_giving_way(now_s=NOW, vvm=vvm) == {standard.pk, None}
+    # Premium catches up (its late tasks leave the window); routing looks again 10 s later.
+    Task.objects.filter(vv__customer=slow_premium).delete()
+    load_of(slow_premium, latencies=[5.0] * LEVEL_MIN_SAMPLES, now=NOW + 5)
+    assert classes_giving_way(now_s=NOW + 5, vvm=vvm) == {standard.pk, None}
+    assert classes_giving_way(now_s=NOW + 10, vvm=vvm) == frozenset()
+
+
+def test_nobody_gives_way_without_a_class_served_or_when_every_class_has_slack(
+    customer_a, standard, vvm
+) -> None:
+    customer_class_set(customer=customer_a, service_class=standard, vvm=vvm)
+    assert classes_giving_way(now_s=NOW, vvm=vvm) == frozenset()  # nothing served lately
+    load_of(customer_a, latencies=[10.0] * LEVEL_MIN_SAMPLES)  # 10 s of 120: slack
+    vvm.giving_way_seen = None
+    assert classes_giving_way(now_s=NOW, vvm=vvm) == frozenset()  # nobody to give way to
+    load_of(customer_a, latencies=[70.0] * LEVEL_MIN_SAMPLES)  # now 70 s: no slack
+    vvm.giving_way_seen = None
+    # Only the customers without a class give way: standard has nothing to give.
+    assert classes_giving_way(now_s=NOW, vvm=vvm) == {None}
+
+
+def test_a_vv_giving_way_leaves_the_reserve_rv_to_the_class_without_slack(
+    customer_a, customer_b, standard, premium, slow_premium, vvm
+) -> None:
+    # Two RVs over one area at one depot. Heli Two carries a task of a standard customer
+    # already; Heli One is idle, cheaper for any new task. Standard has slack while premium
+    # misses: a new VV of a customer without a class goes to Heli Two, leaving Heli One to
+    # premium's, which takes it.
+    two = VehicleFactory(name="Heli Two")
+    VehicleFactory(name="Heli One")
+    steady = CustomerFactory(name="Customer D", max_parallel_vvs=50)
+    customer_class_set(customer=steady, service_class=standard, vvm=vvm)
+    customer_class_set(customer=customer_b, service_class=premium, vvm=vvm)
+    load_of(steady, latencies=[10.0] * LEVEL_MIN_SAMPLES)
+    Task.objects.filter(vv=load_of(steady, open_ages=[5.0])).update(vehicle=two)
+    plain = vv_submit(customer=customer_a, name="plain", program=ONE_TASK, vvm=vvm)
+    premium_vv = vv_submit(customer=customer_b, name="premium", program=ONE_TASK, vvm=vvm)
+    for vv in (plain, premium_vv):
+        vv_advance(vv_id=vv.pk, vvm=vvm)
+    assert (moved_to(plain), moved_to(premium_vv)) == ("Heli Two", "Heli One")
+    # With no class under pressure, the same kind of VV takes the cheapest RV.
+    vvm.giving_way_seen = (NOW, frozenset())
+    again = vv_submit(customer=customer_a, name="plain 2", program=ONE_TASK, vvm=vvm)
+    vv_advance(vv_id=again.pk, vvm=vvm)
+    assert moved_to(again) == "Heli One"
+
+
+def moved_to(vv: VirtualVehicle) -> str:
+    """The RV the VV last migrated to."""
+    return Migration.objects.filter(vv=vv).latest("at_s", "id").to_name

@@ -50,7 +50,8 @@ class LoopTask:
     """An open task of the RV as the loop sees it. ``vv`` and ``group`` are the store's: the
     VV that asked for it and the request it belongs to (an executeAll batch is one);
     ``weight``: its customer's service class weight (1 without a class); ``deadline_s``: when
-    it is to be read by (its request time plus the class's target; None: no class)."""
+    it is to be read by (its request time plus the class's target; None: no class);
+    ``service_class``: the class's id (None: no class)."""
 
     id: int
     position: Position
@@ -61,6 +62,7 @@ class LoopTask:
     group: str | None = None
     weight: float = 1.0
     deadline_s: float | None = None
+    service_class: int | None = None
 
     def as_plan_task(self) -> PlanTask:
         return PlanTask(

@@ -41,11 +41,12 @@ class LocalRV:
     """What the process that hosts an RV knows of it now, as its row would say once written:
     its status (None: its row's, which another process may have changed a moment ago), its
     last reported position, its open tasks in the order its planner last meant to serve
-    them."""
+    them and the service class of each (None: no class)."""
 
     status: str | None
     position: Position
     route: tuple[Position, ...]
+    classes: tuple[int | None, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,9 @@ class VVM:
     # Who tells the customers' webhooks and e-mail recipients that a VV ended or a task was
     # done (vvm_worker/services/notifications.py); nobody in `simulate` and in most tests.
     notifier: Notifier = dataclass_field(default_factory=Unheard)
+    # The service classes that gave way when routing last looked, and when (platform clock):
+    # see ``service_levels.classes_giving_way``.
+    giving_way_seen: tuple[float, frozenset[int | None]] | None = None
 
     @property
     def listened(self) -> bool:

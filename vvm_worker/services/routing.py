@@ -30,7 +30,14 @@ from missions.models import (
 )
 from vvm_worker.dispatch import HostRef
 from vvm_worker.level_figures import ClassTerms
-from vvm_worker.mapping import ExclusionZone, MapDecision, VehicleCaps, map_task
+from vvm_worker.mapping import (
+    NO_RESERVE,
+    ExclusionZone,
+    MapDecision,
+    Reserve,
+    VehicleCaps,
+    map_task,
+)
 from vvm_worker.runtime import (
     PendingRequest,
     TaskRequest,
@@ -45,6 +52,7 @@ from vvm_worker.services.base import (
     pending_of,
 )
 from vvm_worker.services.journal import journal_append
+from vvm_worker.services.service_levels import classes_giving_way
 from vvm_worker.services.store import (
     db_time_ago,
     open_tasks_of_vehicles,
@@ -235,6 +243,7 @@ def fleet_caps_and_rows(
                 position=vehicle.position if reported else static.position,
                 open_tasks=len(route),
                 route=route,
+                task_classes=found.classes.get(pk, ()),
             )
         )
     return caps, found.rows
@@ -242,16 +251,18 @@ def fleet_caps_and_rows(
 
 @dataclasses.dataclass
 class _FleetRows:
-    """Some RVs as routing sees them: their rows, their routes, whether their worker is
-    online (by id)."""
+    """Some RVs as routing sees them: their rows, their routes and the service classes of
+    their open tasks, whether their worker is online (by id)."""
 
     rows: dict[int, Vehicle] = dataclasses.field(default_factory=dict)
     routes: dict[int, tuple[Position, ...]] = dataclasses.field(default_factory=dict)
+    classes: dict[int, tuple[int | None, ...]] = dataclasses.field(default_factory=dict)
     online: dict[int, bool] = dataclasses.field(default_factory=dict)
 
     def add(self, other: _FleetRows) -> None:
         self.rows.update(other.rows)
         self.routes.update(other.routes)
+        self.classes.update(other.classes)
         self.online.update(other.online)
 
 
@@ -274,6 +285,7 @@ def _rows_hosted_here(vvm: VVM, known: dict[int, LocalRV], shape: _FleetShape) -
         row.status = status
         row.lat, row.lng, row.alt = live.position.lat, live.position.lng, live.position.alt
         found.rows[pk], found.routes[pk], found.online[pk] = row, live.route, True
+        found.classes[pk] = live.classes
     return found
 
 
@@ -285,7 +297,9 @@ def _rows_hosted_elsewhere(vvm: VVM, vehicle_ids: list[int], *, ranked: bool) ->
         return found
     found.rows = {v.pk: v for v in vehicles_in_fleet(vehicle_ids, lease_s=vvm.lease_s)}
     if ranked:
-        found.routes = planned_routes({pk: v.planner_state for pk, v in found.rows.items()})[0]
+        found.routes, _, found.classes = planned_routes(
+            {pk: v.planner_state for pk, v in found.rows.items()}
+        )
     found.online = {
         pk: vvm.lease_s is None or bool(getattr(vehicle, "online", False))
         for pk, vehicle in found.rows.items()
@@ -323,18 +337,21 @@ def rv_statuses_read_ahead(*, vvm: VVM) -> Iterator[None]:
 
 def planned_routes(
     plans: dict[int, Any],
-) -> tuple[dict[int, tuple[Position, ...]], dict[int, int]]:
+) -> tuple[dict[int, tuple[Position, ...]], dict[int, int], dict[int, tuple[int | None, ...]]]:
     """The open tasks of these RVs (id -> the planner state it saved), in the order its planner
-    last meant to serve them (tasks the plan does not know yet come last, oldest first), and
-    how many each has."""
+    last meant to serve them (tasks the plan does not know yet come last, oldest first), how
+    many each has, and the service class of each of them (oldest first; None: no class)."""
     rows = open_tasks_of_vehicles(sorted(plans))
     tasks: dict[int, list[tuple[int, Position]]] = {}
-    for pk, vehicle_id, lat, lng, alt in rows:
+    classes: dict[int, list[int | None]] = {}
+    for pk, vehicle_id, lat, lng, alt, service_class in rows:
         tasks.setdefault(vehicle_id, []).append((pk, Position(lat, lng, alt)))
+        classes.setdefault(vehicle_id, []).append(service_class)
     routes = {
         vehicle_id: planned_order(items, plans[vehicle_id]) for vehicle_id, items in tasks.items()
     }
-    return routes, {vehicle_id: len(items) for vehicle_id, items in tasks.items()}
+    counts = {vehicle_id: len(items) for vehicle_id, items in tasks.items()}
+    return routes, counts, {vehicle_id: tuple(c) for vehicle_id, c in classes.items()}
 
 
 def planned_order(items: Sequence[tuple[int, Position]], state: Any) -> tuple[Position, ...]:
@@ -388,7 +405,17 @@ def _route(
         return False, None
     fleet, rows = fleet_caps_and_rows(vvm, [request_of(t) for t in open_tasks], shape)
     due = _due_in(vv, vvm)
-    decisions = [map_task(request_of(t), fleet, due_in_s=due(t)) for t in open_tasks]
+    service_class = vv.customer.service_class_id
+    # Where more than one RV is to choose from, the classes with slack leave a reserve.
+    reserve = NO_RESERVE
+    if sum(1 for caps in fleet if caps.active) > 1:
+        reserve = Reserve(classes_giving_way(now_s=vvm.clock.now_s(), vvm=vvm))
+    decisions = [
+        map_task(
+            request_of(t), fleet, due_in_s=due(t), service_class=service_class, reserve=reserve
+        )
+        for t in open_tasks
+    ]
     host = vv.host_rv
     if host is not None and mine and _stays(host, open_tasks, mine, fleet, decisions, due):
         tasks_assign(tasks=mine, vehicle=host, vvm=vvm)

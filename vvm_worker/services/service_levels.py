@@ -150,6 +150,33 @@ def class_level(
     return ClassLevel(spec=spec, p95_s=percentile(values, 95) if values else None, missing=missing)
 
 
+# Routing looks again at which classes give way at most this often (platform seconds).
+GIVE_WAY_LOOK_S = 10.0
+
+
+def classes_giving_way(*, now_s: float, vvm: VVM) -> frozenset[int | None]:
+    """The service classes whose tasks leave the mapper's reserve of RVs to others now
+    (`mapping.Reserve`; None stands for the customers without a class): while a class with a
+    target that has no slack is being served (a task of it requested within the window), every
+    class served that has slack (`ClassLevel.has_slack`) and the customers without a class.
+    Empty otherwise: with no class served, or every class with slack, nobody gives way.
+    Looked at again at most every GIVE_WAY_LOOK_S of the platform's clock (kept on ``vvm``):
+    one query, and one per class served."""
+    seen = vvm.giving_way_seen
+    if seen is not None and 0.0 <= now_s - seen[0] < GIVE_WAY_LOOK_S:
+        return seen[1]
+    served = ServiceClass.objects.filter(
+        customers__vvs__tasks__requested_s__gte=now_s - LEVEL_WINDOW_S
+    ).distinct()
+    levels = {c.pk: class_level(service_class=c, now_s=now_s) for c in served}
+    pressed = any(v.spec.p95_s is not None and not v.has_slack for v in levels.values())
+    giving: frozenset[int | None] = frozenset()
+    if pressed:
+        giving = frozenset({None, *(pk for pk, level in levels.items() if level.has_slack)})
+    vvm.giving_way_seen = (now_s, giving)
+    return giving
+
+
 @dataclass(frozen=True)
 class HoldBack:
     """Admission holds back a customer's new VVs: ``level`` is its class's, ``for_classes``

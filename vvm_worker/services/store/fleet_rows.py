@@ -64,7 +64,7 @@ _ROUTES = PreparedRead(
     lambda vehicle_ids: (
         Task.objects.filter(status=TaskStatus.OPEN, vehicle_id__in=vehicle_ids)
         .order_by("requested_s", "id")
-        .values_list("pk", "vehicle_id", "lat", "lng", "alt")
+        .values_list("pk", "vehicle_id", "lat", "lng", "alt", "vv__customer__service_class_id")
     ),
     samples=[("vehicle", _RV_KEYS)],
 )
@@ -72,13 +72,14 @@ _ROUTES = PreparedRead(
 
 def open_tasks_of_vehicles(
     vehicle_ids: Sequence[int],
-) -> list[tuple[int, int, float, float, float]]:
-    """(task, RV, lat, lng, alt) of the open tasks on these RVs' lists, oldest first."""
+) -> list[tuple[int, int, float, float, float, int | None]]:
+    """(task, RV, lat, lng, alt, service class) of the open tasks on these RVs' lists, oldest
+    first (the class of the task's VV's customer; None: none)."""
     return _ROUTES.rows(vehicle_ids) if vehicle_ids else []
 
 
-# The columns of ``vehicle_tasks``' rows, in order; the last two are the task's customer's
-# service class weight and target (None: no class).
+# The columns of ``vehicle_tasks``' rows, in order; the last three are the task's customer's
+# service class weight, target and id (None: no class).
 VEHICLE_TASK_COLUMNS = (
     "id",
     "lat",
@@ -91,6 +92,7 @@ VEHICLE_TASK_COLUMNS = (
     "q",
     "vv__customer__service_class__weight",
     "vv__customer__service_class__p95_s",
+    "vv__customer__service_class_id",
 )
 _VEHICLE_TASKS = PreparedRead(
     lambda vehicle_id: (
