@@ -5,6 +5,9 @@ to 0.1 m/s, durations to 0.1 s, a time on the platform clock as a UTC date and t
 digits (``6831.406656359808``) only hide the ones that matter. The admin's lists and change
 pages show a float field through a display method made here (``rounded``, ``duration``,
 ``moment``), named in ``list_display``, ``readonly_fields`` and fieldsets like a field.
+
+A size the database keeps in bytes (a customer's storage, heap and message quotas) is entered
+and shown in MB or KB through ``SizeField``, a form field: ``10`` for 10,485,760 bytes.
 """
 
 from __future__ import annotations
@@ -12,9 +15,13 @@ from __future__ import annotations
 import datetime as dt
 import math
 from collections.abc import Callable
+from decimal import ROUND_HALF_EVEN, Decimal
 from typing import Any
 
+from django import forms
 from django.contrib import admin
+from django.contrib.admin.widgets import AdminBigIntegerFieldWidget
+from django.core.exceptions import ValidationError
 
 # How many decimals each kind of number means something to.
 DEGREES = 6  # latitude and longitude: 1e-6 degree is about 0.1 m
@@ -93,3 +100,55 @@ class PositionShown:
     lat_shown = rounded("lat", digits=DEGREES, description="latitude")
     lng_shown = rounded("lng", digits=DEGREES, description="longitude")
     alt_shown = rounded("alt", digits=METRES, unit="m", description="altitude")
+
+
+# What the admin's sizes are entered in: binary units, as the quotas' defaults are (10 MB of
+# storage is 10 * 1024 * 1024 bytes).
+SIZE_UNITS = {"KB": 1024, "MB": 1024 * 1024}
+_SHOWN_TO = Decimal("0.001")
+
+
+class SizeField(forms.DecimalField):
+    """A size kept in bytes, entered and shown in ``unit`` (``"MB"`` or ``"KB"``) to 3
+    decimals; cleaned to whole bytes (an int), at least ``min_bytes``.
+
+    A size that is no whole number of the unit (1,000,000 bytes: ``0.954`` MB) is shown
+    rounded; the field counts as changed only when the number shown was changed, so saving a
+    form that was not touched keeps every byte.
+    """
+
+    widget = AdminBigIntegerFieldWidget  # the admin's wide number box (step="any" added)
+
+    def __init__(self, *, unit: str, min_bytes: int = 0, **kwargs: Any) -> None:
+        self.unit = unit
+        self.unit_bytes = SIZE_UNITS[unit]
+        self.min_bytes = min_bytes
+        super().__init__(**kwargs)
+
+    def shown(self, size: int) -> str:
+        """``size`` bytes in the field's unit: ``"10"``, ``"0.954"``."""
+        units = (Decimal(size) / self.unit_bytes).quantize(_SHOWN_TO, rounding=ROUND_HALF_EVEN)
+        return format(units.normalize(), "f")
+
+    def prepare_value(self, value: Any) -> Any:
+        # Bytes from the model; what a person typed (a string) is shown back as typed.
+        return self.shown(value) if isinstance(value, int) else value
+
+    def clean(self, value: Any) -> int | None:
+        units = super().clean(value)
+        if units is None:
+            return None
+        size = int((units * self.unit_bytes).to_integral_value(rounding=ROUND_HALF_EVEN))
+        if size < self.min_bytes:
+            raise ValidationError(f"At least {self.shown(self.min_bytes)} {self.unit}.")
+        return size
+
+    def has_changed(self, initial: Any, data: Any) -> bool:
+        if self.disabled:
+            return False
+        try:
+            entered = self.to_python(data)
+        except ValidationError:
+            return True
+        before = None if initial in (None, "") else self.to_python(self.prepare_value(initial))
+        return entered != before

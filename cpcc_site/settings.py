@@ -33,7 +33,8 @@ ALLOWED_HOSTS = env_list("ALLOWED_HOSTS", ["localhost", "127.0.0.1", "[::1]"] if
 
 INSTALLED_APPS = [
     "daphne",
-    "django.contrib.admin",
+    # django.contrib.admin, on the project's admin site (the platform's sections first).
+    "cpcc_site.admin_site.CpccAdminConfig",
     "django.contrib.auth",
     "django.contrib.contenttypes",
     "django.contrib.sessions",
@@ -210,14 +211,14 @@ STATIC_URL = "static/"
 STATICFILES_DIRS = [BASE_DIR / "static"]
 STATIC_ROOT = VAR_DIR / "staticfiles"
 # With DEBUG off, WhiteNoise serves what `collectstatic` put in STATIC_ROOT: names with a hash
-# of the content (cached for ever) and gzip copies. With DEBUG on (development, tests, `make
+# of the content (cached for ever) and gzip copies (cpcc_site/static_storage.py). With DEBUG on (development, tests, `make
 # demo`) it serves the apps' and static/'s files as they are, no collectstatic needed.
 STORAGES = {
     "default": {"BACKEND": "django.core.files.storage.FileSystemStorage"},
     "staticfiles": {
         "BACKEND": "django.contrib.staticfiles.storage.StaticFilesStorage"
         if DEBUG
-        else "whitenoise.storage.CompressedManifestStaticFilesStorage"
+        else "cpcc_site.static_storage.HashedStaticFiles"
     },
 }
 # Fixed here because WhiteNoise would read DEBUG only when the first request comes, and tests

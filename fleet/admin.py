@@ -19,6 +19,7 @@ from django.urls import URLPattern, path, reverse
 from django.utils import timezone
 
 from cpcc_site.admin_display import METRES, SPEED, PositionShown, duration, rounded
+from cpcc_site.admin_site import ExplainedWhenEmpty
 from fleet.models import (
     Driver,
     GroundStation,
@@ -257,8 +258,12 @@ class SensorTypeForm(forms.ModelForm):
 
 
 @admin.register(SensorType)
-class SensorTypeAdmin(admin.ModelAdmin):
+class SensorTypeAdmin(ExplainedWhenEmpty):
     form = SensorTypeForm
+    empty_list_help = (
+        "An SDC entry is a sensor VVs ask for by name (VV.sensor.get('CO2')): its kind, its "
+        "unit, and which kinds of RV carry it. Add one, then tick it on the RVs that carry it."
+    )
     list_display = ["name", "kind", "unit", "privileged", "kinds_shown"]
     list_filter = ["kind", "privileged"]
     search_fields = ["name"]
@@ -269,9 +274,14 @@ class SensorTypeAdmin(admin.ModelAdmin):
 
 
 @admin.register(GroundStation)
-class GroundStationAdmin(PositionShown, admin.ModelAdmin):
+class GroundStationAdmin(PositionShown, ExplainedWhenEmpty):
     """Ground stations; a new one starts the VVs that waited for one."""
 
+    empty_list_help = (
+        "A ground station loads customers' new VVs and keeps those that wait for an RV, have "
+        "ended or cannot be served; no VV starts before there is one. Add one with its "
+        "position."
+    )
     list_display = ["name", "lat_shown", "lng_shown", "alt_shown"]
     search_fields = ["name"]
 
@@ -284,7 +294,7 @@ class GroundStationAdmin(PositionShown, admin.ModelAdmin):
             obj.pk = ground_station_create(config=config, vvm=platform_vvm()).pk
 
 
-class _AirspaceAdmin(admin.ModelAdmin):
+class _AirspaceAdmin(ExplainedWhenEmpty):
     """Saved and deleted through its services, which tell every RV's worker."""
 
     def _save(self, obj: Any) -> None:
@@ -309,6 +319,11 @@ class NoFlyZoneAdmin(_AirspaceAdmin):
     """No-fly zones: no RV serves a task inside one (between its altitudes), and every RV's
     autopilot gets it as an exclusion fence (when it holds at every altitude the RV flies)."""
 
+    empty_list_help = (
+        "A no-fly zone is an area no RV flies into between its altitudes (an airport, a "
+        "prison, a crowd): no task inside it is served, and every RV's autopilot gets it as a "
+        "fence. Add one by drawing it on the map."
+    )
     list_display = ["name", "min_altitude_shown", "max_altitude_shown", "updated"]
     min_altitude_shown = rounded(
         "min_altitude_m", digits=METRES, unit="m", description="min altitude"
@@ -337,6 +352,11 @@ class NoFlyZoneAdmin(_AirspaceAdmin):
 class RallyPointAdmin(PositionShown, _AirspaceAdmin):
     """Rally points every RV's autopilot gets (where it may land or wait instead of home)."""
 
+    empty_list_help = (
+        "A rally point is a place where an RV may land or wait instead of flying home (the "
+        "autopilot's rally points); every RV's autopilot gets them all. Add one with its "
+        "position and the altitude it holds at."
+    )
     list_display = ["name", "lat_shown", "lng_shown", "alt_shown"]
     search_fields = ["name"]
 
@@ -366,10 +386,16 @@ class VehicleForm(forms.ModelForm):
 
 
 @admin.register(Vehicle)
-class VehicleAdmin(PositionShown, admin.ModelAdmin):
+class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
     """RVs: their kind, limits and sensors; status changes go through the actions, which move
     the VVs aboard an RV that leaves service to RVs that can serve them."""
 
+    empty_list_help = (
+        "An RV (real vehicle) is a copter, rover, boat or sub of the fleet: where it may fly, "
+        "how fast, which sensors it carries, whether it is simulated or flown over MAVLink. VVs "
+        "fly aboard the RVs whose area and sensors fit their tasks. Add one with its area drawn "
+        "on the map; it takes work at once."
+    )
     form = VehicleForm
     list_display = [
         "name",

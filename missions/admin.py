@@ -6,6 +6,7 @@ from django.db.models import QuerySet
 from django.http import HttpRequest
 
 from cpcc_site.admin_display import PositionShown, moment, number_text
+from cpcc_site.admin_site import ExplainedWhenEmpty
 from missions.models import LogEntry, Message, Migration, StorageDocument, Task, VirtualVehicle
 
 
@@ -51,7 +52,12 @@ class MigrationInline(admin.TabularInline):
 
 
 @admin.register(VirtualVehicle)
-class VirtualVehicleAdmin(admin.ModelAdmin):
+class VirtualVehicleAdmin(ExplainedWhenEmpty):
+    empty_list_help = (
+        "A VV (virtual vehicle) is a customer's JavaScript program flown aboard the RVs: it "
+        "asks for readings and moves from RV to RV to get them. Customers submit them in the "
+        "editor, over the API or with cpcc."
+    )
     list_display = ["name", "customer", "status", "host_gs", "host_rv", "steps", "submitted"]
     list_filter = ["status", "customer"]
     search_fields = ["name", "customer__name"]
@@ -88,7 +94,11 @@ class VirtualVehicleAdmin(admin.ModelAdmin):
 
 
 @admin.register(Task)
-class TaskAdmin(MadeByThePlatform, admin.ModelAdmin):
+class TaskAdmin(MadeByThePlatform, ExplainedWhenEmpty):
+    empty_list_help = (
+        "A task is a point a VV asked to have read (VV.task.execute): the platform makes one "
+        "when a VV asks for a reading, and an RV that can serve it flies there."
+    )
     list_display = ["vv", "q", "index", "status", "vehicle", "requested", "done"]
     list_filter = ["status", "vehicle"]
     requested = _vv_time("requested_s", "requested")
@@ -96,30 +106,45 @@ class TaskAdmin(MadeByThePlatform, admin.ModelAdmin):
 
 
 @admin.register(StorageDocument)
-class StorageDocumentAdmin(MadeByThePlatform, admin.ModelAdmin):
+class StorageDocumentAdmin(MadeByThePlatform, ExplainedWhenEmpty):
+    empty_list_help = (
+        "What VVs keep in their private storage (VV.storage.store), one key each; they appear "
+        "here as VVs store them."
+    )
     list_display = ["vv", "key", "size_bytes"]
     search_fields = ["key", "vv__name"]
 
 
 @admin.register(LogEntry)
-class LogEntryAdmin(MadeByThePlatform, admin.ModelAdmin):
+class LogEntryAdmin(MadeByThePlatform, ExplainedWhenEmpty):
+    empty_list_help = (
+        "The lines VVs log (VV.log), shown to their owners; they appear here as VVs run."
+    )
     list_display = ["vv", "seq", "at", "message"]
     at = _vv_time("at_s", "at")
     search_fields = ["message", "vv__name"]
 
 
 @admin.register(Migration)
-class MigrationAdmin(MadeByThePlatform, admin.ModelAdmin):
+class MigrationAdmin(MadeByThePlatform, ExplainedWhenEmpty):
+    empty_list_help = (
+        "A migration is a VV moving with its whole state from one host (an RV or a ground "
+        "station) to another; the platform makes one at every move."
+    )
     list_display = ["vv", "from_name", "to_name", "at", "reason"]
     at = _vv_time("at_s", "at")
 
 
 @admin.register(Message)
-class MessageAdmin(admin.ModelAdmin):
+class MessageAdmin(ExplainedWhenEmpty):
     """Messages between a customer's VVs and from its own system: sent and taken by the
     platform only, so staff read them and change nothing (a recipient's journal holds what it
     took)."""
 
+    empty_list_help = (
+        "Messages a customer's VVs send each other (VV.message.send), or its own system sends "
+        "them over the API; they appear here as they are sent."
+    )
     list_display = ["id", "customer", "sender_shown", "recipient_name", "bytes", "sent", "received"]
     list_filter = ["customer"]
     search_fields = ["recipient__name", "sender_name"]

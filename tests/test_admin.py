@@ -13,8 +13,8 @@ from django.db import transaction
 from django.urls import reverse
 from django.utils import timezone
 
-from accounts.models import Customer
 from missions.models import Message
+from tests.admin_forms import form_as_shown
 from tests.factories import AREA_ONE, AREA_TWO, GroundStationFactory, UserFactory, VehicleFactory
 from vvm_worker.services import vv_submit
 from vvm_worker.services.messages import message_send
@@ -97,25 +97,10 @@ def test_the_queued_vv_quota_is_set_in_the_admin_with_the_other_quotas(
 ) -> None:
     client.force_login(staff)
     url = reverse("admin:accounts_customer_change", args=[customer_a.pk])
-    page = client.get(url).text
-    quotas = page[page.index('class="fieldset-heading">Quotas</h2>') :]
+    shown = client.get(url)
+    quotas = shown.text[shown.text.index('class="fieldset-heading">Quotas</h2>') :]
     assert 'name="max_parallel_vvs"' in quotas and 'name="max_queued_vvs"' in quotas
-    form = {
-        "name": customer_a.name,
-        "slug": customer_a.slug,
-        "max_parallel_vvs": 5,
-        "max_queued_vvs": 12,
-        "max_tasks_per_vv": 10_000,
-        "storage_bytes": 10_485_760,
-        "cpu_ms_per_step": 2000,
-        "heap_bytes": 67_108_864,
-        "max_messages_per_vv": 1000,
-        "max_message_bytes": 65_536,
-        "allowed_api_calls": "[]",
-        "users-TOTAL_FORMS": 0,
-        "users-INITIAL_FORMS": 0,
-    }
-    response = client.post(url, form)
+    response = client.post(url, form_as_shown(shown) | {"max_queued_vvs": 12})
     assert response.status_code == 302, response.content
     customer_a.refresh_from_db()
     customer_b.refresh_from_db()
@@ -127,27 +112,19 @@ def test_the_message_quotas_are_set_in_the_admin_with_the_other_quotas(
 ) -> None:
     client.force_login(staff)
     url = reverse("admin:accounts_customer_change", args=[customer_a.pk])
-    page = client.get(url).text
-    quotas = page[page.index('class="fieldset-heading">Quotas</h2>') :]
+    shown = client.get(url)
+    quotas = shown.text[shown.text.index('class="fieldset-heading">Quotas</h2>') :]
     assert 'name="max_messages_per_vv"' in quotas and 'name="max_message_bytes"' in quotas
-    form = {
-        "name": customer_a.name,
-        "slug": customer_a.slug,
-        **{name: getattr(customer_a, name) for name in Customer.QUOTA_FIELDS},
-        "max_messages_per_vv": 7,
-        "max_message_bytes": 512,
-        "allowed_api_calls": "[]",
-        "users-TOTAL_FORMS": 0,
-        "users-INITIAL_FORMS": 0,
-    }
+    form = form_as_shown(shown) | {"max_messages_per_vv": 7, "max_message_bytes": "0.5"}  # KB
     response = client.post(url, form)
     assert response.status_code == 302, response.content
     customer_a.refresh_from_db()
     customer_b.refresh_from_db()
     assert (customer_a.max_messages_per_vv, customer_a.max_message_bytes) == (7, 512)
     assert (customer_b.max_messages_per_vv, customer_b.max_message_bytes) == (1000, 65_536)
-    refused = client.post(url, {**form, "max_message_bytes": 1})
-    assert refused.status_code == 200 and "max_message_bytes" in refused.text
+    refused = client.post(url, {**form, "max_message_bytes": "0.001"})  # 1 byte
+    assert refused.status_code == 200
+    assert refused.context["adminform"].form.errors["max_message_bytes"] == ["At least 0.002 KB."]
     customer_a.refresh_from_db()
     assert customer_a.max_message_bytes == 512
 

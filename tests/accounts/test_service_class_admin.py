@@ -6,22 +6,11 @@ from __future__ import annotations
 import pytest
 from django.urls import reverse
 
-from accounts.models import Customer, ServiceClass
+from accounts.models import ServiceClass
+from tests.admin_forms import form_as_shown
 from vvm_worker.services.customers import service_class_save
 
 pytestmark = pytest.mark.django_db
-
-
-def customer_form(customer: Customer, **changes: object) -> dict[str, object]:
-    return {
-        "name": customer.name,
-        "slug": customer.slug,
-        **{name: getattr(customer, name) for name in Customer.QUOTA_FIELDS},
-        "allowed_api_calls": "[]",
-        "users-TOTAL_FORMS": 0,
-        "users-INITIAL_FORMS": 0,
-        **changes,
-    }
 
 
 def test_staff_add_a_class_and_put_a_customer_in_it(client, staff, customer_a, customer_b) -> None:
@@ -34,8 +23,9 @@ def test_staff_add_a_class_and_put_a_customer_in_it(client, staff, customer_a, c
     premium = ServiceClass.objects.get(name="premium")
     assert (premium.p95_s, premium.weight) == (30.0, 2.0)
     url = reverse("admin:accounts_customer_change", args=[customer_a.pk])
-    assert 'name="service_class"' in client.get(url).text
-    saved = client.post(url, customer_form(customer_a, service_class=premium.pk))
+    shown = client.get(url)
+    assert 'name="service_class"' in shown.text
+    saved = client.post(url, form_as_shown(shown) | {"service_class": premium.pk})
     assert saved.status_code == 302, saved.content
     customer_a.refresh_from_db()
     customer_b.refresh_from_db()

@@ -34,7 +34,7 @@ def production_static(settings, tmp_path: Path) -> Path:
     settings.STATIC_ROOT = tmp_path / "staticfiles"
     settings.STORAGES = {
         **settings.STORAGES,
-        "staticfiles": {"BACKEND": "whitenoise.storage.CompressedManifestStaticFilesStorage"},
+        "staticfiles": {"BACKEND": "cpcc_site.static_storage.HashedStaticFiles"},
     }
     settings.WHITENOISE_USE_FINDERS = False
     settings.WHITENOISE_AUTOREFRESH = False
@@ -148,3 +148,29 @@ def test_no_template_or_static_file_refers_to_an_outside_url(path: Path) -> None
         text = comments.sub("", text)
     outside = {u.rstrip(".,;") for u in URL.findall(text)} - ALLOWED_URLS
     assert not outside, f"{path.relative_to(ROOT)} refers to {sorted(outside)}"
+
+
+# An inline SVG of a stylesheet: url('data:image/svg+xml,...') (single-quoted, as the vendored
+# Leaflet-Geoman writes them).
+INLINE_SVG = re.compile(r"url\('data:image/svg\+xml,(?P<svg>[^']*)'\)")
+
+
+def test_with_debug_off_every_icon_of_the_area_editors_toolbar_is_a_whole_svg(
+    client, db, production_static
+) -> None:
+    # The area editor's buttons (draw rectangle, polygon, edit, drag, erase) are inline SVGs
+    # in Leaflet-Geoman's stylesheet. As served with DEBUG off (hashed, post-processed) each
+    # must be the SVG it is in the source: a '#' written into a data URL ends it, and quotes
+    # inside an attribute break the XML; either leaves an empty button.
+    from urllib.parse import unquote
+    from xml.etree import ElementTree
+
+    source = (ROOT / "static/vendor/leaflet-geoman/leaflet-geoman.css").read_text()
+    served_name = staticfiles_storage.stored_name("vendor/leaflet-geoman/leaflet-geoman.css")
+    served = _fetch(client, settings.STATIC_URL + served_name).body.decode()
+    icons = [m["svg"] for m in INLINE_SVG.finditer(served)]
+    assert len(icons) >= 5
+    assert icons == [m["svg"] for m in INLINE_SVG.finditer(source)]
+    for svg in icons:
+        assert "#" not in svg, svg[:200]
+        ElementTree.fromstring(unquote(svg).removeprefix('<?xml version="1.0" encoding="UTF-8"?>'))
