@@ -9,6 +9,8 @@ STAMP := $(VENV)/.installed-stamp
 # examples of VVs that message each other and look at their pictures
 # (examples/scenarios/messages-and-images.json); `make demo SCENARIO=FILE` runs FILE alone.
 SCENARIO ?=
+# More options of `manage.py demo` (`manage.py demo --help`), e.g. DEMO_ARGS=--access-log.
+DEMO_ARGS ?=
 
 .PHONY: demo test test-serial pytest lint check bench bench-simulate bench-service-levels bench-planner bench-load bench-burst bench-idle screenshots simulate-fig2 simulate-fig3 vendor clean
 
@@ -21,7 +23,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	$(PY) manage.py migrate --noinput
-	$(PY) manage.py demo $(if $(SCENARIO),--scenario $(SCENARIO))
+	$(PY) manage.py demo $(if $(SCENARIO),--scenario $(SCENARIO)) $(DEMO_ARGS)
 
 lint: $(STAMP)
 	$(PY) -m ruff check .

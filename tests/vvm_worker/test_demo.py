@@ -8,6 +8,7 @@ import queue
 import re
 import signal
 import socket
+import stat
 import subprocess
 import sys
 import threading
@@ -46,7 +47,8 @@ def free_port() -> int:
 def run_demo(tmp_path: Path, *args: str, interrupts: int = 1) -> tuple[str, int]:
     """Run ``manage.py demo ARGS`` until its scenario has ended, then Ctrl-C it (``interrupts``
     times, as an impatient user does); returns its output and port, after checking that it
-    stopped cleanly and left nothing running."""
+    stopped cleanly and left nothing running, and that its terminal stayed readable: no line
+    for each request, no warning that the workers run as root (when they do)."""
     port = free_port()
     env = {
         **os.environ,
@@ -59,6 +61,7 @@ def run_demo(tmp_path: Path, *args: str, interrupts: int = 1) -> tuple[str, int]
         [sys.executable, "manage.py", "demo", *args, "--port", str(port)],
         cwd=ROOT,
         env=env,
+        stdin=subprocess.DEVNULL,  # not the terminal pytest may run in
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -67,9 +70,10 @@ def run_demo(tmp_path: Path, *args: str, interrupts: int = 1) -> tuple[str, int]
     try:
         assert demo.stdout is not None
         output_lines: queue.Queue[str] = queue.Queue()
-        threading.Thread(
+        reader = threading.Thread(
             target=lambda: [output_lines.put(x) for x in demo.stdout], daemon=True
-        ).start()
+        )
+        reader.start()
         deadline = time.monotonic() + 150
         while not lines or "The scenario has ended" not in lines[-1]:
             try:
@@ -92,6 +96,7 @@ def run_demo(tmp_path: Path, *args: str, interrupts: int = 1) -> tuple[str, int]
                 lines.append(output_lines.get(timeout=30))
             demo.send_signal(signal.SIGINT)
         demo.wait(timeout=60)
+    reader.join(timeout=10)  # the lines its processes wrote last, up to the pipe's end
     while not output_lines.empty():
         lines.append(output_lines.get())
     output = "".join(lines)
@@ -102,6 +107,11 @@ def run_demo(tmp_path: Path, *args: str, interrupts: int = 1) -> tuple[str, int]
     assert processes_of(tmp_path) == [], "the demo left processes behind"
     with socket.socket() as s:
         assert s.connect_ex(("127.0.0.1", port)) != 0  # the web server is gone too
+    # It fetched pages and a stylesheet (served_as_in_production): the errors show, the
+    # requests do not (daphne's access log: '127.0.0.1:PORT - - [DATE] "GET /PATH" 200 SIZE').
+    assert "Not Found: /no-such-page/" in output
+    assert '"GET /' not in output, output
+    assert "SecurityWarning" not in output and "superuser privileges" not in output, output
     return output, port
 
 
@@ -135,6 +145,18 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
     assert "VV 1 (Customer A): finished" in output
     for name in ("survey-west", "survey-east", "vegetation"):
         assert f"{name} (Customer D): finished" in output
+    # Where to log in, also in a file only this user can read, its path printed with them.
+    logins = tmp_path / "demo-logins.txt"
+    assert f"(these logins are kept in {logins})" in output
+    assert stat.S_IMODE(logins.stat().st_mode) == 0o600
+    kept = logins.read_text().splitlines()
+    admin = re.search(r"^  admin: admin / \S+ .*$", output, re.MULTILINE)
+    assert admin
+    assert kept == [
+        f"CPCC is running at http://127.0.0.1:{port}/",
+        admin[0],
+        *(f"  customer: customer-{x} / demo-pass-123" for x in "abcd"),
+    ]
 
 
 def test_demo_flies_the_papers_figure_3_over_mavlink(tmp_path: Path) -> None:
@@ -196,6 +218,39 @@ def test_a_second_ctrl_c_right_after_the_first_hurries_the_stop_instead_of_break
     finally:
         for each, handler in handlers.items():
             signal.signal(each, handler)
+
+
+def test_the_demo_prints_the_logins_again_when_enter_is_pressed_in_its_terminal(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Pressing Enter in the demo's terminal prints the logins again, at once (the demo in the
+    tests has no terminal: a pseudo-terminal stands for one here). A terminal whose foreground
+    is not the demo's (a demo sent to the background) is left alone: reading it would stop the
+    demo."""
+    import pty
+
+    from vvm_worker.management.commands.demo import EnterKey
+
+    pressed: list[float] = []
+    keyboard, terminal = pty.openpty()
+    try:
+        with open(terminal, closefd=False) as stdin:
+            enter = EnterKey(stdin, pressed=lambda: pressed.append(time.monotonic()))
+            assert enter.listening
+            os.write(keyboard, b"logins?\n")
+            enter.wait(0.05)  # not this test's controlling terminal: not its foreground
+            assert pressed == []
+            monkeypatch.setattr(enter, "_in_foreground", lambda: True)
+            started = time.monotonic()
+            enter.wait(10)
+            assert len(pressed) == 1 and pressed[0] - started < 5  # at once, not after 10 s
+            enter.wait(0.05)
+            assert len(pressed) == 1  # once a press
+    finally:
+        os.close(keyboard)
+        os.close(terminal)
+    with open(os.devnull) as stdin:  # no terminal (a pipe, a service manager): it only waits
+        assert not EnterKey(stdin, pressed=lambda: pressed.append(0)).listening
 
 
 def test_the_demo_runs_the_examples_of_messages_and_pictures_only_next_to_its_default() -> None:

@@ -12,6 +12,11 @@ Without ``--scenario`` it runs the paper's Figure 3 and, next to it on the same 
 customer of their own, the examples of VVs that message each other and look at their pictures
 (``examples/scenarios/messages-and-images.json``); ``--also`` adds other scenarios to the one
 chosen.
+
+Its terminal shows the platform's own lines and every error, not a line for each request the
+web server answers (``--access-log`` shows those too). The logins are kept in
+``demo-logins.txt`` of the var folder (CPCC_VAR_DIR) as well, and printed again when the user
+presses Enter.
 """
 
 from __future__ import annotations
@@ -19,14 +24,16 @@ from __future__ import annotations
 import contextlib
 import os
 import secrets
+import select
 import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from django.conf import settings
 from django.core.management import call_command
@@ -52,6 +59,14 @@ DEFAULT_ALSO = settings.BASE_DIR / "examples" / "scenarios" / "messages-and-imag
 START_TIMEOUT_S = 60.0
 # How long the stop waits for the processes (a worker lets its task in progress end first).
 STOP_S = 30.0
+# Celery warns in every worker that runs as root. The demo is a local tool, often run as root in
+# a container, where the warning (once per worker) only pushed the logins off the screen: its
+# processes ignore that one warning, by a Python warning filter on the start of its message, its
+# category (celery's SecurityWarning is a UserWarning) and the module that warns. Every other
+# warning still shows; a PYTHONWARNINGS of the environment still applies, before this filter.
+ROOT_WORKER_WARNING_FILTER = (
+    "ignore:You're running the worker with superuser privileges:UserWarning:celery.platforms"
+)
 
 
 def _demo_secret(name: str, nbytes: int = 9) -> str:
@@ -60,11 +75,18 @@ def _demo_secret(name: str, nbytes: int = 9) -> str:
     path = Path(settings.VAR_DIR) / f"demo-{name}.txt"
     if path.exists():
         return path.read_text().strip()
-    path.parent.mkdir(parents=True, exist_ok=True)
     secret = secrets.token_urlsafe(nbytes)
-    path.write_text(secret + "\n")
-    path.chmod(0o600)
+    _write_private(path, secret + "\n")
     return secret
+
+
+def _write_private(path: Path, text: str) -> None:
+    """Write ``text`` to ``path``, readable by this user alone from the start (mode 0600, also
+    when the file was there before with another mode)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600), "w") as file:
+        os.fchmod(file.fileno(), 0o600)
+        file.write(text)
 
 
 def _demo_password(name: str) -> str:
@@ -87,7 +109,48 @@ def _served_as_in_production(host: str) -> dict[str, str]:
         # printed by the workers (no EMAIL_HOST: Django's console backend).
         "CPCC_WEBHOOK_ALLOW_PRIVATE": "1",
     }
-    return {**chosen, **os.environ}
+    env = {**chosen, **os.environ}
+    # (Of two filters for one warning, the one given last wins: this one, over the environment's.)
+    env["PYTHONWARNINGS"] = ",".join(
+        filter(None, [env.get("PYTHONWARNINGS"), ROOT_WORKER_WARNING_FILTER])
+    )
+    return env
+
+
+class EnterKey:
+    """Calls ``pressed`` each time the user presses Enter in the terminal the demo runs in,
+    while the demo waits (``wait``). Only a terminal is listened to: under a test, a pipe or a
+    service manager nobody presses Enter, and an input at its end would be readable for ever."""
+
+    def __init__(self, stdin: TextIO | None, pressed: Callable[[], None]) -> None:
+        self.fd = stdin.fileno() if stdin is not None and stdin.isatty() else None
+        self.pressed = pressed
+
+    @property
+    def listening(self) -> bool:
+        return self.fd is not None
+
+    def wait(self, seconds: float) -> None:
+        """Wait ``seconds``, or less when Enter is pressed (``pressed`` is called first)."""
+        if self.fd is None or not self._in_foreground():
+            time.sleep(seconds)
+            return
+        ready, _, _ = select.select([self.fd], [], [], seconds)
+        if ready:
+            # A terminal hands over whole lines; what was typed before Enter does not matter.
+            if os.read(self.fd, 4096):
+                self.pressed()
+            else:  # Ctrl-D: the end of the input, nothing more to listen to
+                self.fd = None
+
+    def _in_foreground(self) -> bool:
+        """Whether the terminal's input is the demo's now: a demo sent to the background (``&``,
+        Ctrl-Z and ``bg``) that read from it would be stopped by the terminal (SIGTTIN)."""
+        assert self.fd is not None
+        try:
+            return os.tcgetpgrp(self.fd) == os.getpgrp()
+        except OSError:  # not this process's controlling terminal
+            return False
 
 
 class Processes:
@@ -209,6 +272,15 @@ class Command(BaseCommand):
             help="fly every RV over MAVLink: a `mavsim` process per RV (a simulated ArduPilot "
             "copter on a loopback UDP port) and its worker's MAVLink driver",
         )
+        parser.add_argument(
+            "--access-log",
+            nargs="?",
+            const="-",
+            default=None,
+            metavar="FILE",
+            help="log every request the web server answers, in this terminal (or in FILE); "
+            "without it, only errors and the platform's own lines show",
+        )
 
     def handle(self, *args: Any, **options: Any) -> None:
         speed = settings.CPCC_SIM_SPEED if options["speed"] is None else options["speed"]
@@ -250,6 +322,10 @@ class Command(BaseCommand):
                 name: gs for each in loaded for name, gs in each.ground_stations.items()
             }
             vehicles = {name: vehicle for each in loaded for name, vehicle in each.vehicles.items()}
+            # daphne's verbosity 0 turns off its access log (a line for every static file and
+            # map tile, a thousand in a few minutes) and nothing else: the web process logs
+            # through Django's LOGGING (settings.py), errors and the platform's own lines.
+            access_log = options["access_log"]
             processes.start(
                 "web",
                 "-m",
@@ -258,6 +334,7 @@ class Command(BaseCommand):
                 options["host"],
                 "-p",
                 str(options["port"]),
+                *(["--access-log", access_log] if access_log else ["--verbosity", "0"]),
                 "cpcc_site.asgi:application",
             )
             _wait_for_port(options["host"], options["port"], processes)
@@ -271,10 +348,19 @@ class Command(BaseCommand):
                 for vv in scenario_submit_all(scenario=scenario, loaded=its, vvm=platform_vvm())
             ]
             url = f"http://{options['host']}:{options['port']}/"
-            self.stdout.write(self.style.SUCCESS(f"CPCC is running at {url}"))
-            self.stdout.write(f"  admin: admin / {admin_password}  ({url}admin/)")
-            for username, login_password in (login for each in loaded for login in each.logins):
-                self.stdout.write(f"  customer: {username} / {login_password or '(unchanged)'}")
+            self.logins = [
+                f"CPCC is running at {url}",
+                f"  admin: admin / {admin_password}  ({url}admin/)",
+                *(
+                    f"  customer: {username} / {login_password or '(unchanged)'}"
+                    for each in loaded
+                    for username, login_password in each.logins
+                ),
+            ]
+            self.logins_path = Path(settings.VAR_DIR) / "demo-logins.txt"
+            _write_private(self.logins_path, "\n".join(self.logins) + "\n")
+            self.enter = EnterKey(sys.stdin, pressed=self._show_logins)
+            self._show_logins()
             names = " and ".join(repr(scenario.name) for scenario in scenarios)
             self.stdout.write(
                 f"Running {names} at speed {speed:g} with {len(ground_stations)} "
@@ -289,7 +375,7 @@ class Command(BaseCommand):
             )
             while True:
                 processes.check()
-                time.sleep(0.5)
+                self.enter.wait(0.5)
         except KeyboardInterrupt:
             self.stdout.write("\nStopping (Ctrl-C again stops at once).")
         finally:
@@ -328,7 +414,15 @@ class Command(BaseCommand):
                         f"  {vv.name} ({vv.customer}): {vv.status} {vv.error}".rstrip()
                     )
                 return
-            time.sleep(0.25)
+            self.enter.wait(0.25)
+
+    def _show_logins(self) -> None:
+        first, *rest = self.logins
+        self.stdout.write(self.style.SUCCESS(first))
+        for line in rest:
+            self.stdout.write(line)
+        again = "; press Enter to print them again" if self.enter.listening else ""
+        self.stdout.write(f"  (these logins are kept in {self.logins_path}{again})")
 
     def _start_vehicles(self, vehicles: list[Vehicle], processes: Processes, manage: str) -> int:
         """Start one RV worker for these vehicles; with --mavlink, first each one's simulated
