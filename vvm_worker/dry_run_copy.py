@@ -6,27 +6,34 @@ platform's schema, ``run_copy`` loads the fleet (a scenario document) and the cu
 and runs ``manage.py simulate``'s simulation on discrete-event time until the VV ends or the
 wall-clock limit is reached, and reports what it saw.
 
+Two things differ from the platform, so that the duration the report gives is the program's
+own (``DryRunReport.assumes`` tells the customer what it counts):
+
+- no other VV runs in it, so no message can come: ``VV.message.receive`` answers null at once
+  instead of waiting its timeout for nothing (the report's ``message_wait_s`` adds those up);
+- a camera's picture is drawn, as on the platform, so that the program can look at it with
+  ``VV.image.*``; it goes into the copy's own media folder (``CPCC_MEDIA_ROOT`` of the
+  process), which is thrown away with it.
+
 The copy's database starts as a copy of a database migrated once per version of the
 migrations (``vvm_worker.fresh_database``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from django.conf import settings
 
 from accounts.models import Customer
-from fleet.geo import Position
 from fleet.models import SensorType
-from missions.models import ENDED_STATUSES, LogEntry, Task, VirtualVehicle
-from vvm_worker.executor import PlatformSensing
+from missions.models import ENDED_STATUSES, JournalEntry, LogEntry, Task, VirtualVehicle
 from vvm_worker.runtime import ErrorKind, Outcome, Runtime, StepInput, StepResult, VVError
 from vvm_worker.scenario import parse_scenario
-from vvm_worker.sensing import iso_time, sensor_spec
 from vvm_worker.services.dry_run import (
     COPY_CUSTOMER,
     UNFINISHED,
@@ -45,11 +52,13 @@ MAX_LOG_LINES = 200
 
 class _Recorder(Runtime):
     """The copy's runtime: the platform's, noting where in the program each request was made
-    (by its ordinal) and how the VV ended."""
+    (by its ordinal) and how the VV ended. A ``VV.message.receive`` is made to wait no time
+    (no other VV runs in the copy to send a message); its timeout is noted by its ordinal."""
 
     def __init__(self, *, max_contexts: int) -> None:
         super().__init__(max_contexts=max_contexts)
         self.places: dict[int, tuple[int | None, int | None]] = {}
+        self.receive_timeouts: dict[int, float] = {}
         self.error: VVError | None = None
         self.ended = False
 
@@ -58,39 +67,16 @@ class _Recorder(Runtime):
         pending = result.pending
         if pending is not None:
             self.places.setdefault(pending.q, (pending.line, pending.column))
+            if pending.kind == "message" and pending.timeout_s:
+                # The host reads the timeout from the pending request when it first answers
+                # it (vv_answer_receive): with 0, a message there already is still taken.
+                self.receive_timeouts[pending.q] = pending.timeout_s
+                pending = dataclasses.replace(pending, timeout_s=0.0)
+                result = dataclasses.replace(result, pending=pending)
         if result.outcome is not Outcome.SUSPENDED:
             self.ended = True
             self.error = result.error
         return result
-
-
-class _NoPictures(PlatformSensing):
-    """The copy's sensors: the simulated field's readings, but a camera's picture is neither
-    drawn nor kept (its ``image`` names no file): a dry run makes no file."""
-
-    IMAGE = "dry-run.png"
-
-    def read(
-        self, names: Sequence[str], position: Position, now_s: float, battery: float | None
-    ) -> list[dict[str, Any]]:
-        catalog = self.catalog()
-        readings: list[dict[str, Any]] = []
-        for name in names:
-            if catalog[name]["kind"] != "camera":
-                readings += super().read([name], position, now_s, battery)
-                continue
-            spec = sensor_spec(catalog[name])
-            readings.append(
-                {
-                    "sensor": spec.name,
-                    "kind": spec.kind,
-                    "time": iso_time(self.vvm.clock.epoch_ms(now_s)),
-                    "position": {"lat": position.lat, "lng": position.lng, "alt": position.alt},
-                    **self.vvm.field.sample(spec, position, now_s, battery_fraction=battery),
-                    "image": self.IMAGE,
-                }
-            )
-        return readings
 
 
 def run_copy(request: Mapping[str, Any]) -> DryRunReport:
@@ -102,7 +88,6 @@ def run_copy(request: Mapping[str, Any]) -> DryRunReport:
     simulation = Simulation(scenario, seed=1, speed=0.0, logins=False)
     recorder = _Recorder(max_contexts=4)
     simulation.vvm.runtime = recorder
-    simulation.sensing = _NoPictures(simulation.vvm)
     loaded = simulation.start()  # the VV is submitted by the first event
     _give_quotas(loaded.customers[COPY_CUSTOMER], request["customer"])
     deadline = time.monotonic() + float(request["wall_s"])
@@ -161,7 +146,21 @@ def _report(vv: VirtualVehicle, recorder: _Recorder, *, now_s: float) -> DryRunR
         tasks=tuple(tasks),
         quota=quota,
         log=tuple(log.values_list("message", flat=True)[:MAX_LOG_LINES]),
+        message_wait_s=_message_wait_s(vv, recorder),
     )
+
+
+def _message_wait_s(vv: VirtualVehicle, recorder: _Recorder) -> float:
+    """The timeouts of the receives the copy answered with null (no message came): how long
+    the program would have waited for messages that do not come in a dry run."""
+    if not recorder.receive_timeouts:
+        return 0.0
+    unanswered = [
+        entry["q"]
+        for entry in JournalEntry.objects.filter(vv=vv).values_list("entry", flat=True)
+        if entry.get("k") == "msg" and entry.get("data") is None
+    ]
+    return round(sum(recorder.receive_timeouts.get(q, 0.0) for q in unanswered), 3)
 
 
 def _since(vv: VirtualVehicle, t_s: float | None) -> float | None:

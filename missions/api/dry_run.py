@@ -96,8 +96,17 @@ class DryRunReportSerializer(serializers.Serializer):
     error_line = serializers.IntegerField(allow_null=True)
     error_column = serializers.IntegerField(allow_null=True)
     duration_s = serializers.FloatField(
-        help_text="Estimated time from submission to its end (flights included), with the "
-        "fleet to itself: other VVs sharing the vehicles make it longer."
+        help_text="Estimated seconds from the submission to its end (to where the dry run "
+        "stopped, when unfinished), the flights included, on what `assumes` says: the fleet "
+        "in service to itself, each vehicle from the ground at its depot, instant readings, "
+        "no wait for messages counted. Other VVs sharing the vehicles make it longer, a "
+        "vehicle already in the air nearby shorter."
+    )
+    assumes = serializers.CharField(help_text="What duration_s assumes, in a sentence or two.")
+    message_wait_s = serializers.FloatField(
+        help_text="Seconds the program would wait for messages that do not come in a dry run "
+        "(no other VV runs there): the timeouts of its VV.message.receive calls that got "
+        "null, which duration_s leaves out. 0 for a program that waits for none."
     )
     tasks = DryRunTaskSerializer(many=True, help_text="Every task it would ask for, in order.")
     unservable = DryRunTaskSerializer(
@@ -141,6 +150,8 @@ def report_json(report: DryRunReport) -> dict[str, Any]:
         "error_line": report.error_line,
         "error_column": report.error_column,
         "duration_s": report.duration_s,
+        "assumes": report.assumes,
+        "message_wait_s": report.message_wait_s,
         "tasks": [_task_json(task) for task in report.tasks],
         "unservable": [_task_json(task) for task in report.unservable],
         "within_quotas": report.within_quotas,
@@ -177,8 +188,9 @@ class DryRunView(generics.GenericAPIView):  # type: ignore[type-arg]
         "vehicles in service, their areas, altitudes, sensors and speeds) with instant "
         "simulated readings and your quotas, and answer what it would do: every task it "
         "would ask for with the line and column of the call, those no vehicle could serve "
-        "and why, how long it would take, and whether a quota would stop it (which, and "
-        "where). Nothing is created, stored or flown.\n\n"
+        "and why, how long it would take from its submission to its end (and on what "
+        "assumptions: `assumes`), and whether a quota would stop it (which, and where). "
+        "Nothing is created, stored or flown.\n\n"
         "400 for a program with a syntax error, as a submission would answer (`error` with "
         "the line and column) or a refused name; 409 when no VV could start at all (the "
         "platform has no ground station); 429 while this server runs as many dry runs as it "

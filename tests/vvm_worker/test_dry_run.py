@@ -1,18 +1,35 @@
-"""The dry run's service: the copy of the fleet it flies, and dry runs side by side."""
+"""The dry run's service: the copy of the fleet it flies, dry runs side by side, and how well
+its duration estimates what the platform flies."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import threading
+from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 import pytest
-from django.db import connection
+from django.db import connection, transaction
 
 from fleet.models import NoFlyZone, VehicleStatus
+from missions.models import VirtualVehicle
 from tests.factories import AREA_TWO, VehicleFactory
-from vvm_worker.scenario import parse_scenario
-from vvm_worker.services.dry_run import COPY_CUSTOMER, DryRunReport, fleet_copy, vv_dry_run_for_user
+from vvm_worker.clock import SimulatedClock
+from vvm_worker.dry_run_copy import run_copy
+from vvm_worker.management.commands.demo import DEFAULT_ALSO, DEFAULT_SCENARIO
+from vvm_worker.runtime import Runtime, StepInput, StepResult
+from vvm_worker.scenario import Scenario, load_scenario, parse_scenario
+from vvm_worker.services import routing
+from vvm_worker.services.dry_run import (
+    COPY_CUSTOMER,
+    DryRunReport,
+    customer_copy,
+    fleet_copy,
+    vv_dry_run_for_user,
+)
+from vvm_worker.simulation import Simulation
 
 
 def test_the_copy_holds_the_fleet_in_service_and_names_nothing(ground_station, heli_one) -> None:
@@ -67,3 +84,130 @@ def test_dry_runs_side_by_side_each_get_their_own_report(
     a, b = reports[user_a], reports[user_b]
     assert (a.status, len(a.tasks), a.log) == ("finished", 1, ("a",))
     assert (b.status, len(b.tasks), b.log) == ("finished", 0, ("b", "b again"))
+
+
+# --- the estimate against what the platform flies ---------------------------------------------
+
+# How far a dry run's duration may be from the duration flown (issue 56, item 9).
+ESTIMATE_TOLERANCE = 0.25
+
+
+class _MessageWaits(Runtime):
+    """The platform's runtime, adding up how long each VV waited in ``VV.message.receive``:
+    from the step that asked to the step after the answer (the same instant when a message
+    was there already)."""
+
+    def __init__(self, clock: SimulatedClock) -> None:
+        super().__init__(max_contexts=64)
+        self.clock = clock
+        self.asked: dict[str, float] = {}
+        self.waited: defaultdict[str, float] = defaultdict(float)
+
+    def step(self, step: StepInput) -> StepResult:
+        asked = self.asked.pop(step.vv_id, None)
+        if asked is not None:
+            self.waited[step.vv_id] += self.clock.t - asked
+        result = super().step(step)
+        if result.pending is not None and result.pending.kind == "message":
+            self.asked[step.vv_id] = self.clock.t
+        return result
+
+
+@dataclasses.dataclass(frozen=True)
+class _Flown:
+    """A VV as the simulation flew it: how it ended, the seconds from its submission to its
+    end less those it waited for messages, those, and its dry run's request."""
+
+    status: str
+    duration_s: float
+    message_wait_s: float
+    dry_run: dict[str, Any]
+
+
+def _forget_fleet_shape() -> None:
+    """The mapper reads the fleet again: each run below has a fleet of its own (see the
+    conftest's ``_fresh_fleet_shape``)."""
+    routing._shape_seen_at = None
+    routing._airspace_seen = None
+
+
+def _fly(scenario: Scenario) -> dict[str, _Flown]:
+    """The scenario on discrete-event time, as ``manage.py simulate`` runs it, rolled back
+    afterwards; each VV's dry run is asked for on its fleet."""
+    _forget_fleet_shape()
+    with transaction.atomic():
+        simulation = Simulation(scenario)
+        waits = _MessageWaits(simulation.clock)
+        simulation.vvm.runtime = waits
+        simulation.run()
+        flown = {}
+        for vv in VirtualVehicle.objects.filter(pk__in=simulation.vv_ids).select_related(
+            "customer"
+        ):
+            assert vv.finished_s is not None, vv.name
+            waited = waits.waited[str(vv.pk)]
+            flown[vv.name] = _Flown(
+                status=vv.status,
+                duration_s=vv.finished_s - vv.submitted_s - waited,
+                message_wait_s=waited,
+                dry_run={
+                    "scenario": fleet_copy(name=vv.name, program=vv.program),
+                    "customer": customer_copy(customer=vv.customer),
+                    "wall_s": 60.0,
+                },
+            )
+        transaction.set_rollback(True)
+    return flown
+
+
+def _dry_run(request: dict[str, Any]) -> DryRunReport:
+    """The dry run's copy, in this process (a dry run starts it as a process of its own, on
+    a database of its own), rolled back afterwards."""
+    _forget_fleet_shape()
+    with transaction.atomic():
+        report = run_copy(request)
+        transaction.set_rollback(True)
+    return report
+
+
+def _each_customer_alone(scenario: Scenario) -> list[Scenario]:
+    """The scenario once per customer, with that customer's VVs only: what a dry run
+    estimates (no other customer's VV shares the fleet; the customer's own may)."""
+    return [
+        dataclasses.replace(
+            scenario, vvs=tuple(vv for vv in scenario.vvs if vv.customer == customer.name)
+        )
+        for customer in scenario.customers
+        if any(vv.customer == customer.name for vv in scenario.vvs)
+    ]
+
+
+@pytest.mark.django_db
+def test_the_estimate_is_within_a_quarter_of_what_the_demos_vvs_fly() -> None:
+    """For each VV of the demo's scenarios (``manage.py demo``): the dry run of its program
+    on the scenario's fleet ends as the VV does, and its duration is within 25 % of the
+    seconds from the VV's submission to its end as the simulation flies it, without other
+    customers' VVs (a dry run knows none) and less its waits for messages (none comes in a
+    dry run; ``message_wait_s`` says how long it would wait). The survey VVs wait for each
+    other's summary; the vegetation VV looks at its pictures (VV.image.*)."""
+    flown: dict[str, _Flown] = {}
+    for path in (DEFAULT_SCENARIO, DEFAULT_ALSO):
+        for alone in _each_customer_alone(load_scenario(path)):
+            flown |= _fly(alone)
+    assert len(flown) == 6, sorted(flown)
+    rows = []
+    for name, vv in flown.items():
+        report = _dry_run(vv.dry_run)
+        rows.append((name, vv, report))
+    figures = "\n".join(
+        f"{name}: dry run {r.status} {r.duration_s:.1f} s (+{r.message_wait_s:g} s of message "
+        f"waits), flown {vv.status} {vv.duration_s:.1f} s (+{vv.message_wait_s:.1f} s)"
+        for name, vv, r in rows
+    )
+    for name, vv, report in rows:
+        assert (report.status, vv.status) == ("finished", "finished"), figures
+        off = abs(report.duration_s - vv.duration_s) / vv.duration_s
+        assert off <= ESTIMATE_TOLERANCE, f"{name} is {off:.0%} off:\n{figures}"
+        # Only a program that waits for a message is told how long it would.
+        assert (report.message_wait_s > 0) == (name.startswith("survey-")), figures
+        assert report.message_wait_s in (0.0, 1800.0), figures  # survey-split.js's WAIT_S

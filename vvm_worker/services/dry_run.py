@@ -4,9 +4,10 @@
 The copy is what ``manage.py simulate`` runs (vvm_worker/simulation.py): the vehicles in
 service with their areas, altitudes, sensors and speeds, the ground stations and no-fly zones,
 the SDC, and one VV of the customer's with the customer's quotas; simulated sensors answer at
-once (no picture is drawn), and time is discrete (a flight takes no wall time). It runs in a
-process of its own (``manage.py dry_run_copy``, vvm_worker/dry_run_copy.py) on a database of its
-own, a throw-away SQLite file, for three reasons:
+once, and time is discrete (a flight takes no wall time). Every report says what its duration
+assumes (ASSUMES). The copy runs in a process of its own (``manage.py dry_run_copy``,
+vvm_worker/dry_run_copy.py) on a database of its own, a throw-away SQLite file, for three
+reasons:
 
 - nothing of the copy can reach the platform's database or its media: no VV, task, storage
   document or picture of a dry run ever exists there;
@@ -66,6 +67,17 @@ SETTINGS = "cpcc_site.settings"  # of the copy's process, unless this one names 
 COPY_CUSTOMER = "Customer"
 # Statuses of the VV in the copy: how it would end, or "unfinished" (the wall-clock limit).
 UNFINISHED = "unfinished"
+# What a report's duration_s assumes, said with every report: the copy is the platform's own
+# simulation, so what it leaves out is what the copy does not hold (where the vehicles are now,
+# the other VVs) and the sensors' time.
+ASSUMES = (
+    "From the submission to the VV's end, with the fleet in service to itself: each vehicle "
+    "starts on the ground at its depot (take-off and climb included) and flies at its top speed "
+    "and climb rate; the platform picks the vehicles and the order of the tasks as it would; "
+    "readings take no time. No other VV shares the vehicles: other VVs (of any customer) make "
+    "it longer, a vehicle already in the air nearby shorter. A message the program waits for "
+    "does not come (no other VV runs in a dry run): the wait is not counted (message_wait_s)."
+)
 
 
 class DryRunBusy(RuntimeError):
@@ -136,7 +148,9 @@ class DryRunReport:
     ``unfinished`` when the dry run reached its wall-clock limit first. ``error`` (with its
     place) says why a VV failed or was killed. ``duration_s``: from submission to its end in
     the copy (to where the dry run stopped, when unfinished), the vehicles' flights included,
-    with the fleet to itself. ``log``: the lines the program logged.
+    on the assumptions of ``assumes`` (ASSUMES). ``log``: the lines the program logged.
+    ``message_wait_s``: the timeouts of its ``VV.message.receive`` calls that no message
+    answered, which ``duration_s`` leaves out (the most it would wait for messages).
     """
 
     name: str
@@ -148,6 +162,11 @@ class DryRunReport:
     tasks: tuple[DryRunTask, ...]
     quota: QuotaStop | None
     log: tuple[str, ...]
+    message_wait_s: float = 0.0
+
+    @property
+    def assumes(self) -> str:
+        return ASSUMES
 
     @property
     def unservable(self) -> tuple[DryRunTask, ...]:
@@ -182,6 +201,7 @@ class DryRunReport:
             ),
             quota=QuotaStop(**quota) if quota else None,
             log=tuple(data.get("log") or ()),
+            message_wait_s=float(data.get("message_wait_s") or 0.0),
         )
 
 

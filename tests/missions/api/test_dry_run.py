@@ -91,9 +91,12 @@ def test_the_dry_run_finds_an_out_of_area_point_before_anything_flies(api_a, fle
     assert (report["error_line"], report["error_column"]) == (6, _column(OUT_OF_AREA, 6, "execute"))
     assert report["log"] == ["two done"]
     assert report["within_quotas"] is True and report["quota"] is None
-    # The flights to the two points take time in the copy, and the duration says so.
+    # The flights to the two points take time in the copy, and the duration says so, and on
+    # what it counts them.
     assert tasks[1]["done_s"] > tasks[0]["done_s"] > 0
     assert report["duration_s"] >= tasks[1]["done_s"]
+    assert "on the ground at its depot" in report["assumes"]
+    assert report["message_wait_s"] == 0
     # Nothing of it exists on the platform: no VV, task, journal, storage, log, picture.
     assert _counts() == before
     assert _files(Path(settings.MEDIA_ROOT)) == []
@@ -115,6 +118,23 @@ def test_the_quota_verdict_names_the_quota_and_where(api_a, api_b, customer_a, f
     assert report["within_quotas"] is True and report["quota"] is None
     assert report["status"] == "finished" and len(report["tasks"]) == 3
     assert all(t["servable"] for t in report["tasks"])
+
+
+def test_a_wait_for_a_message_is_not_counted_but_said(api_a, fleet) -> None:
+    """No other VV runs in a dry run, so no message comes: the program goes on at once, as
+    it would after its timeout, and the answer says how long it would have waited."""
+    program = (
+        "var m = VV.message.receive(600);\n"
+        "VV.log(m === null ? 'no message' : 'a message');\n"
+        "VV.task.execute({position: new VV.types.LatLngAlt(48.111, 12.861, 30),"
+        " sensors: [VV.sensor.get('GPS')]});\n"
+    )
+    report = api_a.post(DRY_RUN, {"name": "waits", "program": program}, format="json").json()
+    assert report["status"] == "finished" and report["log"] == ["no message"]
+    assert report["message_wait_s"] == 600
+    (task,) = report["tasks"]
+    assert task["requested_s"] == 0 and 0 < task["done_s"] == report["duration_s"] < 600
+    assert "message_wait_s" in report["assumes"]
 
 
 def test_only_vehicles_in_service_serve_in_the_copy(api_a, fleet) -> None:
