@@ -319,15 +319,22 @@ def _tokens_page(url: str) -> str:
     return f"{url.rstrip('/')}/accounts/tokens/"
 
 
+def _login_token(url: str, args: argparse.Namespace) -> str:
+    """The token to log in with: asked for, unechoed, on a terminal; otherwise (a pipe, a file,
+    ``--token-stdin``) the first line of standard input, or CPCC_TOKEN when that is empty.
+    getpass is not used without a terminal: it would warn (GetPassWarning) and echo."""
+    if args.token_stdin or sys.stdin is None or not sys.stdin.isatty():
+        piped = sys.stdin.readline().strip() if sys.stdin is not None else ""
+        return piped or os.environ.get("CPCC_TOKEN", "").strip()
+    _err(f"Make a token on {_tokens_page(url)} and paste it here.")
+    return getpass.getpass("API token: ").strip()
+
+
 def cmd_login(url: str, args: argparse.Namespace) -> int:
     """Check a token against the platform and keep it for this address."""
-    if args.token_stdin:
-        token = sys.stdin.readline().strip()
-    else:
-        _err(f"Make a token on {_tokens_page(url)} and paste it here.")
-        token = getpass.getpass("API token: ").strip()
+    token = _login_token(url, args)
     if not token:
-        raise UsageError("no token given")
+        raise UsageError("no token given: paste it, pipe it in, or set CPCC_TOKEN")
     client = Client(url, token)
     try:
         mine = list(client.pages(TOKENS))
@@ -503,10 +510,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="keep an API token for this platform",
         description="Ask for an API token (make one on the platform's Account page, "
         "/accounts/tokens/), check it, and keep it for this address, readable by you only. "
-        "CPCC_TOKEN, when set, is used instead.",
+        "Without a terminal (echo TOKEN | cpcc login) the token is the first line of standard "
+        "input, or CPCC_TOKEN when that is empty. CPCC_TOKEN, when set, is used instead of "
+        "the kept token.",
     )
     login.add_argument(
-        "--token-stdin", action="store_true", help="read the token from standard input"
+        "--token-stdin",
+        action="store_true",
+        help="read the token from standard input even on a terminal",
     )
     login.set_defaults(handler=cmd_login)
     logout = commands.add_parser("logout", help="forget the token kept for this platform")

@@ -40,6 +40,7 @@ from missions.models import (
     PROGRAM_TOO_LONG,
     Message,
     Task,
+    TaskStatus,
     VirtualVehicle,
     VVStatus,
 )
@@ -148,11 +149,24 @@ class Actions:
 
 
 def actions_for(vv: VirtualVehicle) -> Actions:
+    """Edit while queued, cancel until it ends, restart once it has ended, unless it failed:
+    its program, run again as it is, would fail the same way (its page offers a copy to
+    change instead)."""
     return Actions(
         cancel=not vv.is_ended,
-        restart=vv.is_ended,
+        restart=vv.is_ended and vv.status != VVStatus.FAILED,
         edit=vv.status == VVStatus.QUEUED,
     )
+
+
+def error_text(vv: VirtualVehicle) -> str:
+    """Why the VV failed, without the place in its program that its error ends with (the
+    page shows that as a link to the line)."""
+    error = vv.error or ""
+    if vv.error_line is None:
+        return error
+    where = f"line {vv.error_line}" + (f", column {vv.error_column}" if vv.error_column else "")
+    return error.removesuffix(f" ({where})")
 
 
 @dataclass(frozen=True)
@@ -619,6 +633,8 @@ def _vv_page(
     context = {
         "vv": vv,
         "where": where(vv, staff=staff),
+        "error_text": error_text(vv),
+        "refused": any(task.status == TaskStatus.REJECTED for task in tasks),
         # What it waits for (static/js/vv.js keeps it up to date from the API while it runs).
         "waiting": vv_waiting(vv, tasks_open=vv.tasks_open),  # type: ignore[attr-defined]
         "api_url": reverse("vv-detail", kwargs={"pk": str(vv.pk)}),

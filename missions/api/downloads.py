@@ -1,6 +1,7 @@
-"""A VV's readings as files people open as they are: ``readings.csv`` for spreadsheets and
-``readings.geojson`` for maps and GIS tools (DESIGN.md section 9). Built by
-``missions.api.results``, which also puts them in the results zip.
+"""A VV's readings as files people open as they are: ``readings.csv`` for spreadsheets,
+``readings.geojson`` for maps and GIS tools and ``track.kml`` (where it flew, and its readings)
+for Google Earth (DESIGN.md section 9). Built by ``missions.api.results``, which also puts them
+in the results zip.
 
 Kept apart from ``views.py``, which imports ``results.py`` for the zip: these views need its
 error handling and results.py's builders, so either module holding them would import the
@@ -26,6 +27,7 @@ from missions.api.results import (
     readings_csv,
     readings_geojson,
     vv_reading_rows,
+    vv_track_kml,
 )
 from missions.api.serializers import image_url
 from missions.api.views import NOT_FOUND, VV_ID, VVErrorsMixin
@@ -35,6 +37,7 @@ from missions.selectors import vv_get_for_user
 
 GEOJSON_TYPE = "application/geo+json"
 CSV_TYPE = "text/csv"
+KML_TYPE = "application/vnd.google-earth.kml+xml"
 
 READING_COLUMNS_TEXT = (
     "`time` (the reading's, ISO 8601 UTC), `latitude` and `longitude` (degrees) and "
@@ -98,7 +101,8 @@ GEOJSON_SCHEMA = {
 
 
 class _ReadingsDownload(VVErrorsMixin, generics.GenericAPIView):  # type: ignore[type-arg]
-    """One of the VV's readings files: the caller's own VV (another customer's answers 404)."""
+    """One of the VV's readings files: the caller's own VV (another customer's answers 404).
+    A camera reading's value is the URL of its picture, as in the tasks."""
 
     content_negotiation_class = FileOrJSONNegotiation
     suffix = ""
@@ -107,7 +111,7 @@ class _ReadingsDownload(VVErrorsMixin, generics.GenericAPIView):  # type: ignore
     def get_serializer_class(self) -> type[BaseSerializer[Any]]:
         return DetailSerializer  # only errors are JSON here
 
-    def body(self, rows: list[ReadingRow]) -> str:
+    def body(self, vv: VirtualVehicle, rows: list[ReadingRow]) -> str | bytes:
         raise NotImplementedError
 
     def get(self, request: Request, id: str) -> HttpResponse:
@@ -118,7 +122,9 @@ class _ReadingsDownload(VVErrorsMixin, generics.GenericAPIView):  # type: ignore
             vv=vv,
             picture=lambda reference: image_url(context, vv.pk, image_file(reference)),
         )
-        response = HttpResponse(self.body(rows), content_type=f"{self.content_type}; charset=utf-8")
+        response = HttpResponse(
+            self.body(vv, rows), content_type=f"{self.content_type}; charset=utf-8"
+        )
         filename = download_filename(vv, self.suffix)
         response["Content-Disposition"] = f'attachment; filename="{filename}"'
         return response
@@ -143,7 +149,7 @@ class VVReadingsCSVView(_ReadingsDownload):
     suffix = "readings.csv"
     content_type = CSV_TYPE
 
-    def body(self, rows: list[ReadingRow]) -> str:
+    def body(self, vv: VirtualVehicle, rows: list[ReadingRow]) -> str:
         return readings_csv(rows)
 
 
@@ -167,5 +173,32 @@ class VVReadingsGeoJSONView(_ReadingsDownload):
     suffix = "readings.geojson"
     content_type = GEOJSON_TYPE
 
-    def body(self, rows: list[ReadingRow]) -> str:
+    def body(self, vv: VirtualVehicle, rows: list[ReadingRow]) -> str:
         return json.dumps(readings_geojson(rows), ensure_ascii=False)
+
+
+@extend_schema(
+    parameters=[VV_ID],
+    responses={
+        (200, KML_TYPE): OpenApiResponse(
+            OpenApiTypes.STR, description="A KML 2.2 document (UTF-8)."
+        ),
+        **NOT_FOUND,
+    },
+    description="Where the VV flew and what it read, as KML 2.2 for Google Earth and GIS tools: "
+    "its track as a `LineString` of `longitude,latitude,altitude` points in the order flown "
+    "(altitude in metres above ground, `relativeToGround`) with the flight's `TimeSpan`, and a "
+    '`Folder` "Readings" with a `Placemark` per reading that has a position, in the order '
+    "they were taken: its time as a `TimeStamp`, its `sensor`, `kind`, `value`, `unit`, "
+    "`task_q` and `task_index` as `ExtendedData` (as in readings.csv: a camera's value is the "
+    "URL of its picture). The same file is in results.zip, where a camera's value names its "
+    "file in the zip's `images/`.",
+)
+class VVTrackKMLView(_ReadingsDownload):
+    """The VV's flown track and its readings as KML."""
+
+    suffix = "track.kml"
+    content_type = KML_TYPE
+
+    def body(self, vv: VirtualVehicle, rows: list[ReadingRow]) -> bytes:
+        return vv_track_kml(request=self.request, vv=vv, rows=rows)

@@ -3,7 +3,7 @@
 from django.urls import path, re_path
 from rest_framework.routers import DefaultRouter
 
-from missions.api.downloads import VVReadingsCSVView, VVReadingsGeoJSONView
+from missions.api.downloads import VVReadingsCSVView, VVReadingsGeoJSONView, VVTrackKMLView
 from missions.api.dry_run import DryRunView
 from missions.api.messages import VVMessagesView
 from missions.api.service_levels import ServiceLevelsView
@@ -43,4 +43,5 @@ urlpatterns = [
     re_path(
         ONE_VV + r"readings\.geojson$", VVReadingsGeoJSONView.as_view(), name="vv-readings-geojson"
     ),
+    re_path(ONE_VV + r"track\.kml$", VVTrackKMLView.as_view(), name="vv-track-kml"),
 ]

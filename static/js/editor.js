@@ -241,7 +241,8 @@
         element.dataset.zones = String(zones.length);
         element.dataset.state = 'ready';
         show(bounds);
-        tell(bands.length ? 'Click the map to insert a point at the cursor.'
+        // How to click is the hint below the map, always shown; this line tells what is where.
+        tell(bands.length ? 'Point at the map to see the altitudes served there.'
           : 'No vehicle is in service now: no task could be served anywhere.');
       })
       .catch(function (error) {

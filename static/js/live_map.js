@@ -1,15 +1,18 @@
 // The live map page (/map/): one CPCCMap on the socket the page names, a status line, and the
 // filters: how much history it shows (staff start with the last 15 minutes, customers with
-// all the map holds) and one VV alone with its whole history, fetched from the server
-// (/vvs/<id>/map.json: staff may see any VV, a customer only its own).
+// the last hour) and which VVs: the running ones (the default), every one, or one VV alone
+// with its whole history, fetched from the server (/vvs/<id>/map.json: staff may see any VV,
+// a customer only its own).
 // State for whoever looks, on #live-map besides CPCCMap's: data-window (seconds, empty for
-// all), data-only (the VV shown alone), data-history-of (the VV whose history has come).
+// all), data-running (only the VVs that have not ended), data-only (the VV shown alone),
+// data-history-of (the VV whose history has come).
 // A file of its own rather than an inline script: the pages' Content Security Policy allows
 // scripts from this site only.
 (function () {
   'use strict';
   var REDRAW_MS = 15000; // what leaves the time window goes, frames or not
   var ENDED = { finished: true, failed: true, killed: true, cancelled: true };
+  var RUNNING = 'running'; // the VV choice that shows those that have not ended
 
   var element = document.getElementById('live-map');
   var status = document.getElementById('map-status');
@@ -34,7 +37,7 @@
     if (key === listed) return;
     listed = key;
     var chosen = vvChoice.value;
-    while (vvChoice.options.length > 1) vvChoice.remove(1);
+    while (vvChoice.options.length > 2) vvChoice.remove(2);
     vvs.forEach(function (vv, k) {
       var option = document.createElement('option');
       option.value = vv.id;
@@ -58,14 +61,20 @@
 
   map.setWindow(windowChoice.value);
   element.dataset.window = windowChoice.value;
+  // "the running ones" (the first choice, and the default): the VVs that have not ended.
+  map.showRunning(vvChoice.value === RUNNING);
+  element.dataset.running = String(vvChoice.value === RUNNING);
   windowChoice.addEventListener('change', function () {
     map.setWindow(windowChoice.value);
     element.dataset.window = windowChoice.value;
   });
 
-  /* One VV alone, with all the server keeps of it; or every VV again. */
+  /* One VV alone, with all the server keeps of it; or every VV again, or the running ones. */
   vvChoice.addEventListener('change', function () {
-    var id = vvChoice.value;
+    var running = vvChoice.value === RUNNING;
+    var id = running ? '' : vvChoice.value;
+    map.showRunning(running);
+    element.dataset.running = String(running);
     map.showOnly(id || null);
     element.dataset.only = id;
     if (!id) {

@@ -9,19 +9,23 @@
  * (connect) or from a mission's history (replay).
  *
  * Its state is on the map element for whoever looks (tests, the page): data-seq (last frame),
- * data-connected, data-vehicles, data-tasks-open, data-tasks-done, data-vvs (every VV it
+ * data-connected, data-vehicles, data-tasks-open, data-tasks-done, data-tasks-refused (points
+ * drawn that no vehicle may fly to), data-vvs (every VV it
  * knows), data-vvs-shown (those with something in view), data-frames, data-tiles-loaded,
  * data-messages (message lines drawn so far), data-messages-shown (those on the map now).
  *
  * The background is the tile server of the CPCC_MAP_TILES setting, or else the platform's own
  * tiles of the simulated world (/tiles/{z}/{x}/{y}.png: what the cameras photograph). The map
  * fits, once, the operation areas and the tasks the platform accepted: a point no vehicle
- * may fly to (a rejected task) never pulls the view away from the fleet.
+ * may fly to (a rejected task, drawn as a dashed ring) never pulls the view away from the
+ * fleet, unless the map is one VV's (option fitRefused: its page shows why it failed).
  *
  * What it shows can be narrowed (the live map's filters): setWindow(seconds) keeps the
  * history (paths, done tasks, migrations) of that last stretch of time, open tasks and
- * vehicles always; showOnly(vv) one VV; mergeHistory(snapshot) adds what the server keeps of
- * a VV (/vvs/<id>/map.json) to what the socket brought.
+ * vehicles always; showRunning(true) the VVs that have not ended; showOnly(vv) one VV;
+ * mergeHistory(snapshot) adds what the server keeps of a VV (/vvs/<id>/map.json) to what the
+ * socket brought. Live, the history older than FADE_S is drawn faint (option fade: false, as
+ * on a VV's own page, draws it all alike).
  *
  * Names (VVs, vehicles, areas, ground stations) are the customers' and operators' words, never
  * markup: every tooltip is a DOM node whose text is set by text() (Leaflet would take a string
@@ -47,8 +51,11 @@
     done: '#d62828',
     open: '#1f6fe5',
     migration: '#d62828',
-    message: '#c026d3'
+    message: '#c026d3',
+    refused: '#7a1f1f'
   };
+  var FADE_S = 600;   // live, the path flown before the last ten minutes is drawn faint...
+  var FADED = 0.35;   // ...at this opacity, as are the done tasks and migrations of that time
   var MESSAGE_LINE_MS = 6000; // a message's line is on the map this long...
   var MESSAGE_FADE_MS = 2000; // ...fading out over the last of it
   var MESSAGE_TICK_MS = 100;
@@ -440,7 +447,9 @@
       if (this.only && id !== this.only) continue;
       var vv = this.vvs[id];
       for (var t in vv.tasks) {
-        if (accepted(vv.tasks[t])) bounds.extend([vv.tasks[t].lat, vv.tasks[t].lng]);
+        if (accepted(vv.tasks[t]) || this.options.fitRefused) {
+          bounds.extend([vv.tasks[t].lat, vv.tasks[t].lng]);
+        }
       }
       if (this.only) {
         for (var p = 0; p < vv.track.length; p++) bounds.extend([vv.track[p][1], vv.track[p][2]]);
@@ -490,6 +499,12 @@
     this._changed();
   };
 
+  /* Show only the VVs that have not ended (true), or the ended ones too (false). */
+  CPCCMap.prototype.showRunning = function (running) {
+    this.runningOnly = !!running;
+    this._changed();
+  };
+
   /* Add a VV's history as the server keeps it (the shape of a snapshot's "vvs") to what the
    * map knows: its tasks (a newer word from the socket stays), its whole path, its
    * migrations. */
@@ -522,15 +537,26 @@
 
   /* A VV's path as shown: within the window, from the leg it was on when the window began. */
   CPCCMap.prototype._path = function (track) {
-    var path = [];
+    return this._paths(track, null).recent;
+  };
+
+  /* A track's points in view, as the part flown before ``fadeFrom`` (platform seconds; null:
+   * none) and the part after it, which share the point where one ends and the other starts. */
+  CPCCMap.prototype._paths = function (track, fadeFrom) {
+    var old = [], recent = [];
     for (var p = 0; p < track.length; p++) {
       var t = track[p][0];
       var next = track[p + 1];
-      if (this._seen(t) || (this._since !== null && next && next[0] >= this._since)) {
-        path.push([track[p][1], track[p][2]]);
+      if (!(this._seen(t) || (this._since !== null && next && next[0] >= this._since))) continue;
+      var point = [track[p][1], track[p][2]];
+      if (fadeFrom !== null && next && next[0] <= fadeFrom) {
+        old.push(point);
+      } else {
+        if (fadeFrom !== null && t < fadeFrom) old.push(point);
+        recent.push(point);
       }
     }
-    return path;
+    return { old: old, recent: recent };
   };
 
   CPCCMap.prototype._draw = function () {
@@ -540,13 +566,23 @@
     L_.tasks.clearLayers(); L_.carried.clearLayers(); L_.intended.clearLayers();
     L_.migrations.clearLayers(); L_.routes.clearLayers();
     this._since = this.window === null || this.time !== null ? null : this.now() - this.window;
-    var open = 0, done = 0, count = 0, shown = 0;
+    var open = 0, done = 0, refused = 0, count = 0, shown = 0;
     for (var id in this.vvs) {
       var vv = this.vvs[id];
       count += 1;
       if (this.only && id !== this.only) continue;
+      if (this.runningOnly && !this.only && VV_ENDED[vv.status]) continue;
       var before = open + done, moves = 0;
-      var path = this._path(vv.track);
+      // Live, what was flown more than FADE_S ago is drawn faint: the last minutes stand out.
+      var fadeFrom = this.time === null && !this.only && this.options.fade !== false
+        ? this.now() - FADE_S : null;
+      var paths = this._paths(vv.track, fadeFrom);
+      var path = paths.recent;
+      if (paths.old.length > 1) {
+        L.polyline(paths.old, {
+          renderer: this.renderer, color: COLOR.carried, weight: 2, opacity: FADED
+        }).bindTooltip(text(vv.name)).addTo(L_.carried);
+      }
       if (path.length > 1) {
         L.polyline(path, { renderer: this.renderer, color: COLOR.carried, weight: 3 })
           .bindTooltip(text(vv.name)).addTo(L_.carried);
@@ -554,6 +590,18 @@
       var pending = [];
       for (var tid in vv.tasks) {
         var task = vv.tasks[tid];
+        var name = vv.name + ': task ' + task.q + (task.index ? '.' + task.index : '');
+        if (task.status === 'rejected') {
+          // A point no vehicle may fly to: a hollow dashed ring where it is (the VV's page
+          // says why).
+          if (this.time !== null && !this._seen(task.requested_s)) continue;
+          refused += 1;
+          L.circleMarker([task.lat, task.lng], {
+            renderer: this.renderer, radius: 6, color: COLOR.refused, weight: 2.5,
+            dashArray: '3 3', fillColor: '#fff', fillOpacity: 0.9
+          }).bindTooltip(text(name + ' (refused)')).addTo(L_.tasks);
+          continue;
+        }
         var isDone = task.status === 'done' && this._seen(task.done_s);
         var isOpen = this.time === null ? task.status === 'open'
           : this._seen(task.requested_s) && !isDone && task.status !== 'rejected'
@@ -561,10 +609,10 @@
         if (!isDone && !isOpen) continue;
         if (isDone) done += 1; else { open += 1; pending.push(task); }
         L.circleMarker([task.lat, task.lng], {
-          renderer: this.renderer, radius: 4, stroke: false, fillOpacity: 0.9,
+          renderer: this.renderer, radius: 4, stroke: false,
+          fillOpacity: isDone && fadeFrom !== null && task.done_s < fadeFrom ? FADED : 0.9,
           fillColor: isDone ? COLOR.done : COLOR.open
-        }).bindTooltip(text(vv.name + ': task ' + task.q + (task.index ? '.' + task.index : '') +
-                            (isDone ? ' (done)' : ' (open)')))
+        }).bindTooltip(text(name + (isDone ? ' (done)' : ' (open)')))
           .addTo(L_.tasks);
       }
       if (pending.length && path.length) {
@@ -580,12 +628,13 @@
         if (!move.from_pos || !move.to_pos || !this._seen(move.at_s)) continue;
         moves += 1;
         L.polyline([move.from_pos, move.to_pos], {
-          renderer: this.renderer, color: COLOR.migration, weight: 2
+          renderer: this.renderer, color: COLOR.migration, weight: 2,
+          opacity: fadeFrom !== null && move.at_s < fadeFrom ? FADED : 1
         }).bindTooltip(text(vv.name + ' migrated' +
                             (move.from ? ': ' + move.from + ' → ' + move.to : '')))
           .addTo(L_.migrations);
       }
-      if (open + done > before || path.length > 1 || moves) shown += 1;
+      if (open + done > before || path.length > 1 || paths.old.length > 1 || moves) shown += 1;
     }
     this._drawVehicles();
     var el = this.element;
@@ -593,6 +642,7 @@
     el.dataset.frames = String(this.frames);
     el.dataset.tasksOpen = String(open);
     el.dataset.tasksDone = String(done);
+    el.dataset.tasksRefused = String(refused);
     el.dataset.vvs = String(count);
     el.dataset.vvsShown = String(shown);
     this._messageState();

@@ -26,65 +26,120 @@
     return (h ? h + ':' : '') + String(m).padStart(2, '0') + ':' + String(s).padStart(2, '0');
   }
 
-  function live(el, map) {
-    var id = el.dataset.vv;
+  // The page's state of a VV that has not ended (status, where it is, what it waits for, its
+  // task counts, the actions offered) is rendered whole from one read of the API's VV
+  // (GET /api/v1/vvs/<id>/), never piece by piece from different moments: read again every
+  // POLL_MS, and at once when the live map shows a change (another status or task count).
+  var POLL_MS = 5000;
+
+  function PageState(box) {
+    this.api = box.dataset.api;
+    this.box = box;
+    this.staff = box.dataset.staff === 'true';
+    this.shown = { status: badgeStatus(), tasks_open: counter('vv-tasks-open'), tasks_done: counter('vv-tasks-done') };
+    this.timer = null;
+    this.reading = false;
+    this.again = false;
+    this.hostKind = null;  // the live map's word on where it is (staff see the host's name)
+  }
+
+  function badgeStatus() {
     var badge = document.getElementById('vv-status');
+    return badge ? badge.className.replace(/.*status-(\w+).*/, '$1') : '';
+  }
+
+  function counter(id) {
+    var el = document.getElementById(id);
+    return el ? Number(el.textContent) : null;
+  }
+
+  PageState.prototype.differs = function (vv) {
+    return vv.status !== this.shown.status || vv.tasks_open !== this.shown.tasks_open ||
+      vv.tasks_done !== this.shown.tasks_done;
+  };
+
+  // Read the VV now (once at a time: a change seen meanwhile reads it again after).
+  PageState.prototype.look = function () {
+    var self = this;
+    if (this.reading) { this.again = true; return; }
+    clearTimeout(this.timer);
+    this.reading = true;
+    fetch(this.api, { credentials: 'same-origin', headers: { Accept: 'application/json' } })
+      .then(function (response) {
+        if (!response.ok) throw new Error(String(response.status));
+        return response.json();
+      })
+      .then(function (vv) {
+        self.render(vv);
+        self.next(ENDED[vv.status] ? null : POLL_MS);
+      })
+      .catch(function () { self.next(POLL_MS * 3); });
+  };
+
+  PageState.prototype.next = function (ms) {
+    var self = this;
+    this.reading = false;
+    if (this.again) { this.again = false; this.look(); return; }
+    if (ms !== null) this.timer = setTimeout(function () { self.look(); }, ms);
+  };
+
+  PageState.prototype.render = function (vv) {
+    this.shown = { status: vv.status, tasks_open: vv.tasks_open, tasks_done: vv.tasks_done };
+    var badge = document.getElementById('vv-status');
+    badge.className = 'badge status-' + vv.status;
+    badge.textContent = LABELS[vv.status] || vv.status;
     var where = document.getElementById('vv-where');
+    if (where) where.textContent = this.where(vv);
+    var open = document.getElementById('vv-tasks-open');
+    var done = document.getElementById('vv-tasks-done');
+    if (open) open.textContent = String(vv.tasks_open);
+    if (done) done.textContent = String(vv.tasks_done);
+    var w = ENDED[vv.status] ? null : vv.waiting;
+    this.box.hidden = !w;
+    this.box.dataset.reason = w ? w.reason : '';
+    if (w) {
+      document.getElementById('vv-waiting-label').textContent = (w.reason === 'flying' ? 'On its way' : 'Waiting') + ':';
+      document.getElementById('vv-waiting-message').textContent = w.message;
+    }
+    // Edit while queued, cancel until it ends.
+    document.querySelectorAll('.head-actions a[href$="/edit/"]').forEach(function (a) {
+      a.hidden = vv.status !== 'queued';
+    });
+    if (ENDED[vv.status]) {
+      document.getElementById('vv-ended-note').hidden = false;
+      document.querySelectorAll('.head-actions form[action$="/cancel/"]')
+        .forEach(function (action) { action.hidden = true; });
+    }
+  };
+
+  // Where the VV is, as the page's server says it (missions.views.where).
+  PageState.prototype.where = function (vv) {
+    if (this.staff && vv.host) {
+      var kind = this.hostKind || (vv.host === 'vehicle' ? 'rv' : 'gs');
+      return vv.host + (kind === 'rv' ? ' (vehicle)' : ' (ground station)');
+    }
+    if (vv.host === 'vehicle') return 'in flight';
+    if (vv.host === 'ground station') return 'at a ground station';
+    if (vv.status === 'queued') return 'queued';
+    return '—';
+  };
+
+  function live(el, map, state) {
+    var id = el.dataset.vv;
     var status = document.getElementById('vv-map-status');
-    var shown = badge ? badge.className.replace(/.*status-(\w+).*/, '$1') : '';
+    var seen = '';
     map.options.onDraw = function () {
       status.textContent = (el.dataset.connected === 'true' ? 'live' : 'reconnecting…') + ' · ' +
         el.dataset.tasksOpen + ' open, ' + el.dataset.tasksDone + ' done';
       var vv = map.vvs[id];
-      if (!vv || !vv.status || vv.status === shown) return;
-      shown = vv.status;
-      badge.className = 'badge status-' + vv.status;
-      badge.textContent = LABELS[vv.status] || vv.status;
-      if (where) {
-        if (vv.host) where.textContent = vv.host + (vv.host_kind === 'rv' ? ' (vehicle)' : ' (ground station)');
-        else if (vv.host_kind === 'rv') where.textContent = 'in flight';
-        else if (vv.host_kind === 'gs') where.textContent = 'at a ground station';
-      }
-      if (ENDED[vv.status]) {
-        document.getElementById('vv-ended-note').hidden = false;
-        // Nothing to cancel or edit any more.
-        document.querySelectorAll('.head-actions form[action$="/cancel/"], .head-actions a[href$="/edit/"]')
-          .forEach(function (action) { action.hidden = true; });
-      }
+      if (!vv || !vv.status || !state) return;
+      state.hostKind = vv.host_kind || state.hostKind;
+      var now = { status: vv.status, tasks_open: Number(el.dataset.tasksOpen), tasks_done: Number(el.dataset.tasksDone) };
+      var key = JSON.stringify(now);
+      if (key !== seen && state.differs(now)) state.look();  // once for each change the map shows
+      seen = key;
     };
     map.connect(el.dataset.socket);
-  }
-
-  // What the VV waits for (#vv-waiting, while it has not ended): read again from the API
-  // (GET /api/v1/vvs/<id>/, its `waiting`) every WAITING_POLL_MS until the VV ends.
-  var WAITING_POLL_MS = 5000;
-
-  function waiting() {
-    var box = document.getElementById('vv-waiting');
-    if (!box || !box.dataset.api) return;
-    var label = document.getElementById('vv-waiting-label');
-    var message = document.getElementById('vv-waiting-message');
-    function show(vv) {
-      var w = vv.waiting;
-      box.hidden = !w;
-      box.dataset.reason = w ? w.reason : '';
-      if (!w) return;
-      label.textContent = (w.reason === 'flying' ? 'On its way' : 'Waiting') + ':';
-      message.textContent = w.message;
-    }
-    function look() {
-      fetch(box.dataset.api, { credentials: 'same-origin', headers: { Accept: 'application/json' } })
-        .then(function (response) {
-          if (!response.ok) throw new Error(String(response.status));
-          return response.json();
-        })
-        .then(function (vv) {
-          show(vv);
-          if (!ENDED[vv.status]) setTimeout(look, WAITING_POLL_MS);
-        })
-        .catch(function () { setTimeout(look, WAITING_POLL_MS * 3); });
-    }
-    setTimeout(look, WAITING_POLL_MS);
   }
 
   function replay(el, map) {
@@ -157,12 +212,16 @@
     21600, 43200, 86400];
   var DAY_MS = 86400000;
 
-  // A moment (epoch milliseconds) as a UTC clock time, "13:04:05", with its date in front
-  // ("2026-11-27 13:04:05") when asked.
-  function utcClock(ms, withDate) {
+  // A moment (epoch milliseconds) as a UTC clock time, "13:04:05" (or "13:04" without
+  // seconds), with its date in front ("2026-11-27 13:04:05") when asked.
+  function utcClock(ms, withDate, withoutSeconds) {
     var iso = new Date(ms).toISOString();
-    return (withDate ? iso.slice(0, 10) + ' ' : '') + iso.slice(11, 19);
+    return (withDate ? iso.slice(0, 10) + ' ' : '') + iso.slice(11, withoutSeconds ? 16 : 19);
   }
+
+  // The time axis shows at least this many seconds: one reading, or a few a second apart,
+  // sit in the middle of a minute with ticks a few seconds apart.
+  var MIN_SPAN_S = 60;
 
   // The smallest clock step that puts at most about 8 ticks on a span of seconds.
   function clockStep(spanS) {
@@ -186,7 +245,14 @@
     if (first === Infinity) return;
     var origin = Math.floor(first / DAY_MS) * DAY_MS;
     var spansDays = last - origin >= DAY_MS;
-    var step = clockStep(Math.max(1, (last - first) / 1000));
+    // The axis: the readings' span with a margin (at least MIN_SPAN_S), cut at clock-round
+    // ticks; the step, and so the labels' unit (seconds or minutes), chosen from that span.
+    var from = (first - origin) / 1000, to = (last - origin) / 1000;
+    var margin = Math.max((to - from) * 0.05, (MIN_SPAN_S - (to - from)) / 2);
+    var step = clockStep(to - from + 2 * margin);
+    var axisMin = Math.floor((from - margin) / step) * step;
+    var axisMax = Math.ceil((to + margin) / step) * step;
+    var seconds = step < 60;  // else every tick is on a whole minute: "13:05"
     holder.dataset.timeOrigin = String(origin);
     var byUnit = {};
     var units = [];
@@ -229,11 +295,15 @@
           scales: {
             x: {
               type: 'linear',
+              min: axisMin,
+              max: axisMax,
               title: { display: true, text: 'time (UTC)' },
               ticks: {
                 stepSize: step,
                 maxRotation: 0,
-                callback: function (value) { return utcClock(origin + value * 1000, spansDays); }
+                callback: function (value) {
+                  return utcClock(origin + value * 1000, spansDays, !seconds);
+                }
               }
             },
             y: { title: { display: !!unit, text: unit } }
@@ -255,13 +325,19 @@
   }
 
   document.addEventListener('DOMContentLoaded', function () {
-    waiting();
+    var box = document.getElementById('vv-waiting');
+    var state = box && box.dataset.api ? new PageState(box) : null;
+    if (state) state.next(POLL_MS);
     charts();
     var el = document.getElementById('vv-map');
     if (!el || !window.CPCCMap) return;
-    var map = new window.CPCCMap(el, { tiles: el.dataset.tiles || '' });
+    var map = new window.CPCCMap(el, {
+      tiles: el.dataset.tiles || '', fade: false,
+      // An ended VV's page holds the points no vehicle could serve in view (why it failed).
+      fitRefused: el.dataset.mode === 'replay'
+    });
     window.cpccMap = map;
     if (el.dataset.mode === 'replay') replay(el, map);
-    else live(el, map);
+    else live(el, map, state);
   });
 })();

@@ -146,8 +146,11 @@ def test_a_customers_map_is_on_the_platforms_world_and_a_rejected_point_stays_ou
     expect(live).to_have_attribute("data-connected", "true")
     expect(live).to_have_attribute("data-tasks-done", "2")
     expect(live).to_have_attribute("data-vehicles", "1")
-    # The customer starts with all the map holds; the rejected task is known to the map...
-    assert page.locator("#map-window").input_value() == ""
+    # The customer starts with the running VVs of the last hour; the rejected task is known to
+    # the map and drawn where it is...
+    assert page.locator("#map-window").input_value() == "3600"
+    assert page.locator("#map-vv").input_value() == "running"
+    expect(live).to_have_attribute("data-tasks-refused", "1")
     rejected = page.evaluate(
         """(id) => Object.values(window.cpccMap.vvs[id].tasks)
                      .filter((t) => t.status === 'rejected').map((t) => [t.lat, t.lng])""",
@@ -185,14 +188,23 @@ def test_the_staff_map_shows_the_last_15_minutes_or_one_vvs_whole_history(
     wait_for_tiles(page, "#live-map")
     page.screenshot(path=tmp_path / "staff-map.png")
 
+    # All the map holds, of the running VVs: Old has ended, so still Survey alone.
+    choice = page.get_by_label("Virtual vehicles")
+    assert choice.input_value() == "running"
     page.get_by_label("History").select_option(label="all the map holds")
+    expect(live).to_have_attribute("data-vvs-shown", "1")
+    # Every one: Old's path too, two hours old, drawn faint; Survey's of the last minutes not.
+    choice.select_option(label="every one")
     expect(live).to_have_attribute("data-tasks-done", "4")
     expect(live).to_have_attribute("data-vvs-shown", "2")
+    opacities = page.evaluate(
+        "() => window.cpccMap.layers.carried.getLayers().map((l) => l.options.opacity)"
+    )
+    assert sorted(opacities) == [0.35, 1.0], opacities
     page.get_by_label("History").select_option(label="the last hour")
     expect(live).to_have_attribute("data-tasks-done", "2")
 
     # One VV: Old alone, its whole history fetched from the server, the map on it.
-    choice = page.get_by_label("Virtual vehicle")
     expect(choice.locator(f'option[value="{old}"]')).to_have_text("Old (finished)")
     expect(choice.locator(f'option[value="{survey}"]')).to_have_text("Survey")
     choice.select_option(old)

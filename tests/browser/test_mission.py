@@ -76,12 +76,52 @@ def write_and_submit(page: Page, name: str) -> str:
     page.wait_for_url(re.compile(r"/vvs/[0-9a-f-]{36}/$"))
     expect(page.locator(".messages")).to_contain_text(f"“{name}” is submitted.")
     vv_id = page.url.rstrip("/").rsplit("/", 1)[1]
+    one_state_from_the_first_paint(page)
     page.get_by_role("navigation", name="Main").get_by_role("link", name="Dashboard").click()
     row = page.locator("tr[data-vv]", has=page.get_by_role("link", name=name, exact=True))
     assert row.get_attribute("data-vv") == vv_id
     # A form sends a textarea's lines ending in CR LF (the HTML standard): the same program.
     assert VirtualVehicle.objects.get(pk=vv_id).program.replace("\r\n", "\n") == VV1
     return vv_id
+
+
+# What the VV's page says of the VV in its parts: the status badge, where it is, whether it
+# offers "Edit program", the waiting banner, its tasks-open figure and the live map's.
+PAGE_STATE = """() => {
+  const edit = document.querySelector('.head-actions a[href$="/edit/"]');
+  const waiting = document.getElementById('vv-waiting');
+  const map = document.getElementById('vv-map');
+  return {
+    status: document.getElementById('vv-status').className.replace(/.*status-(\\w+).*/, '$1'),
+    where: document.getElementById('vv-where').textContent,
+    edit: !!edit && !edit.hidden,
+    waiting: waiting.hidden ? '' : waiting.dataset.reason || 'shown',
+    open: document.getElementById('vv-tasks-open').textContent,
+    map_open: map.dataset.tasksOpen || null,
+  };
+}"""
+
+
+def one_state_from_the_first_paint(page: Page) -> None:
+    """Right after Submit, the VV's page never says two things at once: queued (where
+    "queued", "Edit program" offered, waiting in the queue) or started (neither), whichever
+    part is looked at, while it starts; once the live map counts its tasks, the page's figure
+    follows within a poll."""
+    seen = []
+    for _ in range(40):
+        state = page.evaluate(PAGE_STATE)
+        seen.append(state)
+        queued = state["status"] == "queued"
+        assert state["edit"] == queued, seen
+        assert (state["where"] == "queued") == queued, seen
+        assert queued or state["waiting"] != "queue", seen
+        if not queued and state["map_open"] not in (None, state["open"]):
+            break  # the map counts before the page has read: the page reads at once
+        page.wait_for_timeout(100)
+    page.wait_for_function(
+        f"() => {{ const s = ({PAGE_STATE})(); return s.map_open === null || s.map_open === s.open; }}",
+        timeout=10_000,
+    )
 
 
 def carrier(page) -> dict:
@@ -149,7 +189,9 @@ def test_a_customer_writes_vv1_watches_it_fly_and_gets_its_results_others_see_no
         assert (state_b["vvs"], state_b["vehicles"], state_b["vvNames"]) == ("0", [], [])
         assert (state_b["tasksOpen"], state_b["tasksDone"]) == ("0", "0")
 
-        # All four tasks done (red), nothing open; the carrier leaves the customer's map.
+        # All four tasks done (red), nothing open; the carrier leaves the customer's map. (The
+        # map shows the running VVs by default: VV 1 stays on it, once ended, with every one.)
+        page.get_by_label("Virtual vehicles").select_option(label="every one")
         expect(live).to_have_attribute("data-tasks-done", "4", timeout=FLIGHT_MS)
         expect(live).to_have_attribute("data-tasks-open", "0")
         expect(live).to_have_attribute("data-vehicles", "0")
@@ -236,6 +278,9 @@ def test_the_live_map_keeps_what_ended_when_an_older_word_arrives_late(world, pa
     log_in(page, "customer-a", then="/map/")
     live = page.locator("#live-map")
     expect(live).to_have_attribute("data-connected", "true")
+    # Every VV, the ended too, and all the map holds (these words are of long ago).
+    page.get_by_label("Virtual vehicles").select_option(label="every one")
+    page.get_by_label("History").select_option(label="all the map holds")
     vv = "00000000-0000-4000-8000-000000000001"
     task = {"kind": "task", "vv": vv, "id": 7, "q": 0, "index": 0, "lat": 48.11, "lng": 12.87,
             "alt": 10.0, "requested_s": 1.0}  # fmt: skip

@@ -51,6 +51,11 @@ def test_a_customer_plans_on_the_map_and_a_dry_run_finds_the_point_out_of_reach(
     # Heli One's area, 0-120 m, as one band; no name of a vehicle anywhere on the page.
     expect(service_map).to_have_attribute("data-bands", "1")
     assert "Heli One" not in page.content()
+    # How to click is said once, under the map; the status line says what is where.
+    expect(page.get_by_text("Click the map")).to_have_count(1)
+    expect(page.locator("#service-map-status")).to_have_text(
+        "Point at the map to see the altitudes served there."
+    )
     # The view holds the service area.
     assert page.evaluate(
         "() => window.cpccServiceMap.map.getBounds().contains([[48.109, 12.859], [48.114, 12.868]])"

@@ -1,12 +1,16 @@
 """``cpcc login``: the command keeps a token made on the Account page and uses it; a revoked
-token is refused, a wrong one is not kept, ``cpcc logout`` forgets it."""
+token is refused, a wrong one is not kept, ``cpcc logout`` forgets it. Without a terminal it
+reads the token from a pipe or CPCC_TOKEN, with no warning."""
 
 from __future__ import annotations
 
 import io
 import json
+import os
 import re
 import stat
+import subprocess
+import sys
 
 import pytest
 from django.test import Client
@@ -24,6 +28,13 @@ KEY = re.compile(r"cpcc_[0-9a-f]{64}")
 def config_dir(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
     return tmp_path / "config" / "cpcc"
+
+
+def make_token(user, name: str) -> str:
+    """A token made on the Account page, as its owner copies it."""
+    browser = Client()
+    browser.force_login(user)
+    return KEY.search(browser.post("/accounts/tokens/", {"name": name}).content.decode())[0]
 
 
 @pytest.fixture
@@ -75,3 +86,44 @@ def test_cpcc_logs_in_with_a_token_made_on_the_account_page(
     code, out, _ = cpcc("logout")
     assert code == 0 and out.startswith(f"Forgot the token for {live_server.url}.")
     assert json.loads(kept.read_text()) == {}
+
+
+def test_a_token_piped_into_cpcc_login_is_kept_without_a_warning(
+    live_server, config_dir, user_a
+) -> None:
+    key = make_token(user_a, "ci")
+    env = {k: v for k, v in os.environ.items() if k != "CPCC_TOKEN"}
+    env |= {"CPCC_URL": live_server.url, "XDG_CONFIG_HOME": str(config_dir.parent)}
+    # A session of its own: no controlling terminal that getpass could open instead.
+    done = subprocess.run(
+        [sys.executable, "-m", "cpcc_client", "login"],
+        input=key + "\n",
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        start_new_session=True,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith(f"Logged in to {live_server.url} with the token 'ci';")
+    assert "Warning" not in done.stderr and "API token:" not in done.stderr
+    assert done.stderr == ""
+    kept = json.loads((config_dir / "credentials.json").read_text())
+    assert kept == {live_server.url: key}
+
+
+def test_without_a_terminal_cpcc_login_takes_cpcc_token_when_nothing_is_piped(
+    cpcc, live_server, config_dir, user_a, monkeypatch
+) -> None:
+    code, _, err = cpcc("login")
+    assert code == 2 and "no token given" in err
+    assert not (config_dir / "credentials.json").exists()
+
+    key = make_token(user_a, "env")
+    monkeypatch.setenv("CPCC_TOKEN", key)
+    code, out, err = cpcc("login")
+    assert code == 0, err
+    assert out.startswith(f"Logged in to {live_server.url} with the token 'env';")
+    assert "Warning" not in err
+    assert json.loads((config_dir / "credentials.json").read_text()) == {live_server.url: key}

@@ -29,6 +29,7 @@ def test_the_schema_validates_without_warnings(tmp_path: Path) -> None:
         "/api/v1/vvs/{id}/results.zip",
         "/api/v1/vvs/{id}/readings.csv",
         "/api/v1/vvs/{id}/readings.geojson",
+        "/api/v1/vvs/{id}/track.kml",
         "/api/v1/vvs/{id}/images/{file}",
         "/api/v1/sensors/",
         "/api/v1/vehicles/",

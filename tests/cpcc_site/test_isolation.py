@@ -221,6 +221,7 @@ ROUTES: dict[str, Route] = {
     r"api/v1/vvs/(?P<id>{uuid})/readings\.geojson$": Route(
         Kind.OBJECT, "/api/v1/vvs/{vv}/readings.geojson"
     ),
+    r"api/v1/vvs/(?P<id>{uuid})/track\.kml$": Route(Kind.OBJECT, "/api/v1/vvs/{vv}/track.kml"),
     # The SDC entries the caller may use: the same catalog for every customer by default.
     "api/v1/sensors/": Route(Kind.SIGNED_IN, "/api/v1/sensors/"),
     # Where tasks can be served: the same for everyone, no vehicle named.

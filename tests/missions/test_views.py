@@ -754,3 +754,42 @@ def test_the_editor_shows_why_a_full_queue_refuses_a_submission(
     client.force_login(user_b)
     other = client.post(reverse("vv-new"), {"name": "B", "copies": 2, "program": FINE})
     assert other.status_code == 302
+
+
+def test_a_failed_vvs_page_says_why_once_shows_where_and_offers_a_copy_not_a_restart(
+    client, user_a, vv_a
+) -> None:
+    # VV failed at line 3, column 9: a task no vehicle could serve (refused).
+    VirtualVehicle.objects.filter(pk=vv_a.pk).update(
+        status=VVStatus.FAILED,
+        error="no vehicle can serve the task at (48.200000, 12.861900) at 50 m: it is outside "
+        "every operation area (line 3, column 9)",
+        error_line=3,
+        error_column=9,
+        finished_s=12.0,
+    )
+    Task.objects.create(
+        vv=vv_a,
+        q=1,
+        lat=48.2,
+        lng=12.8619,
+        alt=50.0,
+        tolerance_m=2.0,
+        sensors=["CO2"],
+        status="rejected",
+        requested_s=1.0,
+    )
+    client.force_login(user_a)
+    page = page_of(client, vv_a)
+    # The place once, as the link to the line; the reason in words before it.
+    assert page.count("line 3, column 9") == 1
+    assert "outside every operation area\n" in page or "outside every operation area " in page
+    assert 'class="error-where">line 3, column 9</a>' in page
+    # The refused point is named in the map's legend; an ended VV read none, not "yet".
+    assert "refused task" in page
+    assert "No scalar readings: it read none." in page and "readings yet" not in page
+    # Run again as it is it would fail the same way: a copy to change, no Restart.
+    assert f'action="/vvs/{vv_a.pk}/restart/"' not in page
+    assert "it would fail the same way" in page and f'href="/vvs/new/?from={vv_a.pk}"' in page
+    dashboard = html.unescape(client.get(reverse("home")).text)
+    assert f'action="/vvs/{vv_a.pk}/restart/"' not in dashboard

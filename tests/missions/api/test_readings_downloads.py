@@ -1,6 +1,6 @@
-"""A VV's readings as files people open as they are: readings.csv and readings.geojson from
-the API and in results.zip (with track.kml), read back with standard readers, from a mission
-really flown in-process; another customer gets 404."""
+"""A VV's readings as files people open as they are: readings.csv, readings.geojson and
+track.kml from the API and in results.zip, read back with standard readers, from a mission
+really flown in-process; another customer gets 404, an anonymous caller is refused."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import zipfile
 from xml.etree import ElementTree as ET
 
 import pytest
+from rest_framework.test import APIClient
 from shapely.geometry import Point, shape
 
 from missions.api.results import READINGS_COLUMNS, track_kml
@@ -135,7 +136,33 @@ def test_results_zip_holds_the_readings_and_the_flown_track_as_kml(mission, api_
     ]
 
 
-@pytest.mark.parametrize("file", ["readings.csv", "readings.geojson"])
+def test_track_kml_is_the_flown_track_as_in_results_zip(mission, api_a) -> None:
+    response = api_a.get(vv_url(mission, "track.kml"))
+    assert response.status_code == 200
+    assert response["Content-Type"] == "application/vnd.google-earth.kml+xml; charset=utf-8"
+    assert 'filename="survey-' in response["Content-Disposition"]
+    assert response["Content-Disposition"].endswith('-track.kml"')
+    kml = ET.fromstring(response.content)
+    assert kml.tag == f"{KML}kml"
+    (line,) = kml.iter(f"{KML}LineString")
+    flown = [
+        tuple(float(n) for n in point.split(","))
+        for point in line.findtext(f"{KML}coordinates").split()
+    ]
+    track = list(mission.track.order_by("t_s", "id").values_list("lng", "lat", "alt"))
+    assert len(track) >= 2 and flown == track
+    # The zip's file, but for a camera's value: the picture's URL here, as in readings.csv,
+    # its file in the zip there.
+    archive = zipfile.ZipFile(
+        io.BytesIO(b"".join(api_a.get(vv_url(mission, "results.zip")).streaming_content))
+    )
+    in_zip = archive.read("track.kml")
+    assert b"images/" in in_zip
+    images = f"http://testserver/api/v1/vvs/{mission.pk}/images/".encode()
+    assert response.content == in_zip.replace(b"images/", images)
+
+
+@pytest.mark.parametrize("file", ["readings.csv", "readings.geojson", "track.kml"])
 def test_another_customers_readings_answer_404_like_a_missing_vv(
     mission, api_a, api_b, client, user_a, file
 ) -> None:
@@ -148,12 +175,13 @@ def test_another_customers_readings_answer_404_like_a_missing_vv(
     client.force_login(user_a)
     assert client.get(vv_url(mission, file)).status_code == 200
     assert api_a.get(vv_url(mission, file)).status_code == 200
+    assert APIClient().get(vv_url(mission, file)).status_code in (401, 403)
 
 
 def test_the_vv_page_links_the_readings_downloads(mission, client, user_a) -> None:
     client.force_login(user_a)
     page = client.get(f"/vvs/{mission.pk}/").text
-    for file in ("readings.csv", "readings.geojson"):
+    for file in ("readings.csv", "readings.geojson", "track.kml"):
         assert f'href="/api/v1/vvs/{mission.pk}/{file}"' in page
 
 
