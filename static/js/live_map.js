@@ -51,9 +51,12 @@
   var map = new CPCCMap(element, {
     tiles: element.dataset.tiles || '',
     onDraw: function () {
+      var idle = element.dataset.running === 'true' && element.dataset.vvsShown === '0' &&
+        element.dataset.vvs !== '0';
       status.textContent = (element.dataset.connected === 'true' ? 'live' : 'reconnecting…') +
         ' · ' + element.dataset.vehicles + ' vehicle(s) · ' + element.dataset.tasksOpen +
-        ' open, ' + element.dataset.tasksDone + ' done task(s)';
+        ' open, ' + element.dataset.tasksDone + ' done task(s)' +
+        (idle ? ' · none running now: "every one" shows those that have ended' : '');
       listVVs(map);
     }
   });

@@ -31,6 +31,7 @@
   // (GET /api/v1/vvs/<id>/), never piece by piece from different moments: read again every
   // POLL_MS, and at once when the live map shows a change (another status or task count).
   var POLL_MS = 5000;
+  var ENDED_RELOAD_MS = 1500;  // the note that it has ended shows this long before the reload
 
   function PageState(box) {
     this.api = box.dataset.api;
@@ -106,9 +107,11 @@
       a.hidden = vv.status !== 'queued';
     });
     if (ENDED[vv.status]) {
+      // Ended: the page of an ended VV (its error, results and replay) replaces this one.
       document.getElementById('vv-ended-note').hidden = false;
       document.querySelectorAll('.head-actions form[action$="/cancel/"]')
         .forEach(function (action) { action.hidden = true; });
+      setTimeout(function () { window.location.reload(); }, ENDED_RELOAD_MS);
     }
   };
 

@@ -788,6 +788,7 @@ def test_a_failed_vvs_page_says_why_once_shows_where_and_offers_a_copy_not_a_res
     # The refused point is named in the map's legend; an ended VV read none, not "yet".
     assert "refused task" in page
     assert "No scalar readings: it read none." in page and "readings yet" not in page
+    assert "No messages: it sent and received none." in page and " yet." not in page
     # Run again as it is it would fail the same way: a copy to change, no Restart.
     assert f'action="/vvs/{vv_a.pk}/restart/"' not in page
     assert "it would fail the same way" in page and f'href="/vvs/new/?from={vv_a.pk}"' in page
