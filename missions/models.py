@@ -233,7 +233,12 @@ class Task(models.Model):
         constraints = [
             models.UniqueConstraint(fields=["vv", "q", "index"], name="task_unique_per_request"),
         ]
-        indexes = [models.Index(fields=["vehicle", "status"])]
+        indexes = [
+            models.Index(fields=["vehicle", "status"]),
+            # The tasks requested lately (which service classes are being served: routing's
+            # look every 10 s, services/service_levels.classes_giving_way).
+            models.Index(fields=["requested_s"], name="task_requested"),
+        ]
 
     def __str__(self) -> str:
         return f"task {self.q}.{self.index} of {self.vv.name}"

@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from cpcc_site.embedded_redis import answers
+from tests.polling import wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -201,9 +202,9 @@ def test_demo_flies_the_papers_figure_3_over_mavlink(tmp_path: Path) -> None:
 def test_a_second_ctrl_c_right_after_the_first_hurries_the_stop_instead_of_breaking_it() -> None:
     """Two Ctrl-C in quick succession (CI saw the second land before the demo had printed that
     it was stopping): the first interrupts, the second only asks to kill what is left."""
-    from vvm_worker.management.commands.demo import Processes
+    from vvm_worker.management.commands.demo import STOP_SIGNALS, Processes
 
-    handlers = {each: signal.getsignal(each) for each in (signal.SIGINT, signal.SIGTERM)}
+    handlers = {each: signal.getsignal(each) for each in STOP_SIGNALS}
     processes = Processes({})
     try:
         processes.catch_interrupts()
@@ -215,6 +216,36 @@ def test_a_second_ctrl_c_right_after_the_first_hurries_the_stop_instead_of_break
             os.kill(os.getpid(), signal.SIGTERM)
         assert processes.hurry.wait(timeout=5)
         assert processes.stop() == []
+    finally:
+        for each, handler in handlers.items():
+            signal.signal(each, handler)
+
+
+def test_a_closed_terminal_stops_the_demo_and_what_it_started(tmp_path: Path) -> None:
+    """SIGHUP (the terminal the demo runs in is closed) stops it as Ctrl-C does: its workers
+    and servers are not left running."""
+    from vvm_worker.management.commands.demo import STOP_SIGNALS, Processes
+
+    handlers = {each: signal.getsignal(each) for each in STOP_SIGNALS}
+    processes = Processes(dict(os.environ))
+    ready = tmp_path / "ready"
+    try:
+        processes.catch_interrupts()
+        child = processes.start(  # a worker: it exits 0 on SIGTERM, once it has said it is up
+            "sleeper",
+            "-c",
+            "import pathlib, signal, sys, time; "
+            "signal.signal(signal.SIGTERM, lambda *_: sys.exit(0)); "
+            f"pathlib.Path({str(ready)!r}).touch(); time.sleep(60)",
+        )
+        wait_until(ready.exists, timeout=30, what="the worker to start")
+        try:
+            os.kill(os.getpid(), signal.SIGHUP)
+            raise AssertionError("the hang-up did not interrupt")
+        except KeyboardInterrupt:
+            pass
+        assert processes.stop() == []
+        assert child.poll() is not None
     finally:
         for each, handler in handlers.items():
             signal.signal(each, handler)

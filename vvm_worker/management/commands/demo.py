@@ -153,6 +153,10 @@ class EnterKey:
             return False
 
 
+# What stops the demo: Ctrl-C, a service manager's SIGTERM, a closed terminal's SIGHUP.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
 class Processes:
     """The demo's child processes, each in a process group of its own."""
 
@@ -162,19 +166,20 @@ class Processes:
         self.hurry = threading.Event()
 
     def catch_interrupts(self) -> None:
-        """The first Ctrl-C (or SIGTERM, as a service manager stops) raises KeyboardInterrupt
-        and, before it does, makes the next one set ``hurry``: a second Ctrl-C that comes at
-        once, even before the demo has printed that it is stopping, kills what is left."""
+        """The first Ctrl-C (or SIGTERM, as a service manager stops, or SIGHUP, as a closed
+        terminal hangs up) raises KeyboardInterrupt and, before it does, makes the next one set
+        ``hurry``: a second Ctrl-C that comes at once, even before the demo has printed that it
+        is stopping, kills what is left."""
 
         def again(signum: int, frame: object) -> None:
             self.hurry.set()
 
         def first(signum: int, frame: object) -> None:
-            for each in (signal.SIGINT, signal.SIGTERM):
+            for each in STOP_SIGNALS:
                 signal.signal(each, again)
             raise KeyboardInterrupt
 
-        for signum in (signal.SIGINT, signal.SIGTERM):
+        for signum in STOP_SIGNALS:
             signal.signal(signum, first)
 
     def start(self, label: str, *args: str) -> subprocess.Popen[bytes]:
@@ -195,7 +200,7 @@ class Processes:
     def stop(self) -> list[str]:
         """SIGTERM every child, then wait for each (STOP_S at most; a second Ctrl-C or SIGTERM
         kills what is left at once). Returns a line for each child that did not exit 0."""
-        for signum in (signal.SIGINT, signal.SIGTERM):
+        for signum in STOP_SIGNALS:
             signal.signal(signum, lambda signum, frame: self.hurry.set())
         for process in self.children.values():
             if process.poll() is None:
@@ -377,12 +382,15 @@ class Command(BaseCommand):
                 processes.check()
                 self.enter.wait(0.5)
         except KeyboardInterrupt:
-            self.stdout.write("\nStopping (Ctrl-C again stops at once).")
+            with contextlib.suppress(OSError):  # the terminal may be gone (SIGHUP)
+                self.stdout.write("\nStopping (Ctrl-C again stops at once).")
         finally:
-            for problem in processes.stop():
-                self.stderr.write(problem)
+            problems = processes.stop()
             if redis is not None:
                 redis.stop()
+            with contextlib.suppress(OSError):
+                for problem in problems:
+                    self.stderr.write(problem)
 
     def _follow(
         self,
