@@ -680,13 +680,18 @@ def build_rig(
     sensing: PlatformSensing | None = None,
     wake_defers_to_arrival: bool = False,
     plan_elsewhere: PlanElsewhere | None = None,
+    airborne_at: Position | None = None,
 ) -> VehicleRig:
     """An RV's control loop over the database: for ``simulate`` (one per RV, one queue) and
     for the RV workers (real time). ``driver``: the vehicle's (a MAVLink autopilot), else a
-    simulated vehicle at its depot with ``kinematics(vehicle, scale=scale)``."""
+    simulated vehicle with ``kinematics(vehicle, scale=scale)``, landed at its depot or, with
+    ``airborne_at``, hovering there (a scenario's vehicle that starts in the air)."""
     spec = kinematics(vehicle, scale=scale)
     if driver is None:
-        driver = SimVehicle(spec, vehicle.depot, now_s=vvm.clock.now_s())
+        sim = SimVehicle(spec, vehicle.depot, now_s=vvm.clock.now_s())
+        if airborne_at is not None:
+            sim.hover_at(airborne_at, vvm.clock.now_s())
+        driver = sim
     store = DatabaseStore(vehicle_id=vehicle.pk, vvm=vvm, ticks=ticks, defer_reports=defer_reports)
     readings = VehicleSensing(
         sensing or PlatformSensing(vvm), driver=driver, sources=vehicle.parsed_sources()

@@ -132,6 +132,9 @@ class VehicleSpec:
     kind: str = DEFAULT_KIND
     dive_rate_mps: float | None = None  # underwater: how fast it dives (None: its climb rate)
     turn_rate_dps: float | None = None  # ground and surface: how fast it turns (None: default)
+    # Where a simulated aerial vehicle is when the scenario starts, in the air (above its
+    # depot): it starts there, hovering. None: landed at its depot.
+    start: Position | None = None
 
 
 @dataclass(frozen=True)
@@ -318,6 +321,7 @@ _VEHICLE_OPTIONAL = (
     "kind",
     "dive_rate_mps",
     "turn_rate_dps",
+    "start",
 )
 _CUSTOMER_REQUIRED = ("name", "max_parallel_vvs")
 _CUSTOMER_QUOTAS = (
@@ -644,6 +648,19 @@ class _Parser:
         driver_url = (
             _string(obj["driver_url"], _join(path, "driver_url")) if "driver_url" in obj else None
         )
+        start = None
+        if "start" in obj:
+            start = _position(obj["start"], _join(path, "start"))
+            if kind != AERIAL or driver != "sim":
+                raise ScenarioError(
+                    _join(path, "start"), "only a simulated aerial vehicle starts in the air"
+                )
+            if start.alt <= depot.alt:
+                raise ScenarioError(
+                    _join(path, "start"),
+                    f"a vehicle starts in the air, above its depot's {depot.alt:g} m, "
+                    f"got {start.alt:g} m (leave start out for one landed at its depot)",
+                )
         return VehicleSpec(
             name=name,
             depot=depot,
@@ -659,6 +676,7 @@ class _Parser:
             kind=kind,
             dive_rate_mps=dive_rate,
             turn_rate_dps=turn_rate,
+            start=start,
         )
 
     def altitudes(self, obj: Mapping[str, Any], path: str, kind: str) -> tuple[float, float]:

@@ -23,6 +23,7 @@ from typing import Any
 from django.conf import settings
 from django.db.models import Prefetch
 
+from fleet.geo import Position
 from fleet.models import Vehicle
 from fleet.simulation import SensorField
 from missions.models import (
@@ -168,8 +169,9 @@ class Simulation:
 
     # --- set-up --------------------------------------------------------------------------------
 
-    def add_vehicle_loop(self, vehicle: Vehicle) -> VehicleRig:
-        """Give an RV a simulated vehicle and a control loop (its worker, in one process)."""
+    def add_vehicle_loop(self, vehicle: Vehicle, airborne_at: Position | None = None) -> VehicleRig:
+        """Give an RV a simulated vehicle and a control loop (its worker, in one process);
+        ``airborne_at``: where it starts in the air (its scenario's ``start``)."""
         rig = build_rig(
             vehicle,
             vvm=self.vvm,
@@ -177,6 +179,7 @@ class Simulation:
             planner=self.planner_name,
             defer_reports=True,
             sensing=self.sensing,
+            airborne_at=airborne_at,
         )
         self.fleet.add(rig)
         return rig
@@ -195,8 +198,9 @@ class Simulation:
     def _setup(self) -> None:
         assert self.scenario is not None
         self.loaded = scenario_apply(scenario=self.scenario, logins=self.logins)
-        for vehicle in self.loaded.vehicles.values():
-            self.add_vehicle_loop(vehicle)
+        starts = {v.name: v.start for v in self.scenario.vehicles}
+        for name, vehicle in self.loaded.vehicles.items():
+            self.add_vehicle_loop(vehicle, starts.get(name))
         for spec, name in vv_instances(self.scenario):
             customer = self.loaded.customers[spec.customer]
 

@@ -248,6 +248,20 @@ class SimVehicle:
                 here = top
         return self._append(t, here, target, PHASE_CRUISE)
 
+    def hover_at(self, position: Position, now_s: float) -> None:
+        """Start in the air: at ``now_s`` the vehicle hovers at ``position`` (above its depot's
+        altitude), as one that was flying when its simulation began; the next command flies
+        from there without a take-off. Only before any other command. Raises ValueError
+        otherwise, for a vehicle that does not fly, or for a position not above the depot."""
+        if self._steps:
+            raise ValueError("a vehicle starts in the air only before its first command")
+        if self.spec.kind != AERIAL or position.alt <= self.depot.alt:
+            raise ValueError(
+                f"only an aerial vehicle hovers, above its depot's {self.depot.alt:g} m"
+            )
+        self._begin_command(now_s)
+        self._append(now_s, position, position, PHASE_HOVERING, duration_s=0.0)
+
     def return_to_depot(self, now_s: float) -> float:
         """Plan the way home: cruise to above the depot, then land vertically on it.
 

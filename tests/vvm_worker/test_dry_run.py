@@ -211,3 +211,68 @@ def test_the_estimate_is_within_a_quarter_of_what_the_demos_vvs_fly() -> None:
         # Only a program that waits for a message is told how long it would.
         assert (report.message_wait_s > 0) == (name.startswith("survey-")), figures
         assert report.message_wait_s in (0.0, 1800.0), figures  # survey-split.js's WAIT_S
+
+
+@pytest.mark.django_db
+def test_a_dry_run_asked_while_the_rvs_stand_by_in_the_air_starts_them_there() -> None:
+    """The case a user met: Figure 3 has ended, its RVs stand by in the air in the middle of
+    their areas, and VV 2's program is tried again. Its copy starts each RV where its worker
+    last reported it (in the air, no take-off); the estimate is within 25 % of what the
+    platform then flies. (Starting them on the ground at their depots said twice as long.)"""
+    from fleet.models import Vehicle
+    from vvm_worker.services import vv_submit
+
+    scenario = load_scenario(DEFAULT_SCENARIO)
+    program = next(vv.source for vv in scenario.vvs if vv.name == "VV 2")
+    _forget_fleet_shape()
+    with transaction.atomic():
+        simulation = Simulation(scenario)
+        loaded = simulation.start()
+        simulation.drain(until=lambda: _ended(simulation.vv_ids, count=3))
+        # A little later: both RVs have reached their stand-by spots.
+        later = simulation.clock.now_s() + 30.0
+        simulation.queue.call_at(later, lambda: None)
+        simulation.drain(until=lambda: simulation.clock.now_s() >= later)
+        for rig in simulation.fleet.rigs.values():  # what their workers report
+            where = rig.driver.position_at(later)
+            Vehicle.objects.filter(pk=rig.vehicle_id).update(
+                lat=where.lat, lng=where.lng, alt=where.alt, phase=rig.driver.phase_at(later)
+            )
+        assert {rig.driver.phase_at(later) for rig in simulation.fleet.rigs.values()} == {
+            "hovering"
+        }
+        customer = loaded.customers["Customer B"]
+        request = {
+            "scenario": fleet_copy(name="again", program=program),
+            "customer": customer_copy(customer=customer),
+            "wall_s": 60.0,
+        }
+        assert all("start" in rv for rv in request["scenario"]["vehicles"])
+        on_the_ground = {
+            **request,
+            "scenario": {
+                **request["scenario"],
+                "vehicles": [
+                    {k: v for k, v in rv.items() if k != "start"}
+                    for rv in request["scenario"]["vehicles"]
+                ],
+            },
+        }
+        vv = vv_submit(customer=customer, name="again", program=program, vvm=simulation.vvm)
+        simulation.drain(until=lambda: _ended([vv.pk], count=1))
+        vv.refresh_from_db()
+        flown = vv.finished_s - vv.submitted_s
+        transaction.set_rollback(True)
+    # The dry runs, each on a database of its own as on the platform (here: this one, empty).
+    report, from_the_depots = _dry_run(request), _dry_run(on_the_ground)
+    figures = (
+        f"estimate {report.duration_s:.1f} s (from the depots {from_the_depots.duration_s:.1f} s), "
+        f"flown {flown:.1f} s"
+    )
+    assert report.status == vv.status == "finished", figures
+    assert abs(report.duration_s - flown) / flown <= ESTIMATE_TOLERANCE, figures
+    assert abs(from_the_depots.duration_s - flown) / flown > ESTIMATE_TOLERANCE, figures
+
+
+def _ended(vv_ids: list[Any], *, count: int) -> bool:
+    return VirtualVehicle.objects.filter(pk__in=vv_ids, finished_s__isnull=False).count() == count

@@ -685,3 +685,17 @@ def test_two_no_fly_zones_of_one_name() -> None:
         variant(("no_fly_zones", [zone, zone])),
         r"^no_fly_zones\[1\]\.name: duplicate no-fly zone name 'Z' \(also at no_fly_zones\[0\]",
     )
+
+
+def test_a_simulated_aerial_vehicle_may_start_in_the_air_above_its_depot() -> None:
+    scenario = parse(variant(("vehicles.0.start", [48.112, 12.861, 40.0])))
+    assert scenario.vehicles[0].start == Position(48.112, 12.861, 40.0)
+    assert scenario.vehicles[1].start is None  # landed at its depot
+    raises(
+        variant(("vehicles.0.start", [48.112, 12.861, 0.0])),
+        r"^vehicles\[0\]\.start: a vehicle starts in the air, above its depot's 0 m, got 0 m",
+    )
+    raises(
+        variant(("vehicles.0.start", [48.112, 12.861, 40.0]), ("vehicles.0.driver", "mavlink")),
+        r"^vehicles\[0\]\.start: only a simulated aerial vehicle starts in the air",
+    )

@@ -43,7 +43,7 @@ from django.conf import settings
 from django.core.exceptions import ValidationError
 
 from accounts.models import Customer, User
-from fleet.models import NoFlyZone, SensorType, VehicleKind
+from fleet.models import NoFlyZone, SensorType, Vehicle, VehicleKind
 from fleet.selectors import ground_station_list, vehicles_in_service
 from missions.models import vv_name_problem
 from vvm_worker.dry_run_places import DryRunPlaces, Refused
@@ -72,11 +72,12 @@ UNFINISHED = "unfinished"
 # the other VVs) and the sensors' time.
 ASSUMES = (
     "From the submission to the VV's end, with the fleet in service to itself: each vehicle "
-    "starts on the ground at its depot (take-off and climb included) and flies at its top speed "
-    "and climb rate; the platform picks the vehicles and the order of the tasks as it would; "
-    "readings take no time. No other VV shares the vehicles: other VVs (of any customer) make "
-    "it longer, a vehicle already in the air nearby shorter. A message the program waits for "
-    "does not come (no other VV runs in a dry run): the wait is not counted (message_wait_s)."
+    "starts where it is now, in the air where it flies or stands by, else on the ground at its "
+    "depot (take-off and climb included), and flies at its top speed and climb rate; the "
+    "platform picks the vehicles and the order of the tasks as it would; readings take no "
+    "time. No other VV shares the vehicles: other VVs (of any customer) make it longer. A "
+    "message the program waits for does not come (no other VV runs in a dry run): the wait is "
+    "not counted (message_wait_s)."
 )
 
 
@@ -261,10 +262,24 @@ def vv_dry_run_for_user(
     return report, None
 
 
+def airborne_now(vehicle: Vehicle) -> tuple[float, float, float] | None:
+    """Where an aerial RV is in the air now, as its worker last reported (lat, lng, alt), or
+    None when it is on the ground (or has not reported): a dry run's copy of it starts there,
+    hovering, as an RV standing by in the middle of its area would fly from there."""
+    if vehicle.kind != VehicleKind.AERIAL or vehicle.phase == "landed":
+        return None
+    if vehicle.lat is None or vehicle.lng is None or vehicle.alt is None:
+        return None
+    if vehicle.alt <= vehicle.depot_alt:
+        return None
+    return (vehicle.lat, vehicle.lng, vehicle.alt)
+
+
 def fleet_copy(*, name: str, program: str) -> dict[str, Any]:
     """The fleet as a scenario document (vvm_worker/scenario.py, DESIGN.md section 5) with one
     VV, ``name`` running ``program``, of one customer (COPY_CUSTOMER): the ground stations,
-    the RVs in service (a simulated vehicle each, at its depot), the no-fly zones and the SDC.
+    the RVs in service (a simulated vehicle each where it is now: landed at its depot, or in
+    the air where its worker last reported it), the no-fly zones and the SDC.
 
     Vehicles, stations and zones are numbered, not named: the copy never holds a name it
     could show the customer. An RV with no sensor (it could serve nothing) is left out.
@@ -295,6 +310,9 @@ def fleet_copy(*, name: str, program: str) -> dict[str, Any]:
         }
         if vehicle.battery_s:
             spec["battery_s"] = vehicle.battery_s
+        airborne = airborne_now(vehicle)
+        if airborne is not None:
+            spec["start"] = list(airborne)
         # A scenario gives a rate only to the kinds that have it.
         if vehicle.dive_rate_mps and vehicle.kind == VehicleKind.UNDERWATER:
             spec["dive_rate_mps"] = vehicle.dive_rate_mps

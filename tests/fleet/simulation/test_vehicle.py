@@ -267,3 +267,19 @@ def test_only_a_landed_vehicle_charges() -> None:
     arrival = vehicle.fly_to(TARGET, 0.0)
     with pytest.raises(ValueError, match="not landed"):
         vehicle.recharge(arrival, 10.0)
+
+
+def test_a_vehicle_that_starts_in_the_air_flies_from_there_without_a_take_off() -> None:
+    v = _vehicle()
+    above = Position(47.001, 15.0, 30.0)
+    v.hover_at(above, 0.0)
+    assert v.position_at(0.0) == above and v.phase_at(5.0) == "hovering"
+    target = Position(47.001, 15.001, 30.0)
+    arrives = v.fly_to(target, 10.0)
+    # One straight cruise leg from where it hovers: no climb from its depot first.
+    assert arrives == pytest.approx(10.0 + v.leg_s(above, target))
+    assert v.phase_at(11.0) == "cruise"
+    with pytest.raises(ValueError, match="before its first command"):
+        v.hover_at(above, 20.0)
+    with pytest.raises(ValueError, match="above its depot"):
+        _vehicle().hover_at(DEPOT, 0.0)
