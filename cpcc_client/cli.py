@@ -418,7 +418,11 @@ def _print_dry_run(program: str, report: dict[str, Any]) -> bool:
     ending = report["status"]
     if report.get("error"):  # its place is in it: "... (line 4, column 9)"
         ending += f": {report['error']}"
-    _out(f"  ends: {ending}, after about {_duration(report['duration_s'])}")
+    waits = report.get("message_wait_s") or 0
+    unless = f" (not counting up to {_duration(waits)} of waiting for messages)" if waits else ""
+    _out(f"  ends: {ending}, after about {_duration(report['duration_s'])}{unless}")
+    if report.get("assumes"):
+        _out(f"  assumes: {report['assumes']}")
     quota = report.get("quota")
     if quota is None:
         _out("  quotas: within your quotas")

@@ -365,6 +365,7 @@
     var box = document.getElementById('dry-run');
     if (!button || !box) return;
     var summary = document.getElementById('dry-run-summary');
+    var assumes = document.getElementById('dry-run-assumes');
     var verdicts = document.getElementById('dry-run-verdicts');
     var table = document.getElementById('dry-run-table');
     var rows = document.getElementById('dry-run-tasks');
@@ -421,7 +422,11 @@
       summary.textContent = r.tasks.length + ' task' + (r.tasks.length === 1 ? '' : 's') + ', ' +
         (r.unservable.length ? r.unservable.length + ' that no vehicle in service could serve'
           : 'every one servable') +
-        ' · ' + ending(r) + ' after about ' + duration(r.duration_s) + '.';
+        ' · ' + ending(r) + ' after about ' + duration(r.duration_s) +
+        (r.message_wait_s ? ' (not counting up to ' + duration(r.message_wait_s) +
+          ' of waiting for messages)' : '') + '.';
+      assumes.textContent = r.assumes || '';
+      assumes.hidden = !r.assumes;
       verdicts.textContent = '';
       r.unservable.forEach(function (task) {
         var item = verdict('bad');

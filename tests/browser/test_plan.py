@@ -85,6 +85,8 @@ def test_a_customer_plans_on_the_map_and_a_dry_run_finds_the_point_out_of_reach(
     expect(report.locator("#dry-run-summary")).to_contain_text(
         "3 tasks, 1 that no vehicle in service could serve"
     )
+    # What its duration assumes, in words under it.
+    expect(report.locator("#dry-run-assumes")).to_contain_text("each vehicle starts where it is")
     rows = report.locator("#dry-run-tasks tr")
     expect(rows).to_have_count(3)
     expect(report.locator("#dry-run-tasks tr.unservable")).to_have_count(1)

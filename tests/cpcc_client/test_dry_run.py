@@ -63,6 +63,7 @@ def test_a_dry_run_of_a_program_that_would_finish_succeeds(cpcc, tmp_path) -> No
     assert code == cli.EXIT_OK, err
     assert "1 task(s), 0 that no vehicle in service could serve" in out
     assert "ends: finished" in out and "quotas: within your quotas" in out
+    assert "assumes: From the submission to the VV's end" in out
     assert not VirtualVehicle.objects.exists()
 
 

@@ -71,13 +71,11 @@ UNFINISHED = "unfinished"
 # simulation, so what it leaves out is what the copy does not hold (where the vehicles are now,
 # the other VVs) and the sensors' time.
 ASSUMES = (
-    "From the submission to the VV's end, with the fleet in service to itself: each vehicle "
-    "starts where it is now, in the air where it flies or stands by, else on the ground at its "
-    "depot (take-off and climb included), and flies at its top speed and climb rate; the "
-    "platform picks the vehicles and the order of the tasks as it would; readings take no "
-    "time. No other VV shares the vehicles: other VVs (of any customer) make it longer. A "
-    "message the program waits for does not come (no other VV runs in a dry run): the wait is "
-    "not counted (message_wait_s)."
+    "From the submission to the VV's end, with the fleet to itself: each vehicle starts where "
+    "it is now (in the air where it flies or stands by, else on the ground at its depot, with "
+    "its take-off) and flies at its top speed; the platform picks the vehicles and the order "
+    "of the tasks as it would; readings take no time. Other VVs sharing the vehicles make it "
+    "longer. No message comes in a dry run: a wait for one is not counted."
 )
 
 
