@@ -99,7 +99,9 @@ def test_two_transactions_that_deadlock_both_get_their_work_done() -> None:
     for thread in threads:
         thread.join(60)
     assert not failures
-    assert sorted(attempts) in (["a", "a", "b"], ["a", "b", "b"])  # one of them twice
+    # One of them did its work again (more than once, when its next try met the other's
+    # transaction again on a loaded machine: CI saw b three times), and each update landed once.
+    assert set(attempts) == {"a", "b"} and len(attempts) >= 3, attempts
     for vehicle in (one, two):
         vehicle.refresh_from_db()
         assert (vehicle.tasks_done, vehicle.distance_m) == (1, 1.0)
