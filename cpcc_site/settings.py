@@ -211,8 +211,8 @@ STATIC_URL = "static/"
 STATICFILES_DIRS = [BASE_DIR / "static"]
 STATIC_ROOT = VAR_DIR / "staticfiles"
 # With DEBUG off, WhiteNoise serves what `collectstatic` put in STATIC_ROOT: names with a hash
-# of the content (cached for ever) and gzip copies (cpcc_site/static_storage.py). With DEBUG on (development, tests, `make
-# demo`) it serves the apps' and static/'s files as they are, no collectstatic needed.
+# of the content (cached for ever) and gzip copies (cpcc_site/static_storage.py). With DEBUG on
+# (development, tests) it serves the apps' and static/'s files as they are, no collectstatic.
 STORAGES = {
     "default": {"BACKEND": "django.core.files.storage.FileSystemStorage"},
     "staticfiles": {

@@ -64,7 +64,7 @@ from missions.selectors import (
 )
 from missions.waiting import vv_waiting
 from vvm_worker.platform import platform_vvm
-from vvm_worker.runtime import SyntaxProblem, check_syntax
+from vvm_worker.runtime import SyntaxProblem, check_syntax, place_text
 from vvm_worker.services import (
     NotACustomer,
     ProgramRejected,
@@ -159,14 +159,17 @@ def actions_for(vv: VirtualVehicle) -> Actions:
     )
 
 
+def error_place(vv: VirtualVehicle) -> str:
+    """The place in its program its error names ("line 3, column 9"; "" when none)."""
+    return "" if vv.error_line is None else place_text(vv.error_line, vv.error_column)
+
+
 def error_text(vv: VirtualVehicle) -> str:
-    """Why the VV failed, without the place in its program that its error ends with (the
-    page shows that as a link to the line)."""
+    """Why the VV failed, without the place in its program that its error ends with
+    (``VVError``'s words; the page shows the place as a link to the line)."""
+    place = error_place(vv)
     error = vv.error or ""
-    if vv.error_line is None:
-        return error
-    where = f"line {vv.error_line}" + (f", column {vv.error_column}" if vv.error_column else "")
-    return error.removesuffix(f" ({where})")
+    return error.removesuffix(f" ({place})") if place else error
 
 
 @dataclass(frozen=True)
@@ -634,6 +637,7 @@ def _vv_page(
         "vv": vv,
         "where": where(vv, staff=staff),
         "error_text": error_text(vv),
+        "error_place": error_place(vv),
         "refused": any(task.status == TaskStatus.REJECTED for task in tasks),
         # What it waits for (static/js/vv.js keeps it up to date from the API while it runs).
         "waiting": vv_waiting(vv, tasks_open=vv.tasks_open),  # type: ignore[attr-defined]

@@ -98,9 +98,9 @@ class DryRunReportSerializer(serializers.Serializer):
     duration_s = serializers.FloatField(
         help_text="Estimated seconds from the submission to its end (to where the dry run "
         "stopped, when unfinished), the flights included, on what `assumes` says: the fleet "
-        "in service to itself, each vehicle from the ground at its depot, instant readings, "
-        "no wait for messages counted. Other VVs sharing the vehicles make it longer, a "
-        "vehicle already in the air nearby shorter."
+        "in service to itself, each vehicle where it is now (in the air where its worker last "
+        "reported it, else from the ground at its depot), instant readings, no wait for "
+        "messages counted. Other VVs sharing the vehicles make it longer."
     )
     assumes = serializers.CharField(help_text="What duration_s assumes, in a sentence or two.")
     message_wait_s = serializers.FloatField(

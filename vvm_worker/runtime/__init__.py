@@ -26,6 +26,7 @@ from vvm_worker.runtime.types import (
     StepResult,
     TaskRequest,
     VVError,
+    place_text,
 )
 
 __all__ = [
@@ -51,5 +52,6 @@ __all__ = [
     "answer_task",
     "check_syntax",
     "instrument",
+    "place_text",
     "run_step",
 ]

@@ -230,8 +230,13 @@ class VVError:
     def __str__(self) -> str:
         if self.line is None:
             return self.message
-        where = f"line {self.line}" + (f", column {self.column}" if self.column else "")
-        return f"{self.message} ({where})"
+        return f"{self.message} ({place_text(self.line, self.column)})"
+
+
+def place_text(line: int, column: int | None) -> str:
+    """A place in the user's program as an error names it: "line 3, column 9" ("line 3"
+    without a column)."""
+    return f"line {line}" + (f", column {column}" if column else "")
 
 
 @dataclass(frozen=True, slots=True)

@@ -41,7 +41,8 @@ class LocalRV:
     """What the process that hosts an RV knows of it now, as its row would say once written:
     its status (None: its row's, which another process may have changed a moment ago), its
     last reported position, its open tasks in the order its planner last meant to serve
-    them and the service class of each (None: no class)."""
+    them, and the service classes of its open tasks (oldest first; None: no class), which
+    the mapper's reserve counts."""
 
     status: str | None
     position: Position

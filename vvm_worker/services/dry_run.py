@@ -45,6 +45,7 @@ from django.core.exceptions import ValidationError
 from accounts.models import Customer, User
 from fleet.models import NoFlyZone, SensorType, Vehicle, VehicleKind
 from fleet.selectors import ground_station_list, vehicles_in_service
+from fleet.simulation.vehicle import PHASE_LANDED
 from missions.models import vv_name_problem
 from vvm_worker.dry_run_places import DryRunPlaces, Refused
 from vvm_worker.runtime import SyntaxProblem, check_syntax
@@ -264,7 +265,7 @@ def airborne_now(vehicle: Vehicle) -> tuple[float, float, float] | None:
     """Where an aerial RV is in the air now, as its worker last reported (lat, lng, alt), or
     None when it is on the ground (or has not reported): a dry run's copy of it starts there,
     hovering, as an RV standing by in the middle of its area would fly from there."""
-    if vehicle.kind != VehicleKind.AERIAL or vehicle.phase == "landed":
+    if vehicle.kind != VehicleKind.AERIAL or vehicle.phase == PHASE_LANDED:
         return None
     if vehicle.lat is None or vehicle.lng is None or vehicle.alt is None:
         return None

@@ -297,7 +297,7 @@ def _rows_hosted_elsewhere(vvm: VVM, vehicle_ids: list[int], *, ranked: bool) ->
         return found
     found.rows = {v.pk: v for v in vehicles_in_fleet(vehicle_ids, lease_s=vvm.lease_s)}
     if ranked:
-        found.routes, _, found.classes = planned_routes(
+        found.routes, found.classes = planned_routes(
             {pk: v.planner_state for pk, v in found.rows.items()}
         )
     found.online = {
@@ -337,10 +337,10 @@ def rv_statuses_read_ahead(*, vvm: VVM) -> Iterator[None]:
 
 def planned_routes(
     plans: dict[int, Any],
-) -> tuple[dict[int, tuple[Position, ...]], dict[int, int], dict[int, tuple[int | None, ...]]]:
+) -> tuple[dict[int, tuple[Position, ...]], dict[int, tuple[int | None, ...]]]:
     """The open tasks of these RVs (id -> the planner state it saved), in the order its planner
-    last meant to serve them (tasks the plan does not know yet come last, oldest first), how
-    many each has, and the service class of each of them (oldest first; None: no class)."""
+    last meant to serve them (tasks the plan does not know yet come last, oldest first), and
+    the service class of each of them (oldest first; None: no class)."""
     rows = open_tasks_of_vehicles(sorted(plans))
     tasks: dict[int, list[tuple[int, Position]]] = {}
     classes: dict[int, list[int | None]] = {}
@@ -350,8 +350,7 @@ def planned_routes(
     routes = {
         vehicle_id: planned_order(items, plans[vehicle_id]) for vehicle_id, items in tasks.items()
     }
-    counts = {vehicle_id: len(items) for vehicle_id, items in tasks.items()}
-    return routes, counts, {vehicle_id: tuple(c) for vehicle_id, c in classes.items()}
+    return routes, {vehicle_id: tuple(c) for vehicle_id, c in classes.items()}
 
 
 def planned_order(items: Sequence[tuple[int, Position]], state: Any) -> tuple[Position, ...]:
