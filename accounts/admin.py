@@ -10,8 +10,8 @@ from django.db.models import Count, QuerySet
 from django.http import HttpRequest
 
 from accounts.admin_reports import ServiceLevelsReportMixin
-from accounts.models import ApiToken, Customer, ServiceClass, User, Webhook
-from accounts.services import api_token_revoke, webhook_delete
+from accounts.models import ApiToken, Customer, Invite, ServiceClass, User, Webhook
+from accounts.services import api_token_revoke, invite_withdraw, webhook_delete
 from cpcc_site.admin_display import SizeField
 from cpcc_site.admin_site import ExplainedWhenEmpty
 from vvm_worker.platform import platform_vvm
@@ -233,16 +233,46 @@ class ServiceClassAdmin(ServiceLevelsReportMixin, ExplainedWhenEmpty):
 
 @admin.register(User)
 class UserAdmin(BaseUserAdmin):
-    list_display = ["username", "email", "customer", "is_staff", "is_active"]
-    list_filter = ["customer", "is_staff", "is_active"]
+    """Users: a customer's members with their role, staff with their groups (fleet manager,
+    pilot, support: accounts.staff_groups)."""
+
+    list_display = ["username", "email", "customer", "role", "is_staff", "is_active"]
+    list_filter = ["customer", "role", "is_staff", "groups", "is_active"]
     fieldsets = [
         *BaseUserAdmin.fieldsets,
-        ("Customer", {"fields": ["customer"]}),
+        ("Customer", {"fields": ["customer", "role"]}),
     ]
     add_fieldsets = [
         *BaseUserAdmin.add_fieldsets,
-        ("Customer", {"fields": ["customer"]}),
+        ("Customer", {"fields": ["customer", "role"]}),
     ]
+
+
+@admin.register(Invite)
+class InviteAdmin(ExplainedWhenEmpty):
+    """Owners' invitations (made on their Members page): staff see them and may withdraw one."""
+
+    empty_list_help = (
+        "An owner of a customer invites a colleague by e-mail from Account, Members: the link "
+        "works once, until it expires (CPCC_INVITE_DAYS)."
+    )
+    list_display = ["email", "customer", "role", "invited_by", "created", "expires", "accepted"]
+    list_filter = ["customer", "role"]
+    search_fields = ["email", "customer__name"]
+    fields = list_display
+
+    def has_add_permission(self, request: HttpRequest) -> bool:
+        return False
+
+    def has_change_permission(self, request: HttpRequest, obj: Any = None) -> bool:
+        return False
+
+    def delete_model(self, request: HttpRequest, obj: Invite) -> None:
+        invite_withdraw(invite=obj)
+
+    def delete_queryset(self, request: HttpRequest, queryset: Any) -> None:
+        for obj in queryset:
+            self.delete_model(request, obj)
 
 
 class _MadeByTheirOwners(ExplainedWhenEmpty):

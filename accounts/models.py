@@ -13,6 +13,8 @@ from django.utils.text import slugify
 from knox.models import AbstractAuthToken
 from knox.settings import CONSTANTS
 
+from accounts.roles import CUSTOMER_ROLES, OWNER, ROLE_LABELS
+
 DEFAULT_MAX_PARALLEL_VVS = 5
 # Room for two editor submissions of the most copies (50) each, and for every VV of the example
 # scenarios at once; a scenario or a script that queues more sets its customer's quota higher.
@@ -202,11 +204,23 @@ class ServiceLevelHold(models.Model):
         return f"{self.customer} held from {self.started_s:.0f}"
 
 
+ROLE_CHOICES = [(role, ROLE_LABELS[role]) for role in reversed(CUSTOMER_ROLES)]
+
+
 class User(AbstractUser):
-    """A person who logs in: a customer's user, or platform staff (no customer)."""
+    """A person who logs in: a member of a customer with a role (accounts.roles), or platform
+    staff (no customer; what they may do is their groups' and permissions')."""
 
     customer = models.ForeignKey(
         Customer, null=True, blank=True, on_delete=models.CASCADE, related_name="users"
+    )
+    # A user made without one (by the admin or a scenario that names none) may do everything,
+    # as before roles existed; members invited later get the role of their invitation.
+    role = models.CharField(
+        max_length=10,
+        choices=ROLE_CHOICES,
+        default=OWNER,
+        help_text="What this member may do for the customer (staff: ignored).",
     )
     # Opt-in (none by default): a user made by a scenario has no address, and 50 copies of a
     # VV should not send 50 e-mails unasked.
@@ -227,6 +241,9 @@ class ApiToken(AbstractAuthToken):
     name = models.CharField(max_length=100)
     # Written at most once a minute per token (accounts/authentication.py), not per request.
     last_used = models.DateTimeField(null=True, blank=True)
+    # Narrower than its user's role when chosen so (a read-only token for a dashboard); blank:
+    # its user's role, whatever that is now.
+    role = models.CharField(max_length=10, choices=ROLE_CHOICES, blank=True)
 
     class Meta:
         ordering = ["-created", "-id"]
@@ -290,3 +307,32 @@ class WebhookDelivery(models.Model):
     @property
     def ok(self) -> bool:
         return self.status_code is not None and 200 <= self.status_code < 300
+
+
+class Invite(models.Model):
+    """An owner's invitation to join the customer with a role: sent by e-mail as a signed link
+    that expires (``CPCC_INVITE_DAYS``) and is used once."""
+
+    customer = models.ForeignKey(Customer, on_delete=models.CASCADE, related_name="invites")
+    email = models.EmailField()
+    role = models.CharField(max_length=10, choices=ROLE_CHOICES)
+    invited_by = models.ForeignKey(
+        User, null=True, blank=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    created = models.DateTimeField(default=timezone.now)
+    expires = models.DateTimeField()
+    accepted = models.DateTimeField(null=True, blank=True)
+    accepted_by = models.ForeignKey(
+        User, null=True, blank=True, on_delete=models.SET_NULL, related_name="+"
+    )
+
+    class Meta:
+        ordering = ["-created", "-id"]
+        indexes = [models.Index(fields=["customer", "accepted"])]
+
+    def __str__(self) -> str:
+        return f"{self.email} as {self.role}"
+
+    @property
+    def open(self) -> bool:
+        return self.accepted is None and self.expires > timezone.now()

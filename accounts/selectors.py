@@ -8,7 +8,7 @@ from typing import Any
 from django.core.exceptions import ObjectDoesNotExist
 from django.db.models import Exists, OuterRef, QuerySet
 
-from accounts.models import ApiToken, Customer, User, Webhook, WebhookDelivery
+from accounts.models import ApiToken, Customer, Invite, User, Webhook, WebhookDelivery
 from fleet.models import SensorType
 
 
@@ -97,3 +97,46 @@ def webhook_deliveries_for_user(*, user: User, webhook_id: int) -> QuerySet[Webh
     WebhookNotFound as webhook_get_for_user."""
     webhook = webhook_get_for_user(user=user, webhook_id=webhook_id)
     return WebhookDelivery.objects.filter(webhook=webhook).order_by("-id")
+
+
+# --- members and invitations: each customer's own --------------------------------------------
+
+
+class MemberNotFound(LookupError):
+    """No such member of the user's customer (another customer's answers the same)."""
+
+
+class InviteNotFound(LookupError):
+    """No such open invitation of the user's customer (another customer's answers the same)."""
+
+
+def member_list_for_user(*, user: User) -> QuerySet[User]:
+    """The active members of the user's customer, by user name (none for a user of no
+    customer)."""
+    if user.customer_id is None:
+        return User.objects.none()
+    return User.objects.filter(customer_id=user.customer_id, is_active=True).order_by("username")
+
+
+def member_get_for_user(*, user: User, member_id: int) -> User:
+    try:
+        return member_list_for_user(user=user).get(pk=member_id)
+    except User.DoesNotExist:
+        raise MemberNotFound(member_id) from None
+
+
+def invite_list_for_user(*, user: User) -> QuerySet[Invite]:
+    """The invitations of the user's customer not accepted yet (expired ones too), newest
+    first."""
+    if user.customer_id is None:
+        return Invite.objects.none()
+    return Invite.objects.filter(customer_id=user.customer_id, accepted__isnull=True).order_by(
+        "-created", "-id"
+    )
+
+
+def invite_get_for_user(*, user: User, invite_id: int) -> Invite:
+    try:
+        return invite_list_for_user(user=user).get(pk=invite_id)
+    except Invite.DoesNotExist:
+        raise InviteNotFound(invite_id) from None

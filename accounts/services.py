@@ -13,15 +13,22 @@ working beside them, and its owner may revoke it too.
 
 from __future__ import annotations
 
+import datetime as dt
 import logging
 import secrets
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
+from django.conf import settings
+from django.contrib.auth.password_validation import validate_password
+from django.core import signing
 from django.core.exceptions import ValidationError
+from django.core.mail import send_mail
 from django.core.validators import EmailValidator
 from django.db import IntegrityError, transaction
+from django.utils import timezone
 
-from accounts.models import ApiToken, Customer, NotifyEvent, User, Webhook
+from accounts import roles
+from accounts.models import ApiToken, Customer, Invite, NotifyEvent, User, Webhook
 from accounts.selectors import legacy_token_for_user
 from cpcc_site.names import plain_name_problem
 from vvm_worker import delivery
@@ -33,17 +40,31 @@ MAX_TOKENS_PER_USER = 100
 NAME_MAX_CHARS = ApiToken._meta.get_field("name").max_length or 100
 
 
-def api_token_create(*, user: User, name: str) -> tuple[ApiToken, str]:
+def api_token_create(*, user: User, name: str, role: str = "") -> tuple[ApiToken, str]:
     """Make a named token for the user: returns it and its key, which is never shown again.
+    ``role``: what the token may do, at most what its user may (blank: its user's role, as
+    that changes).
 
     Raises ValidationError on ``name`` for a blank name, one over 100 characters, one with a
     control or bidirectional formatting character, or one the user already gave a token (code
-    ``unique``); and when the user already has MAX_TOKENS_PER_USER tokens.
+    ``unique``); on ``role`` for one that is not a role or is wider than the user's; and when
+    the user already has MAX_TOKENS_PER_USER tokens.
     """
     name = name.strip()
     problem = _name_problem(name)
     if problem is not None:
         raise ValidationError({"name": problem})
+    if role:
+        if not roles.is_role(role):
+            raise ValidationError(
+                {"role": f"{role!r} is not a role; one of {', '.join(roles.CUSTOMER_ROLES)}."}
+            )
+        if user.customer_id is None:
+            raise ValidationError({"role": "Only a customer's member's token carries a role."})
+        if roles.narrower(user.role, role) != role:
+            raise ValidationError(
+                {"role": f"A token may do at most what you may: you are {user.role}."}
+            )
     with transaction.atomic():
         # The user's row first: two requests at once cannot both take the last place.
         User.objects.select_for_update().filter(pk=user.pk).exists()
@@ -56,7 +77,7 @@ def api_token_create(*, user: User, name: str) -> tuple[ApiToken, str]:
             raise ValidationError({"name": _taken(name)})
         try:
             with transaction.atomic():
-                token, key = ApiToken.objects.create(user=user, expiry=None, name=name)
+                token, key = ApiToken.objects.create(user=user, expiry=None, name=name, role=role)
         except IntegrityError:  # made meanwhile by another request of the same user
             raise ValidationError({"name": _taken(name)}) from None
     return token, key
@@ -216,3 +237,173 @@ def _listen(customer: Customer) -> None:
         # An UPDATE of its own: no audit-log entry, no customer signal (Customer.save).
         Customer.objects.filter(pk=customer.pk).update(notify_events=listened)
         customer.notify_events = listened
+
+
+# --- members: invitations, roles, removal -------------------------------------------------------
+
+INVITE_SALT = "cpcc.invite"
+
+
+class InviteInvalid(Exception):
+    """A link that is no invitation, or one that expired, was used or was withdrawn: the
+    message says which, in the invitee's words."""
+
+
+def invite_create(
+    *,
+    customer: Customer,
+    email: str,
+    role: str,
+    invited_by: User | None,
+    link: Callable[[str], str],
+) -> Invite:
+    """Invite ``email`` to join ``customer`` as ``role``: the invitation is kept and e-mailed
+    (through Django's mail settings) as a signed link, ``link(signed)``, that expires after
+    ``CPCC_INVITE_DAYS`` and can be used once.
+
+    Raises ValidationError on ``email`` for an address that is not one or a member's already,
+    on ``role`` for one that is not a role."""
+    email = email.strip()
+    try:
+        EmailValidator()(email)
+    except ValidationError:
+        raise ValidationError({"email": f"{email!r} is not an e-mail address."}) from None
+    if not roles.is_role(role):
+        raise ValidationError(
+            {"role": f"{role!r} is not a role; one of {', '.join(roles.CUSTOMER_ROLES)}."}
+        )
+    if User.objects.filter(customer=customer, is_active=True, email__iexact=email).exists():
+        raise ValidationError({"email": f"{email} is a member already."})
+    now = timezone.now()
+    invite = Invite.objects.create(
+        customer=customer,
+        email=email,
+        role=role,
+        invited_by=invited_by,
+        created=now,
+        expires=now + dt.timedelta(days=settings.CPCC_INVITE_DAYS),
+    )
+    signed = signing.dumps(invite.pk, salt=INVITE_SALT)
+    who = invited_by.get_username() if invited_by is not None else "An owner"
+    days = settings.CPCC_INVITE_DAYS
+    send_mail(
+        subject=f"[CPCC] {who} invites you to {customer.name}",
+        message=(
+            f"{who} invites you to join {customer.name} on CPCC as {role} "
+            f"({roles.ROLE_LABELS[role]}).\n\nAccept within {days:g} days, once:\n"
+            f"{link(signed)}\n\nIf you did not expect this, ignore this e-mail."
+        ),
+        from_email=None,
+        recipient_list=[email],
+    )
+    logger.info(
+        "member invited", extra={"customer": customer.slug, "invite": invite.pk, "role": role}
+    )
+    return invite
+
+
+def invite_find(*, signed: str) -> Invite:
+    """The open invitation a link names; InviteInvalid saying why there is none."""
+    max_age = settings.CPCC_INVITE_DAYS * 86400
+    try:
+        pk = signing.loads(signed, salt=INVITE_SALT, max_age=max_age)
+    except signing.SignatureExpired:
+        raise InviteInvalid("This invitation expired: ask for a new one.") from None
+    except signing.BadSignature:
+        raise InviteInvalid("This link is not an invitation (it may be cut short).") from None
+    invite = Invite.objects.select_related("customer").filter(pk=pk).first()
+    if invite is None:
+        raise InviteInvalid("This invitation was withdrawn: ask for a new one.")
+    if invite.accepted is not None:
+        raise InviteInvalid("This invitation was used already: log in instead.")
+    if invite.expires <= timezone.now():
+        raise InviteInvalid("This invitation expired: ask for a new one.")
+    return invite
+
+
+def invite_accept(*, signed: str, username: str, password: str) -> User:
+    """Accept an invitation: a new user of its customer with its role and address, who can log
+    in with ``username`` and ``password`` at once. Used once: a second accept (even at the same
+    moment) raises InviteInvalid. Raises ValidationError on ``username`` for one in use or not
+    valid, on ``password`` for one Django's validators refuse."""
+    username = username.strip()
+    if not username:
+        raise ValidationError({"username": "Choose a user name."})
+    try:
+        User.username_validator(username)
+    except ValidationError as exc:
+        raise ValidationError({"username": exc.messages}) from None
+    with transaction.atomic():
+        invite = invite_find(signed=signed)
+        invite = Invite.objects.select_for_update().get(pk=invite.pk)
+        if invite.accepted is not None:
+            raise InviteInvalid("This invitation was used already: log in instead.")
+        if User.objects.filter(username__iexact=username).exists():
+            raise ValidationError({"username": f"{username!r} is taken: choose another."})
+        user = User(
+            username=username, customer_id=invite.customer_id, role=invite.role, email=invite.email
+        )
+        try:
+            validate_password(password, user)
+        except ValidationError as exc:
+            raise ValidationError({"password": exc.messages}) from None
+        user.set_password(password)
+        user.save()
+        invite.accepted, invite.accepted_by = timezone.now(), user
+        invite.save(update_fields=["accepted", "accepted_by"])
+    logger.info(
+        "invitation accepted",
+        extra={"customer": invite.customer.slug, "invite": invite.pk, "user": user.pk},
+    )
+    return user
+
+
+def invite_withdraw(*, invite: Invite) -> None:
+    """Withdraw an invitation not used yet (one the caller selected for its customer): its link
+    no longer works."""
+    invite.delete()
+
+
+def _other_owners(member: User) -> bool:
+    return (
+        User.objects.select_for_update()
+        .filter(customer_id=member.customer_id, role=roles.OWNER, is_active=True)
+        .exclude(pk=member.pk)
+        .exists()
+    )
+
+
+def member_set_role(*, member: User, role: str) -> User:
+    """Give a member (one the caller selected for its customer) another role; their tokens
+    carry at most the new one. Raises ValidationError on ``role`` for one that is not a role,
+    and for taking the role of owner from the customer's last owner."""
+    if not roles.is_role(role):
+        raise ValidationError(
+            {"role": f"{role!r} is not a role; one of {', '.join(roles.CUSTOMER_ROLES)}."}
+        )
+    with transaction.atomic():
+        member = User.objects.select_for_update().get(pk=member.pk)
+        if member.role == roles.OWNER and role != roles.OWNER and not _other_owners(member):
+            raise ValidationError(
+                {"role": "The last owner stays owner: make another member owner first."}
+            )
+        member.role = role
+        member.save(update_fields=["role"])
+    return member
+
+
+def member_remove(*, member: User) -> None:
+    """Remove a member (one the caller selected for its customer): they can no longer log in
+    and their API tokens die with them; their account is kept inactive for the records (the
+    audit log names them). Raises ValidationError for the customer's last owner."""
+    with transaction.atomic():
+        member = User.objects.select_for_update().get(pk=member.pk)
+        if member.role == roles.OWNER and not _other_owners(member):
+            raise ValidationError("The last owner cannot be removed: make another member owner.")
+        ApiToken.objects.filter(user=member).delete()
+        legacy_token_revoke(user=member)
+        member.is_active = False
+        member.save(update_fields=["is_active"])
+        customer = Customer.objects.select_for_update().get(pk=member.customer_id)
+        _listen(customer)
+    logger.info("member removed", extra={"customer": customer.slug, "user": member.pk})

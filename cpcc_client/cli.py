@@ -12,6 +12,11 @@ list): all of them are queued, or none.
 fleet, which says what it would do (every task, those no vehicle could serve, how long, which
 quota would stop it).
 
+``cpcc members`` lists the people of your customer with their roles (owner, developer,
+viewer); an owner invites someone by e-mail (``members invite``), changes a member's role
+(``members role``) and removes a member (``members remove``). A refused action prints the
+platform's sentence naming the role it needs.
+
 Exit codes: 0 success (``submit --wait``: every VV finished; ``--dry-run``: each would finish
 within its quotas with every task served); 1 the server refused the request, could not be
 reached, a VV ended otherwise than finished, or a dry run found a task no vehicle could serve
@@ -364,6 +369,80 @@ def cmd_logout(url: str, args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# --- members: the people of your customer and their roles -------------------------------------
+
+MEMBERS = "/api/v1/members/"
+INVITES = "/api/v1/invites/"
+# The roles of a customer's members (the platform's accounts.roles), least allowed first.
+ROLES = ("viewer", "developer", "owner")
+
+
+def cmd_members(client: Client, args: argparse.Namespace) -> int:
+    """List your customer's members: user name, e-mail address, role."""
+    members = list(client.pages(MEMBERS))
+    if args.json:
+        _out(json.dumps(members, indent=2))
+        return EXIT_OK
+    if not members:
+        _out("no members (only a customer's users have them)")
+        return EXIT_OK
+    width = max(len("USER"), *(len(m["username"]) for m in members))
+    mail = max(len("E-MAIL"), *(len(m.get("email") or "-") for m in members))
+    _out(f"{'USER':<{width}}  {'E-MAIL':<{mail}}  ROLE")
+    for member in members:
+        email = member.get("email") or "-"
+        _out(f"{member['username']:<{width}}  {email:<{mail}}  {member['role']}")
+    return EXIT_OK
+
+
+def cmd_members_invite(client: Client, args: argparse.Namespace) -> int:
+    invite = client.call("POST", INVITES, data={"email": args.email, "role": args.role})
+    expires = (invite.get("expires") or "")[:16].replace("T", " ")
+    _out(
+        f"Invited {invite['email']} as {invite['role']}: the link in the e-mail works once"
+        + (f", until {expires} UTC" if expires else "")
+        + "."
+    )
+    return EXIT_OK
+
+
+def cmd_members_role(client: Client, args: argparse.Namespace) -> int:
+    member = _member(client, args.user)
+    changed = client.call("PATCH", f"{MEMBERS}{member['id']}/", data={"role": args.role})
+    _out(f"{changed['username']} is now {changed['role']}.")
+    return EXIT_OK
+
+
+def cmd_members_remove(client: Client, args: argparse.Namespace) -> int:
+    member = _member(client, args.user)
+    client.call("DELETE", f"{MEMBERS}{member['id']}/")
+    _out(
+        f"Removed {member['username']}: they can no longer log in, and their API tokens no "
+        "longer work."
+    )
+    return EXIT_OK
+
+
+class NoSuchMember(Exception):
+    """The name given is none of the customer's members (exit code 1)."""
+
+
+def _member(client: Client, user: str) -> dict[str, Any]:
+    """The member a command names, by user name (or, failing that, by e-mail address)."""
+    members: list[dict[str, Any]] = list(client.pages(MEMBERS))
+    wanted = user.strip()
+    folded = wanted.casefold()
+    for matches in (
+        [m for m in members if m["username"] == wanted],
+        [m for m in members if m["username"].casefold() == folded],
+        [m for m in members if (m.get("email") or "").casefold() == folded],
+    ):
+        if len(matches) == 1:
+            return matches[0]
+    names = ", ".join(m["username"] for m in members) or "none"
+    raise NoSuchMember(f"no member {wanted!r} in your customer (its members: {names})")
+
+
 # --- submit --dry-run: a program tried against a simulated copy of the fleet ------------------
 
 DRY_RUN = "/api/v1/vvs/dry-run/"
@@ -526,6 +605,44 @@ def build_parser() -> argparse.ArgumentParser:
     login.set_defaults(handler=cmd_login)
     logout = commands.add_parser("logout", help="forget the token kept for this platform")
     logout.set_defaults(handler=cmd_logout)
+
+    members = commands.add_parser(
+        "members",
+        help="list your customer's members and their roles; owners invite, change, remove",
+        description="Without an action: list the people of your customer (user name, e-mail, "
+        "role). Roles: viewer (read only), developer (also submit, edit and cancel VVs, "
+        "webhooks), owner (also the members). Inviting, changing a role and removing a member "
+        "need the owner role; a refused action prints what it needs and exits 1.",
+    )
+    members.add_argument("--json", action="store_true", help="print the API's JSON")
+    members.set_defaults(handler=cmd_members)
+    actions = members.add_subparsers(dest="members_action", metavar="[ACTION]")
+    invite = actions.add_parser(
+        "invite",
+        help="invite someone by e-mail (owners)",
+        description="Send an invitation to EMAIL: a link that works once and expires; they "
+        "choose a user name and password and join your customer with ROLE.",
+    )
+    invite.add_argument("email", metavar="EMAIL")
+    invite.add_argument("--role", required=True, choices=ROLES, help="their role once they join")
+    invite.set_defaults(handler=cmd_members_invite)
+    role = actions.add_parser(
+        "role",
+        help="change a member's role (owners)",
+        description="Give the member USER (a user name, or their e-mail address) ROLE. The "
+        "last owner stays owner; their tokens carry at most the new role.",
+    )
+    role.add_argument("user", metavar="USER")
+    role.add_argument("role", metavar="ROLE", choices=ROLES, help=", ".join(ROLES))
+    role.set_defaults(handler=cmd_members_role)
+    remove = actions.add_parser(
+        "remove",
+        help="remove a member (owners): their tokens stop working",
+        description="Remove the member USER (a user name, or their e-mail address): they can "
+        "no longer log in and their API tokens stop working. The last owner cannot be removed.",
+    )
+    remove.add_argument("user", metavar="USER")
+    remove.set_defaults(handler=cmd_members_remove)
     return parser
 
 
@@ -548,6 +665,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UsageError as exc:
         _err(f"cpcc: {exc}")
         return EXIT_USAGE
+    except NoSuchMember as exc:
+        _err(f"cpcc: {exc}")
+        return EXIT_ERROR
     except ApiError as exc:
         _err(f"cpcc: {exc.describe()}")
         return EXIT_ERROR

@@ -307,6 +307,11 @@ CPCC_DRY_RUN_WINDOW_S = env_float("CPCC_DRY_RUN_WINDOW_S", 600.0, minimum=1.0)
 # its memory (accounts/authentication.py): a token revoked in another process stops working
 # there within this time, in the revoking process at once (0: every request reads it).
 CPCC_TOKEN_CACHE_S = env_float("CPCC_TOKEN_CACHE_S", 10.0, minimum=0.0)
+# How long an owner's invitation to join a customer can be accepted (once), in days.
+CPCC_INVITE_DAYS = env_float("CPCC_INVITE_DAYS", 7.0, minimum=0.01)
+# An RV takes new work only while a pilot is on duty for it (its VVs wait with the reason "no
+# pilot on duty"); off by default and in the demo.
+CPCC_REQUIRE_PILOT = env_bool("CPCC_REQUIRE_PILOT", False)
 
 # Named API tokens (accounts.ApiToken, django-rest-knox's model with a name and when it was last
 # used): only a digest of each key is kept; keys start with "cpcc_" (so that secret scanners
@@ -365,7 +370,12 @@ REST_FRAMEWORK = {
         # Map tiles (fleet/views.py) per client address: a map shows 20 to 60 at a time.
         "tiles": env_str("CPCC_TILE_RATE", "600/minute"),
     },
-    "DEFAULT_PERMISSION_CLASSES": ["rest_framework.permissions.IsAuthenticated"],
+    # A customer's member acts with their role (cpcc_site.permissions); staff endpoints name
+    # their own classes.
+    "DEFAULT_PERMISSION_CLASSES": [
+        "rest_framework.permissions.IsAuthenticated",
+        "cpcc_site.permissions.MemberRole",
+    ],
     "DEFAULT_SCHEMA_CLASS": "drf_spectacular.openapi.AutoSchema",
     "DEFAULT_PAGINATION_CLASS": "cpcc_site.api.StrictPageNumberPagination",
     "EXCEPTION_HANDLER": "cpcc_site.api.exception_handler",
@@ -388,6 +398,7 @@ SPECTACULAR_SETTINGS = {
     # One name for a choice set that several fields use (webhooks' events and deliveries').
     "ENUM_NAME_OVERRIDES": {
         "NotifyEventEnum": "accounts.models.NotifyEvent",
+        "RoleEnum": "accounts.models.ROLE_CHOICES",
         "SensorKindEnum": "fleet.models.SensorKind",
         "VehicleKindEnum": "fleet.models.VehicleKind",
     },

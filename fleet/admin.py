@@ -4,8 +4,9 @@ from typing import Any
 from django import forms
 from django.conf import settings
 from django.contrib import admin, messages
+from django.contrib.auth import get_user_model
 from django.core.exceptions import PermissionDenied
-from django.db.models import QuerySet
+from django.db.models import Q, QuerySet
 from django.http import (
     HttpRequest,
     HttpResponse,
@@ -18,14 +19,17 @@ from django.template.response import TemplateResponse
 from django.urls import URLPattern, path, reverse
 from django.utils import timezone
 
+from accounts.roles import PILOT
 from cpcc_site.admin_display import METRES, SPEED, PositionShown, duration, rounded
 from cpcc_site.admin_site import ExplainedWhenEmpty
 from fleet.models import (
     Driver,
     GroundStation,
     NoFlyZone,
+    PilotDuty,
     RallyPoint,
     SensorType,
+    TakeOff,
     Vehicle,
     VehicleCommand,
     VehicleKind,
@@ -41,6 +45,7 @@ from fleet.widgets import AreaWidget, map_media
 from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
+    DutyRefused,
     GroundStationConfig,
     VehicleConfig,
     VehicleRemoved,
@@ -52,7 +57,9 @@ from vvm_worker.services import (
     rally_point_save,
     vehicle_command,
     vehicle_create,
+    vehicle_hand_over,
     vehicle_set_status,
+    vehicle_take_duty,
     vehicle_update,
 )
 
@@ -121,7 +128,8 @@ def _battery(vehicle: Vehicle, health: dict[str, Any]) -> tuple[int | None, str]
 
 
 # What an operator may do with an RV on the fleet overview: its button, the question the
-# confirmation asks, and the statuses in which it makes no sense.
+# confirmation asks, and the statuses in which it makes no sense. (Who may do which:
+# ``_acts_allowed``.)
 FLEET_ACTIONS: dict[str, tuple[str, str, frozenset[str]]] = {
     "maintenance": (
         "Maintenance",
@@ -146,21 +154,87 @@ FLEET_ACTIONS: dict[str, tuple[str, str, frozenset[str]]] = {
         "and lands on the spot, and stays there until it is returned to service.",
         frozenset({VehicleStatus.REMOVED}),
     ),
+    "take_duty": (
+        "Take on duty",
+        "Take {name} on duty? You become its pilot in command: recorded with each of its "
+        "take-offs and in the audit log with every command, until you hand it over.",
+        frozenset({VehicleStatus.REMOVED}),
+    ),
+    "hand_over": (
+        "Hand over",
+        "Hand {name} over to {to}? {after}",
+        frozenset({VehicleStatus.REMOVED}),
+    ),
 }
+# The acts that operate an RV: its pilots', and those of any staff who may change vehicles.
+OPERATOR_ACTS = ("maintenance", "return", VehicleCommand.RETURN_HOME, VehicleCommand.LAND)
+NOBODY = "nobody"
 
 
-def _actions(vehicle: Vehicle) -> list[dict[str, Any]]:
-    """The RV's buttons on the fleet overview (``never``: the statuses that disable one, for
-    the page to follow the status live)."""
+# Whom a hand-over goes to where the page's form says it (the button's question).
+CHOSEN = "the pilot chosen beside the button (or nobody)"
+
+
+def _confirm(vehicle: Vehicle, act: str, to: Any = CHOSEN) -> str:
+    """The question an act asks about the RV; for a hand-over, ``to`` is the pilot it goes
+    to, None for nobody, or CHOSEN while the form has not said."""
+    _, confirm, _ = FLEET_ACTIONS[act]
+    if act != "hand_over":
+        return confirm.format(name=vehicle.name)
+    if to is None or to == CHOSEN:
+        whom = NOBODY if to is None else CHOSEN
+        then = "takes no new work" if settings.CPCC_REQUIRE_PILOT else "has no pilot in command"
+        after = f"With nobody, it {then} until a pilot takes it on duty."
+    else:
+        whom = to.get_username()
+        after = f"{whom} becomes its pilot in command."
+    return confirm.format(name=vehicle.name, to=whom, after=after)
+
+
+def _acts_allowed(user: Any, vehicle: Vehicle) -> list[str]:
+    """What the user may do with the RV on the fleet overview: staff who may change vehicles
+    operate any RV, a pilot (``fleet.operate_vehicle``) those they are assigned; one of its
+    pilots (or a superuser) takes it on duty while nobody is; its pilot in command, or staff
+    who may change vehicles, hands it over (to nobody, or to another of its pilots). (The
+    RV's ``pilots`` prefetched, its pilot on duty read with it.)"""
+    manager = user.has_perm("fleet.change_vehicle")
+    assigned = any(p.pk == user.pk for p in vehicle.pilots.all())
+    if not manager and not (assigned and user.has_perm("fleet.operate_vehicle")):
+        return []
+    acts: list[str] = [str(act) for act in OPERATOR_ACTS]
+    on_duty = vehicle.pilot_on_duty_id
+    if on_duty is None and (assigned or user.is_superuser):
+        acts.append("take_duty")
+    if (on_duty is not None and on_duty == user.pk) or (
+        manager and (on_duty is not None or _others(vehicle))
+    ):
+        acts.append("hand_over")
+    return acts
+
+
+def _others(vehicle: Vehicle) -> list[Any]:
+    """The RV's pilots but the one on duty: those it may be handed over to."""
+    return [p for p in vehicle.pilots.all() if p.pk != vehicle.pilot_on_duty_id]
+
+
+def _actions(vehicle: Vehicle, acts: list[str]) -> list[dict[str, Any]]:
+    """The RV's buttons on the fleet overview, those of ``acts`` (``never``: the statuses that
+    disable one, for the page to follow the status live; ``to``: whom a hand-over may go to,
+    nobody first)."""
     return [
         {
             "name": str(name),
             "label": label,
-            "confirm": confirm.format(name=vehicle.name),
+            "confirm": _confirm(vehicle, str(name)),
             "disabled": vehicle.status in never,
             "never": " ".join(sorted(never)),
+            "to": [{"value": "", "name": NOBODY}]
+            + [{"value": p.pk, "name": p.get_username()} for p in _others(vehicle)]
+            if name == "hand_over"
+            else [],
         }
-        for name, (label, confirm, never) in FLEET_ACTIONS.items()
+        for name, (label, _, never) in FLEET_ACTIONS.items()
+        if name in acts
     ]
 
 
@@ -176,10 +250,10 @@ def _command(vehicle: Vehicle) -> dict[str, Any] | None:
     }
 
 
-def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]:
-    """What the fleet overview shows of an RV (annotated with ``vvs_aboard``). Its worker's
-    reports keep the page live (static/js/admin/fleet-overview.js); its speed and next task
-    are known from them only."""
+def _overview_row(vehicle: Any, now: datetime, lease_s: float, user: Any) -> dict[str, Any]:
+    """What the fleet overview shows of an RV (annotated with ``vvs_aboard``) to ``user``
+    (the actions they may do). Its worker's reports keep the page live
+    (static/js/admin/fleet-overview.js); its speed and next task are known from them only."""
     if vehicle.worker_seen is None:
         lease, lease_text = "never", "never reported"
     else:
@@ -218,12 +292,13 @@ def _overview_row(vehicle: Any, now: datetime, lease_s: float) -> dict[str, Any]
         "lease_text": lease_text,
         "area": vehicle.area,
         "command": _command(vehicle),
-        "actions": _actions(vehicle),
+        "pilot_on_duty": pilot.get_username() if (pilot := vehicle.pilot_on_duty) else "",
+        "actions": _actions(vehicle, _acts_allowed(user, vehicle)),
     }
 
 
 # What the page's table shows and its map's data leaves out.
-_NOT_FOR_THE_MAP = ("actions", "command", "status_changed", "health_changed")
+_NOT_FOR_THE_MAP = ("actions", "command", "status_changed", "health_changed", "pilot_on_duty")
 
 
 class SensorTypeForm(forms.ModelForm):
@@ -409,8 +484,9 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
     ]
     list_filter = ["status", "kind", "driver"]
     search_fields = ["name"]
-    filter_horizontal = ["sensors"]
+    filter_horizontal = ["sensors", "pilots"]
     readonly_fields = [
+        "pilot_on_duty",
         "status",
         "status_reason",
         "status_changed",
@@ -444,6 +520,15 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
             },
         ),
         ("Health", {"fields": ["health", "health_changed"]}),
+        (
+            "Pilots",
+            {
+                "fields": ["pilots", "pilot_on_duty"],
+                "description": "Staff of the pilot group who may operate this RV and take it "
+                "on duty; its pilot in command is the one on duty (the fleet overview's "
+                "Take on duty and Hand over).",
+            },
+        ),
         (
             "Limits",
             {
@@ -482,6 +567,19 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
         kwargs["widgets"] = {**kwargs.get("widgets", {}), "area": widget}
         return super().get_form(request, obj, change=change, **kwargs)
 
+    def formfield_for_manytomany(
+        self, db_field: Any, request: HttpRequest, **kwargs: Any
+    ) -> forms.ModelMultipleChoiceField | None:
+        if db_field.name == "pilots":  # staff of the pilot group (and superusers)
+            kwargs["queryset"] = (
+                get_user_model()
+                .objects.filter(is_active=True, is_staff=True)
+                .filter(Q(groups__name=PILOT) | Q(is_superuser=True))
+                .distinct()
+                .order_by("username")
+            )
+        return super().formfield_for_manytomany(db_field, request, **kwargs)
+
     def get_urls(self) -> list[URLPattern]:
         overview = path(
             "overview/",
@@ -503,7 +601,7 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
         now = timezone.now()
         lease_s = settings.CPCC_RV_LEASE_S
         vehicles = [
-            _overview_row(v, now, lease_s)
+            _overview_row(v, now, lease_s, request.user)
             for v in with_active_vv_count(vehicle_list(), name="vvs_aboard")
         ]
         stations = [
@@ -528,26 +626,41 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
             "tiles": settings.CPCC_MAP_TILES,
             "lease_s": lease_s,
             "now": now,
-            "can_act": self.has_change_permission(request),
+            "require_pilot": settings.CPCC_REQUIRE_PILOT,
         }
         return TemplateResponse(request, "admin/fleet/vehicle/overview.html", context)
 
     def act_view(self, request: HttpRequest, object_id: int) -> HttpResponse:
         """An operator's action on one RV from the fleet overview (POST ``act``: maintenance,
-        return, return_home, land), done once confirmed (``confirmed=yes``, which the page's
-        dialog adds; without a script the answer is a page that asks first). Audited like
-        every fleet change (django-auditlog: who, when, what changed); then back to the
-        overview with a message."""
+        return, return_home, land, take_duty, hand_over with ``to``: a pilot's id, empty for
+        nobody), done once confirmed (``confirmed=yes``, which the page's dialog adds; without
+        a script the answer is a page that asks first). Staff who may change vehicles act on
+        any RV, pilots (``fleet.operate_vehicle``) on those they are assigned (else 403).
+        Audited like every fleet change (django-auditlog: who, when, what changed, the pilot
+        in command); then back to the overview with a message."""
         if request.method != "POST":
             return HttpResponseNotAllowed(["POST"])
-        if not self.has_change_permission(request):
+        user = request.user
+        manager = user.has_perm("fleet.change_vehicle")
+        if not manager and not user.has_perm("fleet.operate_vehicle"):
             raise PermissionDenied
         vehicle = get_object_or_404(Vehicle, pk=object_id)
+        if not manager and not vehicle.pilots.filter(pk=user.pk).exists():
+            raise PermissionDenied(
+                f"You are not one of {vehicle.name}'s pilots: a fleet manager assigns them."
+            )
         act = request.POST.get("act", "")
         if act not in FLEET_ACTIONS:
             known = ", ".join(FLEET_ACTIONS)
             return HttpResponseBadRequest(f"act: {act!r} is not an action; one of {known}.")
-        label, confirm, _ = FLEET_ACTIONS[act]
+        to = None
+        if act == "hand_over" and request.POST.get("to"):
+            to = self._pilot(vehicle, request.POST["to"])
+            if to is None:
+                return HttpResponseBadRequest(
+                    f"to: {request.POST['to']!r} is not one of {vehicle.name}'s pilots."
+                )
+        label, _, _ = FLEET_ACTIONS[act]
         if request.POST.get("confirmed") != "yes":
             context = {
                 **self.admin_site.each_context(request),
@@ -556,20 +669,35 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
                 "vehicle": vehicle,
                 "act": act,
                 "label": label,
-                "confirm": confirm.format(name=vehicle.name),
+                "confirm": _confirm(vehicle, act, to),
+                "to": "" if to is None else to.pk,
             }
             return TemplateResponse(request, "admin/fleet/vehicle/overview_confirm.html", context)
         try:
-            done = self._act(request, vehicle, act)
-        except VehicleRemoved as exc:
+            done = self._act(request, vehicle, act, to)
+        except (VehicleRemoved, DutyRefused) as exc:
             self.message_user(request, str(exc), messages.ERROR)
         else:
             self.message_user(request, done, messages.SUCCESS)
         return HttpResponseRedirect(reverse("admin:fleet_vehicle_overview"))
 
-    def _act(self, request: HttpRequest, vehicle: Vehicle, act: str) -> str:
+    @staticmethod
+    def _pilot(vehicle: Vehicle, given: str) -> Any:
+        """The pilot of the RV whose id is ``given`` (None: no such pilot of it)."""
+        if not given.isdigit():
+            return None
+        return vehicle.pilots.filter(pk=int(given), is_active=True).first()
+
+    def _act(self, request: HttpRequest, vehicle: Vehicle, act: str, to: Any = None) -> str:
         """Do a confirmed action through its service; what the operator is told."""
-        who = f"{request.user.get_username()} on the fleet overview"
+        user = request.user
+        if act == "take_duty":
+            vehicle_take_duty(vehicles=[vehicle], pilot=user, vvm=platform_vvm())
+            return f"{vehicle.name}: {user.get_username()} on duty (its pilot in command)"
+        if act == "hand_over":
+            vehicle_hand_over(vehicles=[vehicle], by=user, to=to, vvm=platform_vvm())
+            return f"{vehicle.name}: handed over to {to.get_username() if to else NOBODY}"
+        who = f"{user.get_username()} on the fleet overview"
         if act in VehicleCommand.values:
             command = VehicleCommand(act)
             vehicle_command(
@@ -601,7 +729,10 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
             obj.pk = vehicle_create(config=config, sensors=sensors, vvm=platform_vvm()).pk
 
     def save_related(self, request: HttpRequest, form: Any, formsets: Any, change: bool) -> None:
-        pass  # save_model's service saved the sensors; a vehicle has no inlines
+        # save_model's service saved the sensors; a vehicle has no inlines. Its pilots are
+        # who may operate it (its pilot on duty stays until handed over).
+        if "pilots" in form.changed_data:
+            form.instance.pilots.set(form.cleaned_data["pilots"])
 
     def _set_status(
         self, request: HttpRequest, queryset: QuerySet[Vehicle], status: VehicleStatus
@@ -613,14 +744,65 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
         names = ", ".join(v.name for v in queryset)
         self.message_user(request, f"{names}: {status.label.lower()}", messages.SUCCESS)
 
-    @admin.action(description="Put into maintenance (VVs aboard move to other RVs)")
+    # (Staff who may change vehicles: pilots act on their RVs on the fleet overview.)
+    @admin.action(
+        description="Put into maintenance (VVs aboard move to other RVs)", permissions=["change"]
+    )
     def put_into_maintenance(self, request: HttpRequest, queryset: QuerySet[Vehicle]) -> None:
         self._set_status(request, queryset, VehicleStatus.MAINTENANCE)
 
-    @admin.action(description="Return to service")
+    @admin.action(description="Return to service", permissions=["change"])
     def return_to_service(self, request: HttpRequest, queryset: QuerySet[Vehicle]) -> None:
         self._set_status(request, queryset, VehicleStatus.ACTIVE)
 
-    @admin.action(description="Remove from the fleet (VVs aboard move to other RVs)")
+    @admin.action(
+        description="Remove from the fleet (VVs aboard move to other RVs)", permissions=["delete"]
+    )
     def remove_from_fleet(self, request: HttpRequest, queryset: QuerySet[Vehicle]) -> None:
         self._set_status(request, queryset, VehicleStatus.REMOVED)
+
+
+class _Record(admin.ModelAdmin):
+    """A record the platform keeps: read by staff who may view it, changed by nobody."""
+
+    def has_add_permission(self, request: HttpRequest) -> bool:
+        return False
+
+    def has_change_permission(self, request: HttpRequest, obj: Any = None) -> bool:
+        return False
+
+    def has_delete_permission(self, request: HttpRequest, obj: Any = None) -> bool:
+        return False
+
+
+@admin.register(PilotDuty)
+class PilotDutyAdmin(_Record):
+    """Who was the pilot in command of which RV, from when to when, and to whom they handed
+    it over (``vehicle_take_duty``, ``vehicle_hand_over``)."""
+
+    list_display = ["vehicle", "pilot_name", "started", "ended", "handed_to_shown"]
+    list_filter = ["vehicle"]
+    list_select_related = ["vehicle"]
+    search_fields = ["vehicle__name", "pilot_name"]
+    date_hierarchy = "started"
+
+    @admin.display(description="handed to", ordering="handed_to")
+    def handed_to_shown(self, duty: PilotDuty) -> str:
+        if duty.ended is None:
+            return "on duty"
+        return duty.handed_to or NOBODY
+
+
+@admin.register(TakeOff)
+class TakeOffAdmin(_Record):
+    """Every take-off of an RV with its pilot in command then, as its worker recorded it."""
+
+    list_display = ["vehicle", "pilot_shown", "at"]
+    list_filter = ["vehicle"]
+    list_select_related = ["vehicle"]
+    search_fields = ["vehicle__name", "pilot_name"]
+    date_hierarchy = "at"
+
+    @admin.display(description="pilot in command", ordering="pilot_name")
+    def pilot_shown(self, take_off: TakeOff) -> str:
+        return take_off.pilot_name or "none on duty"

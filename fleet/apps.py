@@ -17,7 +17,7 @@ class FleetConfig(AppConfig):
         auditlog.register(GroundStation)
         auditlog.register(
             Vehicle,
-            m2m_fields={"sensors"},
+            m2m_fields={"sensors", "pilots"},
             exclude_fields=["lat", "lng", "alt", "phase", "distance_m", "flight_s", "tasks_done",
                             "planner_state", "worker_seen", "updated"],
         )  # fmt: skip

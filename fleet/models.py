@@ -6,6 +6,7 @@ import json
 from functools import lru_cache
 from typing import Any
 
+from django.conf import settings
 from django.core.exceptions import ValidationError
 from django.core.validators import MaxValueValidator, MinValueValidator
 from django.db import models
@@ -213,9 +214,29 @@ class Vehicle(models.Model):
         null=True, blank=True, help_text="When the vehicle's worker last reported."
     )
     updated = models.DateTimeField(auto_now=True)
+    # Who may fly it (staff in the "pilot" group), and who is its pilot in command now: one of
+    # them who took it on duty (``vehicle_take_duty``). With CPCC_REQUIRE_PILOT an RV with no
+    # pilot on duty takes no new work.
+    pilots = models.ManyToManyField(
+        settings.AUTH_USER_MODEL,
+        blank=True,
+        related_name="piloted_vehicles",
+        help_text="The pilots who may operate this RV and take it on duty.",
+    )
+    pilot_on_duty = models.ForeignKey(
+        settings.AUTH_USER_MODEL,
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
+        related_name="vehicles_on_duty",
+        help_text="Its pilot in command now (a pilot takes it on duty and hands it over).",
+    )
 
     class Meta:
         ordering = ["name"]
+        permissions = [
+            ("operate_vehicle", "Can operate an RV: maintenance, return home, land, return"),
+        ]
         constraints = [
             models.CheckConstraint(
                 condition=models.Q(max_altitude_m__gte=models.F("min_altitude_m")),
@@ -228,6 +249,12 @@ class Vehicle(models.Model):
 
     def __str__(self) -> str:
         return self.name
+
+    def get_additional_data(self) -> dict[str, Any]:
+        """What the audit log keeps with every change of the RV (django-auditlog): its pilot
+        in command then."""
+        pilot = self.pilot_on_duty
+        return {"pilot_in_command": pilot.get_username() if pilot is not None else None}
 
     @property
     def depot(self) -> Position:
@@ -334,3 +361,45 @@ class RallyPoint(models.Model):
     @property
     def position(self) -> Position:
         return Position(self.lat, self.lng, self.alt)
+
+
+class PilotDuty(models.Model):
+    """A pilot's time in command of an RV: from taking it on duty to handing it over."""
+
+    vehicle = models.ForeignKey(Vehicle, on_delete=models.CASCADE, related_name="duties")
+    pilot = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="duties"
+    )
+    # Kept as it was: the record outlives a pilot's account.
+    pilot_name = models.CharField(max_length=150)
+    started = models.DateTimeField()
+    ended = models.DateTimeField(null=True, blank=True)
+    handed_to = models.CharField(max_length=150, blank=True)
+
+    class Meta:
+        ordering = ["-started", "-id"]
+        verbose_name_plural = "pilot duties"
+        indexes = [models.Index(fields=["vehicle", "ended"])]
+
+    def __str__(self) -> str:
+        return f"{self.pilot_name} on {self.vehicle}"
+
+
+class TakeOff(models.Model):
+    """One take-off of an RV, with its pilot in command then (empty: none on duty)."""
+
+    vehicle = models.ForeignKey(Vehicle, on_delete=models.CASCADE, related_name="take_offs")
+    at = models.DateTimeField()
+    at_s = models.FloatField(help_text="Platform clock.")
+    pilot = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, blank=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    pilot_name = models.CharField(max_length=150, blank=True)
+
+    class Meta:
+        ordering = ["-at", "-id"]
+        verbose_name = "take-off"
+        indexes = [models.Index(fields=["vehicle", "-at"])]
+
+    def __str__(self) -> str:
+        return f"{self.vehicle} at {self.at:%Y-%m-%d %H:%M:%S}"

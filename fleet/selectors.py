@@ -56,7 +56,11 @@ def sensor_carriers(*, sensor: SensorType) -> QuerySet[Vehicle]:
 
 def vehicle_list(*, status: str | None = None) -> QuerySet[Vehicle]:
     """Every RV, removed ones included (or those in one status), with its sensors."""
-    vehicles = Vehicle.objects.prefetch_related("sensors").order_by("name")
+    vehicles = (
+        Vehicle.objects.select_related("pilot_on_duty")
+        .prefetch_related("sensors", "pilots")
+        .order_by("name")
+    )
     return vehicles.filter(status=status) if status else vehicles
 
 

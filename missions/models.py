@@ -25,10 +25,13 @@ class VVStatus(models.TextChoices):
 
 
 class WaitReason(models.TextChoices):
-    """What a VV that has not ended waits for, in the API's words (``waiting.reason``). Only
-    NO_VEHICLE is kept on the VV's row; the others follow from where it is."""
+    """What a VV that has not ended waits for, in the API's words (``waiting.reason``).
+    NO_VEHICLE, NO_PILOT and SERVICE_LEVEL are kept on the VV's row; the others follow from
+    where it is."""
 
     NO_VEHICLE = "no_vehicle", "No vehicle in service covers its next task"
+    # CPCC_REQUIRE_PILOT: the RVs that cover it are in service but no pilot is on duty for them.
+    NO_PILOT = "no_pilot", "No pilot on duty for the vehicles that cover its next task"
     QUEUE = "queue", "In the customer's queue"
     FLYING = "flying", "A vehicle flies to its task"
     MESSAGE = "message", "Its program waits for a message (VV.message.receive)"
@@ -106,8 +109,9 @@ class VirtualVehicle(models.Model):
     submitted_s = models.FloatField()
     started_s = models.FloatField(null=True, blank=True)
     finished_s = models.FloatField(null=True, blank=True)
-    # Why it waits while no RV in service could serve its next task (routing parks it on a
-    # ground station), in the customer's words, and since when; blank once it moves on.
+    # Why it waits while no RV in service (or none with a pilot on duty) could serve its next
+    # task (routing parks it on a ground station), in the customer's words, and since when;
+    # blank once it moves on.
     waiting_reason = models.CharField(
         max_length=20, choices=WaitReason.choices, blank=True, default=""
     )

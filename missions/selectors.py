@@ -58,10 +58,16 @@ def _with_hosts() -> QuerySet[VirtualVehicle]:
     return VirtualVehicle.objects.select_related("customer", "host_gs", "host_rv")
 
 
+def sees_every_vv(user: User) -> bool:
+    """Staff who may read customers' VVs (superusers, fleet managers, support; not pilots)."""
+    return bool(user.is_staff) and user.has_perm("missions.view_virtualvehicle")
+
+
 def vv_list_for_user(*, user: User) -> QuerySet[VirtualVehicle]:
-    """The VVs a user may see: staff see every VV, a customer's user their customer's."""
+    """The VVs a user may see: staff who may read them (``sees_every_vv``) every VV, a
+    customer's member their customer's."""
     qs = _with_hosts()
-    if user.is_staff:
+    if sees_every_vv(user):
         return qs
     if user.customer_id is None:
         return qs.none()
@@ -116,7 +122,7 @@ _LISTS = {
 def vv_pages_for_user(*, user: User, status: str | None = None) -> PreparedPages[VirtualVehicle]:
     """The VVs of ``vv_list_for_user`` as a list pages through them (``vvs_listed``, newest
     first), all of them or those of one status."""
-    if user.is_staff:
+    if sees_every_vv(user):
         customer: tuple[Any, ...] = ()
     elif user.customer_id is not None:
         customer = (user.customer_id,)
@@ -191,7 +197,7 @@ def vv_get_for_user(*, user: User, vv_id: uuid.UUID | str) -> VirtualVehicle:
         pk = uuid.UUID(str(vv_id))
     except (ValueError, TypeError):
         raise VVNotFound(str(vv_id)) from None
-    if user.is_staff:
+    if sees_every_vv(user):
         vv = _ANY_VV.first(pk)
     elif user.customer_id is not None:
         vv = _CUSTOMERS_VV.first(pk, user.customer_id)

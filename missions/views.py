@@ -7,6 +7,12 @@ user is refused. They never name a vehicle or a ground station to a customer, an
 pictures to the REST API (``/api/v1/vvs/{id}/images/{file}``), which checks who asks: images are
 never served by their path under MEDIA_ROOT. Each view reads through the scoped selectors of
 missions/selectors.py and changes state through one service of vvm_worker/services/.
+
+Changing a VV (submit, check, edit, cancel, restart, send a message) needs a member's developer
+role, or staff's STAFF_VV_WRITE permission (``change_refusal``): a viewer reads everything and
+is offered no button to change anything. The refusal (403, saying what it needs) comes before
+any VV is looked up, so it is the same for a VV that does not exist; another customer's VV
+stays 404 to whoever may change their own.
 """
 
 from __future__ import annotations
@@ -31,7 +37,9 @@ from django.utils.http import url_has_allowed_host_and_scheme
 from django.utils.text import slugify
 from django.views.decorators.http import require_POST
 
+from accounts.roles import DEVELOPER
 from cpcc_site import json_depth
+from cpcc_site.permissions import STAFF_VV_WRITE, member_refusal, staff_refusal
 from missions.forms import NewProgramForm, ProgramForm
 from missions.models import (
     ACTIVE_STATUSES,
@@ -114,6 +122,35 @@ def customer_or_staff_required(view: View) -> View:
     return checked
 
 
+def change_refusal(user: Any, action: str = "this") -> str | None:
+    """Why the user may not change VVs on these pages (None: they may): a customer's member
+    needs the developer role, staff the permission STAFF_VV_WRITE."""
+    if user.is_staff:
+        return staff_refusal(user, (STAFF_VV_WRITE,))
+    return member_refusal(user, None, DEVELOPER, action)
+
+
+def _refuse_change(request: HttpRequest, action: str) -> None:
+    why = change_refusal(request.user, action)
+    if why is not None:
+        raise PermissionDenied(why)
+
+
+def changes_vvs(action: str) -> Callable[[View], View]:
+    """The view changes VVs (``action`` names what, in the refusal): a user who may not gets
+    403 before anything is looked up (under customer_or_staff_required)."""
+
+    def decorate(view: View) -> View:
+        @wraps(view)
+        def checked(request: HttpRequest, *args: Any, **kwargs: Any) -> HttpResponse:
+            _refuse_change(request, action)
+            return view(request, *args, **kwargs)
+
+        return checked
+
+    return decorate
+
+
 def _vv_or_404(request: HttpRequest, vv_id: uuid.UUID | str) -> VirtualVehicle:
     try:
         return vv_get_for_user(user=request.user, vv_id=vv_id)  # type: ignore[arg-type]
@@ -148,14 +185,14 @@ class Actions:
     edit: bool
 
 
-def actions_for(vv: VirtualVehicle) -> Actions:
+def actions_for(vv: VirtualVehicle, *, may_change: bool = True) -> Actions:
     """Edit while queued, cancel until it ends, restart once it has ended, unless it failed:
     its program, run again as it is, would fail the same way (its page offers a copy to
-    change instead)."""
+    change instead). Nothing for a user who may not change VVs (``change_refusal``)."""
     return Actions(
-        cancel=not vv.is_ended,
-        restart=vv.is_ended and vv.status != VVStatus.FAILED,
-        edit=vv.status == VVStatus.QUEUED,
+        cancel=may_change and not vv.is_ended,
+        restart=may_change and vv.is_ended and vv.status != VVStatus.FAILED,
+        edit=may_change and vv.status == VVStatus.QUEUED,
     )
 
 
@@ -181,8 +218,11 @@ class Row:
     actions: Actions
 
 
-def _rows(vvs: Iterable[VirtualVehicle], *, staff: bool) -> list[Row]:
-    return [Row(vv=vv, where=where(vv, staff=staff), actions=actions_for(vv)) for vv in vvs]
+def _rows(vvs: Iterable[VirtualVehicle], *, staff: bool, may_change: bool) -> list[Row]:
+    return [
+        Row(vv=vv, where=where(vv, staff=staff), actions=actions_for(vv, may_change=may_change))
+        for vv in vvs
+    ]
 
 
 def _image_url(vv_id: uuid.UUID, reference: str) -> str:
@@ -331,8 +371,10 @@ def _dashboard(request: HttpRequest) -> dict[str, Any]:
     shown_vvs = mine.filter(status__in=statuses) if statuses else mine
     ordered = shown_vvs.order_by("-created", "-submitted_s", "id")
     page: Page[VirtualVehicle] = Paginator(ordered, VVS_PER_PAGE).get_page(request.GET.get("page"))
+    may_change = change_refusal(user) is None
     return {
-        "rows": _rows(with_task_counts(list(page.object_list)), staff=staff),
+        "rows": _rows(with_task_counts(list(page.object_list)), staff=staff, may_change=may_change),
+        "may_change": may_change,
         "page": page,
         "show": wanted,
         "filters": [(key, label) for key, (label, _) in FILTERS.items()],
@@ -376,6 +418,7 @@ def _problem_json(problem: SyntaxProblem | None) -> dict[str, Any]:
 
 @customer_or_staff_required
 @require_POST
+@changes_vvs("a program check")
 def vv_check(request: HttpRequest) -> JsonResponse:
     """``POST /vvs/check/`` (session and CSRF): the API's syntax check of a program without
     submitting it. ``{"program": ...}`` as JSON or form data; answers ``{"ok": true}`` or
@@ -421,6 +464,7 @@ def _editor(
 
 
 @customer_or_staff_required
+@changes_vvs("a new VV")
 def vv_new(request: HttpRequest) -> HttpResponse:
     """The program editor for new VVs: a name, a program (typed or loaded from a .js file),
     a number of copies; ``?from=<id>`` starts from one of the user's VVs."""
@@ -463,6 +507,7 @@ def vv_new(request: HttpRequest) -> HttpResponse:
 
 
 @customer_or_staff_required
+@changes_vvs("an edit of a VV's program")
 def vv_edit(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
     """The program editor for a VV that is still queued: change its name and program."""
     vv = _vv_or_404(request, vv_id)
@@ -515,6 +560,7 @@ def _back(request: HttpRequest, default: str) -> HttpResponse:
 
 @customer_or_staff_required
 @require_POST
+@changes_vvs("a VV's cancellation")
 def vv_cancel(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
     """Cancel a VV that has not ended: its open tasks are dropped, what it stored stays."""
     try:
@@ -530,6 +576,7 @@ def vv_cancel(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
 
 @customer_or_staff_required
 @require_POST
+@changes_vvs("a VV's restart")
 def vv_restart(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
     """Restart an ended VV: a new VV with the same name and program, queued."""
     try:
@@ -566,6 +613,7 @@ def vv_detail(request: HttpRequest, vv_id: uuid.UUID) -> HttpResponse:
     the page; a value that cannot be sent shows the page again with why."""
     if request.method != "POST":
         return _vv_page(request, vv_id)
+    _refuse_change(request, "a message to a VV")
     text = request.POST.get("value", "")
     try:
         value = _posted_value(text)
@@ -620,6 +668,7 @@ def _vv_page(
     in its form with why."""
     user = request.user
     staff = bool(user.is_staff)
+    may_change = change_refusal(user) is None
     try:
         (vv,) = with_task_counts([vv_get_for_user(user=user, vv_id=vv_id)])  # type: ignore[arg-type]
     except VVNotFound:
@@ -642,7 +691,8 @@ def _vv_page(
         # What it waits for (static/js/vv.js keeps it up to date from the API while it runs).
         "waiting": vv_waiting(vv, tasks_open=vv.tasks_open),  # type: ignore[attr-defined]
         "api_url": reverse("vv-detail", kwargs={"pk": str(vv.pk)}),
-        "actions": actions_for(vv),
+        "actions": actions_for(vv, may_change=may_change),
+        "may_change": may_change,
         "ended": vv.is_ended,
         "tasks": [
             TaskRow(

@@ -3,6 +3,8 @@
 
 - ``no_vehicle``: no RV in service covers its next task (routing parked it on a ground
   station and keeps the reason on its row, ``vvm_worker.services.waiting``);
+- ``no_pilot``: the RVs in service that cover its next task have no pilot on duty, where the
+  provider requires one (CPCC_REQUIRE_PILOT; kept on its row as ``no_vehicle`` is);
 - ``queue``: it waits in its customer's queue behind the customer's other VVs (its place is
   read when it is shown: it changes whenever one of them ends);
 - ``service_level``: it is queued and admission holds it back while another service class

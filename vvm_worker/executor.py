@@ -10,9 +10,10 @@ nothing that has not changed.
 
 from __future__ import annotations
 
+import datetime as dt
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from django.conf import settings
@@ -50,6 +51,7 @@ from vvm_worker.services import (
     task_complete,
     vehicle_command_take,
     vehicle_record_state,
+    vehicle_record_take_offs,
     vehicle_record_track,
     vehicle_set_status,
 )
@@ -158,6 +160,9 @@ class DatabaseStore:
         # and, with ``ticks``, the estimates that wait for the map tick to be written.
         self._estimates: dict[Any, float] = {}
         self._etas_waiting: dict[Any, float] = {}
+        # The take-offs the loop reported (platform clock), written with the next write of the
+        # row or of the track (in its unit of work), which reads the pilot on duty then.
+        self._take_offs: list[float] = []
 
     def changed(self) -> None:
         """The RV's tasks or status may have changed: read them again when next asked."""
@@ -294,6 +299,8 @@ class DatabaseStore:
                 self._write(arrival, moved=True)
 
     def record_state(self, state: VehicleState, *, moved: bool) -> None:
+        if state.took_off_s is not None and state.took_off_s not in self._take_offs:
+            self._take_offs.append(state.took_off_s)  # (once, if the work is done again)
         if self.defer_reports:
             if moved:
                 self._points.append(state)
@@ -345,9 +352,14 @@ class DatabaseStore:
     def write_waiting(self) -> None:
         """Write the report that waits, if any (the host's map tick: a row is never more than
         a tick behind what its loop said). Where it stopped to serve a task waits for the
-        answer, which writes it. Then the estimates that wait (see ``estimated``)."""
+        answer, which writes it. Then the take-offs that wait (none, mostly: they go with a
+        report) and the estimates that wait (see ``estimated``)."""
         if self._waiting is not None:
             self._write(self._waiting, moved=False)
+        elif self._take_offs:
+            take_offs = self._dated(self._take_offs)
+            vehicle_record_take_offs(vehicle_id=self.vehicle_id, take_offs=take_offs)
+            self._take_offs = self._take_offs[len(take_offs) :]
         write_estimates([self])
 
     def seen_aboard(self, vvs: list[dict[str, Any]]) -> None:
@@ -355,18 +367,21 @@ class DatabaseStore:
         self._aboard = vvs
 
     def settle(self, *, tasks_done: int = 0) -> Settled:
-        """Write the track points that wait (``defer_reports``), in the caller's transaction,
-        and count ``tasks_done`` more tasks (written with the row); where the RV last said it
-        is (None: it has said nothing since the row was written)."""
+        """Write the track points and take-offs that wait (``defer_reports``), in the
+        caller's transaction, and count ``tasks_done`` more tasks (written with the row);
+        where the RV last said it is (None: it has said nothing since the row was written)."""
+        take_offs, self._take_offs = self._take_offs, []
+        if take_offs:
+            vehicle_record_take_offs(vehicle_id=self.vehicle_id, take_offs=self._dated(take_offs))
         if self._points:
             points, self._points = self._points, []
             vehicle_record_track(
                 vehicle_id=self.vehicle_id, points=[(p.t_s, p.position) for p in points]
             )
             if self.settled_log is not None:
-                self.settled_log.append((self, _Waiting(points, tasks_done)))
-        elif tasks_done and self.settled_log is not None:
-            self.settled_log.append((self, _Waiting([], tasks_done)))
+                self.settled_log.append((self, _Waiting(points, tasks_done, take_offs)))
+        elif (tasks_done or take_offs) and self.settled_log is not None:
+            self.settled_log.append((self, _Waiting([], tasks_done, take_offs)))
         self._tasks_done += tasks_done
         return Settled(None if self._latest is None else self._latest.position)
 
@@ -374,13 +389,21 @@ class DatabaseStore:
         """What ``settle`` wrote was rolled back: it waits again."""
         self._points = [*waiting.points, *self._points]
         self._tasks_done -= waiting.tasks_done
+        self._take_offs = [*waiting.take_offs, *self._take_offs]
+
+    def _dated(self, take_offs: Sequence[float]) -> list[tuple[float, dt.datetime]]:
+        """Take-offs (platform clock) with their dates (the platform clock's epoch)."""
+        epoch_ms = self.vvm.clock.epoch_ms
+        return [
+            (t_s, dt.datetime.fromtimestamp(epoch_ms(t_s) / 1000, tz=dt.UTC)) for t_s in take_offs
+        ]
 
     def flush(self) -> None:
         """Write the reports that wait (see ``defer_reports``): track points, then the row."""
         if self._latest is not None:
             latest = self._latest
             with transaction.atomic():
-                self.settle()
+                self.settle()  # (the take-offs too)
                 vehicle_record_state(
                     vehicle_id=self.vehicle_id, state=latest, tasks_done=self._tasks_done
                 )
@@ -403,8 +426,14 @@ class DatabaseStore:
 
     def _write(self, state: VehicleState, *, moved: bool) -> None:
         self._waiting = None  # said by this report, or by an earlier one than this
-        # The end of a straight leg is on the track of every VV aboard.
-        vehicle_record_state(vehicle_id=self.vehicle_id, state=state, track_aboard=moved)
+        # The end of a straight leg is on the track of every VV aboard; the take-offs since
+        # the last write go in the same commit (cleared once it is done: work redone after an
+        # outage writes them again).
+        take_offs = self._dated(self._take_offs)
+        vehicle_record_state(
+            vehicle_id=self.vehicle_id, state=state, track_aboard=moved, take_offs=take_offs
+        )
+        self._take_offs = self._take_offs[len(take_offs) :]
 
     def area(self) -> Area:
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
@@ -429,10 +458,12 @@ def read_aboard(vehicle_ids: Sequence[int]) -> dict[int, list[dict[str, Any]]]:
 
 @dataclass(frozen=True)
 class _Waiting:
-    """What one ``settle`` of an RV wrote or counted: the ends of legs, tasks served."""
+    """What one ``settle`` of an RV wrote or counted: the ends of legs, tasks served, its
+    take-offs (platform clock)."""
 
     points: list[VehicleState]
     tasks_done: int
+    take_offs: list[float] = field(default_factory=list)
 
 
 class PlatformSensing:

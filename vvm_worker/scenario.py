@@ -7,14 +7,16 @@ first problem found as a `ScenarioError` that names the place (`vehicles[1].area
 known, the file. Nothing here touches the database: sensor names given to vehicles are only
 checked to be non-empty strings, because the catalog they refer to is the database's SDC plus
 the scenario's own `sensors`, which the loader knows (it also checks that a vehicle's kind can
-carry each of its sensors).
+carry each of its sensors). Likewise a vehicle's `pilots` that are not the scenario's own
+`staff` are looked for among the database's staff by the loader.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping, Sequence
+import re
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
@@ -39,10 +41,12 @@ __all__ = [
     "CustomerSpec",
     "FleetEvent",
     "GroundStationSpec",
+    "MemberSpec",
     "NoFlyZoneSpec",
     "Scenario",
     "ScenarioError",
     "SensorSpecEntry",
+    "StaffSpec",
     "VVSpec",
     "VehicleSpec",
     "load_scenario",
@@ -54,6 +58,11 @@ DRIVERS: Final = ("sim", "mavlink")
 SENSOR_KINDS: Final = ("scalar", "gps", "camera")
 VEHICLE_ACTIONS: Final = ("remove", "maintenance", "return")
 ADD_ACTION: Final = "add"
+# The roles of a customer's users and the staff groups, as accounts.roles names them (a pure
+# core imports no app: tests/vvm_worker/test_scenario_roles.py checks that they agree).
+MEMBER_ROLES: Final = ("owner", "developer", "viewer")
+DEFAULT_ROLE: Final = "owner"  # as a customer's login has been since before roles
+STAFF_GROUPS: Final = ("fleet manager", "pilot", "support")
 
 
 class ScenarioError(ValueError):
@@ -135,6 +144,9 @@ class VehicleSpec:
     # Where a simulated aerial vehicle is when the scenario starts, in the air (above its
     # depot): it starts there, hovering. None: landed at its depot.
     start: Position | None = None
+    # The user names of the staff who may fly it (the scenario's `staff` or the database's);
+    # None: the scenario says nothing of them (a vehicle already there keeps its pilots).
+    pilots: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -162,6 +174,27 @@ class CustomerSpec:
     max_messages_per_vv: int | None = None
     max_message_bytes: int | None = None
     service_class: ServiceClassSpec | None = None
+    # Its users besides its own login (named after its slug, an owner), each with a role.
+    users: tuple[MemberSpec, ...] = ()
+
+
+@dataclass(frozen=True)
+class MemberSpec:
+    """A user of a customer, with its role (one of MEMBER_ROLES) and optional e-mail address."""
+
+    name: str
+    role: str = DEFAULT_ROLE
+    email: str | None = None
+
+
+@dataclass(frozen=True)
+class StaffSpec:
+    """A staff user of the platform, in these staff groups (of STAFF_GROUPS; none: only what
+    the admin gives them), with an optional e-mail address."""
+
+    name: str
+    groups: tuple[str, ...] = ()
+    email: str | None = None
 
 
 @dataclass(frozen=True)
@@ -217,6 +250,10 @@ class Scenario:
     path: Path | None
     description: str | None = None
     no_fly_zones: tuple[NoFlyZoneSpec, ...] = ()
+    staff: tuple[StaffSpec, ...] = ()
+    # (place in the file, user name) of each vehicle pilot that `staff` does not name: the
+    # loader looks for them among the database's staff.
+    outside_pilots: tuple[tuple[str, str], ...] = ()
 
 
 # --- public functions --------------------------------------------------------------------------
@@ -304,7 +341,7 @@ class _JsonObject(dict[str, Any]):
 
 
 _TOP_REQUIRED = ("ground_stations", "vehicles", "customers", "vvs")
-_TOP_OPTIONAL = ("name", "description", "sensors", "events", "no_fly_zones")
+_TOP_OPTIONAL = ("name", "description", "sensors", "events", "no_fly_zones", "staff")
 _ZONE_REQUIRED = ("name", "area")
 _ZONE_OPTIONAL = ("min_altitude_m", "max_altitude_m")
 _GS_REQUIRED = ("name", "position")
@@ -322,6 +359,7 @@ _VEHICLE_OPTIONAL = (
     "dive_rate_mps",
     "turn_rate_dps",
     "start",
+    "pilots",
 )
 _CUSTOMER_REQUIRED = ("name", "max_parallel_vvs")
 _CUSTOMER_QUOTAS = (
@@ -336,7 +374,14 @@ _CUSTOMER_QUOTAS = (
 # The least value of a quota where it is not 1 (as accounts.models.Customer validates them): a
 # customer's VVs may be allowed to send no message at all; a message may be kept to 2 bytes.
 _QUOTA_MINIMUM = {"max_messages_per_vv": 0, "max_message_bytes": 2}
-_CUSTOMER_OPTIONAL = ("privileged", "service_class", *_CUSTOMER_QUOTAS)
+_CUSTOMER_OPTIONAL = ("privileged", "service_class", "users", *_CUSTOMER_QUOTAS)
+_MEMBER_REQUIRED = ("name",)
+_MEMBER_OPTIONAL = ("role", "email")
+_STAFF_REQUIRED = ("name",)
+_STAFF_OPTIONAL = ("groups", "email")
+# What Django's user names allow (UnicodeUsernameValidator, at most 150 characters).
+_USER_NAME = re.compile(r"[\w.@+-]+\Z")
+_USER_NAME_MAX = 150
 _SERVICE_CLASS_REQUIRED = ("name", "p95_s")
 _SERVICE_CLASS_OPTIONAL = ("weight",)
 _VV_REQUIRED = ("customer", "name")
@@ -457,6 +502,38 @@ def _vehicle_kind(value: Any, path: str) -> str:
     return kind
 
 
+def _user_name(value: Any, path: str) -> str:
+    name = _string(value, path)
+    if len(name) > _USER_NAME_MAX or not _USER_NAME.match(name):
+        raise ScenarioError(
+            path,
+            f"{name!r} is not a user name: letters, digits and @ . + - _ only, "
+            f"at most {_USER_NAME_MAX} characters",
+        )
+    return name
+
+
+def _staff_group(value: Any, path: str) -> str:
+    group = _string(value, path)
+    if group not in STAFF_GROUPS:
+        raise ScenarioError(
+            path, f"unknown staff group {group!r} (one of: {', '.join(STAFF_GROUPS)})"
+        )
+    return group
+
+
+def _distinct(value: Any, path: str, read: Callable[[Any, str], str]) -> tuple[str, ...]:
+    """A list of strings, each checked by `read`, none given twice."""
+    first_at: dict[str, str] = {}
+    for i, item in enumerate(_list(value, path)):
+        item_path = f"{path}[{i}]"
+        name = read(item, item_path)
+        if name in first_at:
+            raise ScenarioError(item_path, f"{name!r} is given twice (also at {first_at[name]})")
+        first_at[name] = item_path
+    return tuple(first_at)
+
+
 def _position(value: Any, path: str) -> Position:
     items = _list(value, path)
     if len(items) != 3:
@@ -535,6 +612,9 @@ class _Parser:
     def __init__(self, base_dir: Path, *, default_name: str) -> None:
         self.base_dir = base_dir
         self.default_name = default_name
+        # Every vehicle parsed (also those events add) with its place in the file: for the
+        # check of their pilots once the staff are known.
+        self.vehicle_places: list[tuple[str, VehicleSpec]] = []
 
     def scenario(self, data: Any) -> Scenario:
         doc = _object(data, "", _TOP_REQUIRED, _TOP_OPTIONAL)
@@ -565,6 +645,22 @@ class _Parser:
             ((c.name, f"customers[{i}].name") for i, c in enumerate(customers)), "customer"
         )
         _check_service_classes(customers)
+        staff = tuple(
+            self.staff_user(item, f"staff[{i}]")
+            for i, item in enumerate(_list(doc.get("staff", []), "staff"))
+        )
+        # User names are the platform's, not a customer's: one name, one user.
+        _check_unique(
+            [
+                *(
+                    (user.name, f"customers[{i}].users[{k}].name")
+                    for i, customer in enumerate(customers)
+                    for k, user in enumerate(customer.users)
+                ),
+                *((user.name, f"staff[{i}].name") for i, user in enumerate(staff)),
+            ],
+            "user",
+        )
         sensors = tuple(
             self.sensor(item, f"sensors[{i}]")
             for i, item in enumerate(_list(doc.get("sensors", []), "sensors"))
@@ -583,6 +679,7 @@ class _Parser:
         _check_unique(
             ((z.name, f"no_fly_zones[{i}].name") for i, z in enumerate(zones)), "no-fly zone"
         )
+        outside_pilots = self.check_pilots(customers, staff)
         return Scenario(
             name=name,
             ground_stations=ground_stations,
@@ -594,7 +691,35 @@ class _Parser:
             path=None,
             description=description,
             no_fly_zones=zones,
+            staff=staff,
+            outside_pilots=outside_pilots,
         )
+
+    def check_pilots(
+        self, customers: Sequence[CustomerSpec], staff: Sequence[StaffSpec]
+    ) -> tuple[tuple[str, str], ...]:
+        """A vehicle's pilots are staff: a customer's user of the scenario is refused. Returns
+        (place, user name) of each pilot the scenario's `staff` does not name, for the loader
+        to find among the database's staff."""
+        members = {
+            user.name: f"customers[{i}].users[{k}]"
+            for i, customer in enumerate(customers)
+            for k, user in enumerate(customer.users)
+        }
+        staff_names = {user.name for user in staff}
+        outside: list[tuple[str, str]] = []
+        for path, spec in self.vehicle_places:
+            for k, pilot in enumerate(spec.pilots or ()):
+                place = f"{path}.pilots[{k}]"
+                if pilot in members:
+                    raise ScenarioError(
+                        place,
+                        f"{pilot!r} is a customer's user ({members[pilot]}); a pilot is staff "
+                        "(list them in staff, with the group 'pilot')",
+                    )
+                if pilot not in staff_names:
+                    outside.append((place, pilot))
+        return tuple(outside)
 
     def ground_station(self, value: Any, path: str) -> GroundStationSpec:
         obj = _object(value, path, _GS_REQUIRED, ())
@@ -661,7 +786,10 @@ class _Parser:
                     f"a vehicle starts in the air, above its depot's {depot.alt:g} m, "
                     f"got {start.alt:g} m (leave start out for one landed at its depot)",
                 )
-        return VehicleSpec(
+        pilots = (
+            _distinct(obj["pilots"], _join(path, "pilots"), _user_name) if "pilots" in obj else None
+        )
+        spec = VehicleSpec(
             name=name,
             depot=depot,
             area=area,
@@ -677,7 +805,10 @@ class _Parser:
             dive_rate_mps=dive_rate,
             turn_rate_dps=turn_rate,
             start=start,
+            pilots=pilots,
         )
+        self.vehicle_places.append((path, spec))
+        return spec
 
     def altitudes(self, obj: Mapping[str, Any], path: str, kind: str) -> tuple[float, float]:
         """A vehicle's (min_altitude_m, max_altitude_m): both required of an aerial vehicle;
@@ -756,8 +887,39 @@ class _Parser:
                 if "service_class" in obj
                 else None
             ),
+            users=tuple(
+                self.member(item, f"{_join(path, 'users')}[{k}]")
+                for k, item in enumerate(_list(obj.get("users", []), _join(path, "users")))
+            ),
             **quotas,
         )
+
+    def member(self, value: Any, path: str) -> MemberSpec:
+        obj = _object(value, path, _MEMBER_REQUIRED, _MEMBER_OPTIONAL)
+        name = _user_name(obj["name"], _join(path, "name"))
+        role = _string(obj.get("role", DEFAULT_ROLE), _join(path, "role"))
+        if role not in MEMBER_ROLES:
+            raise ScenarioError(
+                _join(path, "role"), f"unknown role {role!r} (one of: {', '.join(MEMBER_ROLES)})"
+            )
+        return MemberSpec(name=name, role=role, email=self.email(obj, path))
+
+    def staff_user(self, value: Any, path: str) -> StaffSpec:
+        obj = _object(value, path, _STAFF_REQUIRED, _STAFF_OPTIONAL)
+        return StaffSpec(
+            name=_user_name(obj["name"], _join(path, "name")),
+            groups=_distinct(obj.get("groups", []), _join(path, "groups"), _staff_group),
+            email=self.email(obj, path),
+        )
+
+    def email(self, obj: Mapping[str, Any], path: str) -> str | None:
+        """A user's e-mail address, or None; the loader checks it as Django does."""
+        if "email" not in obj:
+            return None
+        email = _string(obj["email"], _join(path, "email")).strip()
+        if "@" not in email:
+            raise ScenarioError(_join(path, "email"), f"{email!r} is not an e-mail address")
+        return email
 
     def service_class(self, value: Any, path: str) -> ServiceClassSpec:
         obj = _object(value, path, _SERVICE_CLASS_REQUIRED, _SERVICE_CLASS_OPTIONAL)

@@ -21,7 +21,8 @@ from rest_framework.exceptions import NotFound, PermissionDenied
 from rest_framework.request import Request
 from rest_framework.response import Response
 
-from accounts.models import ApiToken
+from accounts.models import ROLE_CHOICES, ApiToken
+from accounts.roles import VIEWER
 from accounts.selectors import ApiTokenNotFound, api_token_get_for_user, api_token_list_for_user
 from accounts.services import api_token_create, api_token_revoke
 from cpcc_site.api import DetailSerializer, StrictCharField, object_id, refusal
@@ -43,6 +44,12 @@ class ApiTokenInSerializer(serializers.Serializer):
     name = StrictCharField(
         max_length=100, help_text='Where it is used, e.g. "laptop" or "CI"; yours are unique.'
     )
+    role = serializers.ChoiceField(
+        choices=ROLE_CHOICES,
+        required=False,
+        help_text="What it may do, at most what you may (viewer: read only, e.g. for a "
+        "dashboard); left out: your role, as that changes.",
+    )
 
 
 class ApiTokenOutSerializer(serializers.ModelSerializer):
@@ -56,9 +63,14 @@ class ApiTokenOutSerializer(serializers.ModelSerializer):
         help_text="When a request last came with it (kept to the minute); null: never.",
     )
 
+    role = serializers.CharField(
+        read_only=True,
+        help_text="The role it acts with at most; empty: its user's role.",
+    )
+
     class Meta:
         model = ApiToken
-        fields = ["id", "name", "prefix", "created", "last_used"]
+        fields = ["id", "name", "prefix", "role", "created", "last_used"]
 
 
 class ApiTokenCreatedSerializer(ApiTokenOutSerializer):
@@ -104,6 +116,9 @@ class ApiTokenViewSet(
     each was last used, and revoke one you no longer use or that may have leaked."""
 
     serializer_class = ApiTokenOutSerializer
+    # A member's own tokens, whatever their role; staff theirs.
+    role_needed = VIEWER
+    staff_write_perms = ()
 
     def get_queryset(self) -> QuerySet[ApiToken]:
         if getattr(self, "swagger_fake_view", False):  # the schema: ids are the model's
@@ -127,7 +142,11 @@ class ApiTokenViewSet(
             raise PermissionDenied(TOKENS_NEED_A_PASSWORD)
         given = ApiTokenInSerializer(data=request.data)
         given.is_valid(raise_exception=True)
-        token, key = api_token_create(user=request.user, name=given.validated_data["name"])  # type: ignore[arg-type]
+        token, key = api_token_create(
+            user=request.user,  # type: ignore[arg-type]
+            name=given.validated_data["name"],
+            role=given.validated_data.get("role", ""),
+        )
         token.key = key  # type: ignore[attr-defined]  # this answer's only: never stored
         return Response(ApiTokenCreatedSerializer(token).data, status=status.HTTP_201_CREATED)
 

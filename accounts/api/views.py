@@ -23,7 +23,8 @@ from accounts.api.serializers import (
 )
 from accounts.models import Customer, ServiceClass
 from accounts.selectors import customer_list
-from cpcc_site.api import Conflict, DetailSerializer, IsStaff, object_id, refusal
+from cpcc_site.api import Conflict, DetailSerializer, object_id, refusal
+from cpcc_site.permissions import StaffPermission
 from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import CustomerBusy, customer_create, customer_delete, customer_update
@@ -68,8 +69,9 @@ class CustomerViewSet(
     """The customers (staff only): who may use the platform, with which quotas and which SDC
     entries and VVM-API calls. A customer with VVs that have not ended cannot be deleted."""
 
-    permission_classes = [IsAuthenticated, IsStaff]
+    permission_classes = [IsAuthenticated, StaffPermission]
     serializer_class = CustomerOutSerializer
+    staff_model = Customer
 
     def get_queryset(self) -> QuerySet[Customer]:
         return with_active_vv_count(
@@ -148,8 +150,9 @@ class ServiceClassViewSet(
     it, and the weight the planners give its requests. A customer is put in one with
     ``service_class`` on /api/v1/customers/{id}/."""
 
-    permission_classes = [IsAuthenticated, IsStaff]
+    permission_classes = [IsAuthenticated, StaffPermission]
     serializer_class = ServiceClassListSerializer
+    staff_model = ServiceClass
 
     def get_queryset(self) -> QuerySet[ServiceClass]:
         return ServiceClass.objects.annotate(customer_count=Count("customers")).order_by("name")

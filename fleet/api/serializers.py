@@ -179,6 +179,17 @@ class VehicleOutSerializer(serializers.ModelSerializer):
             "fence (loaded, none), took_over (a pilot's or failsafe's mode, or null)."
         ),
     )
+    pilots = serializers.SlugRelatedField(
+        slug_field="username",
+        many=True,
+        read_only=True,
+        help_text="The pilots who may operate it and take it on duty.",
+    )
+    pilot_on_duty = serializers.SlugRelatedField(
+        slug_field="username",
+        read_only=True,
+        help_text="Its pilot in command now, or null.",
+    )
 
     class Meta:
         model = Vehicle
@@ -213,6 +224,8 @@ class VehicleOutSerializer(serializers.ModelSerializer):
             "flight_s",
             "tasks_done",
             "vvs_aboard",
+            "pilots",
+            "pilot_on_duty",
             "updated",
         ]
 
@@ -261,3 +274,29 @@ class GroundStationOutSerializer(serializers.ModelSerializer):
 
     def get_position(self, station: GroundStation) -> list[float]:
         return [station.lat, station.lng, station.alt]
+
+
+class HandOverSerializer(serializers.Serializer):
+    """Whom the RV goes to: another of its pilots, or nobody (left out)."""
+
+    to = StrictCharField(
+        required=False,
+        max_length=150,
+        help_text="The user name of the pilot who takes over; left out: nobody.",
+    )
+
+
+class DutyGroupSerializer(serializers.Serializer):
+    """Several RVs at once (all or none)."""
+
+    vehicles = serializers.ListField(
+        child=serializers.IntegerField(min_value=1, max_value=2**63 - 1),
+        min_length=1,
+        max_length=500,
+        help_text="The vehicles' ids.",
+    )
+    to = StrictCharField(
+        required=False,
+        max_length=150,
+        help_text="Handing over: the pilot who takes over; left out: nobody.",
+    )

@@ -19,16 +19,20 @@ from drf_spectacular.utils import (
 )
 from rest_framework import generics, mixins, status, viewsets
 from rest_framework.decorators import action
-from rest_framework.exceptions import NotFound, ValidationError
+from rest_framework.exceptions import NotFound, PermissionDenied, ValidationError
 from rest_framework.permissions import IsAuthenticated
 from rest_framework.request import Request
 from rest_framework.response import Response
 
+from accounts.models import User
 from accounts.selectors import sensor_list_for_user
-from cpcc_site.api import Conflict, DetailSerializer, IsStaff, object_id, refusal
+from cpcc_site.api import Conflict, DetailSerializer, object_id, refusal
+from cpcc_site.permissions import StaffPermission
 from fleet.api.serializers import (
+    DutyGroupSerializer,
     GroundStationInSerializer,
     GroundStationOutSerializer,
+    HandOverSerializer,
     SensorOutSerializer,
     StaffSensorOutSerializer,
     VehicleInSerializer,
@@ -39,6 +43,7 @@ from fleet.selectors import ground_station_list, vehicle_list
 from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
+    DutyRefused,
     GroundStationBusy,
     VehicleRemoved,
     ground_station_create,
@@ -46,7 +51,9 @@ from vvm_worker.services import (
     ground_station_update,
     vehicle_command,
     vehicle_create,
+    vehicle_hand_over,
     vehicle_set_status,
+    vehicle_take_duty,
     vehicle_update,
 )
 
@@ -65,6 +72,8 @@ class FleetErrorsMixin:
     def handle_exception(self, exc: Exception) -> Response:
         if isinstance(exc, DjangoValidationError):
             exc = refusal(exc, API_FIELD)
+        elif isinstance(exc, DutyRefused):
+            exc = Conflict(str(exc))
         elif isinstance(exc, VehicleRemoved):
             exc = Conflict(f"{exc.vehicle.name} was removed from the fleet: it takes no command.")
         elif isinstance(exc, GroundStationBusy):
@@ -153,10 +162,25 @@ class VehicleViewSet(
     maintenance, back into service, or remove it with explicit commands. A removed vehicle is
     kept, with status ``removed``; the VVs aboard a vehicle leaving service move on unnoticed."""
 
-    permission_classes = [IsAuthenticated, IsStaff]
+    permission_classes = [IsAuthenticated, StaffPermission]
     serializer_class = VehicleOutSerializer
     http_method_names = ["get", "post", "patch", "delete", "head", "options"]
     noun = "vehicle"
+    staff_model = Vehicle
+    # A pilot operates the RVs they are assigned (checked per RV); a fleet manager any.
+    staff_perms = {
+        action: ("fleet.operate_vehicle",)
+        for action in (
+            "maintenance",
+            "return_",
+            "return_home",
+            "land",
+            "take_duty",
+            "hand_over",
+            "take_duty_group",
+            "hand_over_group",
+        )
+    } | {"remove": ("fleet.delete_vehicle",)}
 
     def get_queryset(self) -> QuerySet[Vehicle]:
         wanted = self.request.query_params.get("status")
@@ -208,8 +232,23 @@ class VehicleViewSet(
         )
         return self._shown(vehicle)
 
-    def _set_status(self, status_: VehicleStatus) -> Response:
+    def _operated(self) -> Vehicle:
+        """The RV an operator's action names: a pilot may act only on the RVs they are
+        assigned; staff who may change vehicles on any."""
         vehicle = self.get_object()
+        user = self.request.user
+        if (
+            not user.has_perm("fleet.change_vehicle")
+            and not vehicle.pilots.filter(pk=user.pk).exists()
+        ):
+            raise PermissionDenied(
+                f"You are not one of {vehicle.name}'s pilots: a fleet manager assigns them."
+            )
+        return vehicle
+
+    def _set_status(self, status_: VehicleStatus) -> Response:
+        operated = status_ in (VehicleStatus.MAINTENANCE, VehicleStatus.ACTIVE)
+        vehicle = self._operated() if operated else self.get_object()
         vehicle_set_status(
             vehicle=vehicle,
             status=status_,
@@ -241,7 +280,7 @@ class VehicleViewSet(
 
     def _command(self, command: VehicleCommand) -> Response:
         vehicle = vehicle_command(
-            vehicle=self.get_object(),
+            vehicle=self._operated(),
             command=command,
             vvm=platform_vvm(),
             reason=f"{command.label.lower()}: asked by {self.request.user.get_username()} "
@@ -269,6 +308,89 @@ class VehicleViewSet(
     @action(detail=True, methods=["post"])
     def land(self, request: Request, pk: str) -> Response:
         return self._command(VehicleCommand.LAND)
+
+    # A pilot in command: taking an RV (or a group) on duty and handing it over.
+
+    @extend_schema(
+        request=None,
+        responses={200: VehicleOutSerializer, **STAFF_ERRORS, 409: DetailSerializer},
+        description="Take the vehicle on duty: you become its pilot in command (recorded with "
+        "its take-offs and in the audit log with every command). You must be one of its "
+        "pilots; 409 while another pilot is on duty (they hand it over first).",
+    )
+    @action(detail=True, methods=["post"], url_path="take-duty", url_name="take-duty")
+    def take_duty(self, request: Request, pk: str) -> Response:
+        vehicle_take_duty(vehicles=[self.get_object()], pilot=request.user, vvm=platform_vvm())
+        return self._shown(self.get_object())
+
+    @extend_schema(
+        request=HandOverSerializer,
+        responses={200: VehicleOutSerializer, **STAFF_ERRORS, 409: DetailSerializer},
+        description="Hand the vehicle over to another of its pilots (``to``), or to nobody. "
+        "Its pilot on duty does, or staff who may change vehicles. With CPCC_REQUIRE_PILOT a "
+        "vehicle with no pilot on duty takes no new work.",
+    )
+    @action(detail=True, methods=["post"], url_path="hand-over", url_name="hand-over")
+    def hand_over(self, request: Request, pk: str) -> Response:
+        given = HandOverSerializer(data=request.data or {})
+        given.is_valid(raise_exception=True)
+        vehicle_hand_over(
+            vehicles=[self.get_object()],
+            by=request.user,
+            to=self._pilot(given.validated_data.get("to")),
+            vvm=platform_vvm(),
+        )
+        return self._shown(self.get_object())
+
+    @extend_schema(
+        request=DutyGroupSerializer,
+        responses={200: VehicleOutSerializer(many=True), **STAFF_ERRORS, 409: DetailSerializer},
+        description="Take several vehicles on duty at once (all or none), as .../take-duty/.",
+        operation_id="vehicles_take_duty_group",
+    )
+    @action(detail=False, methods=["post"], url_path="take-duty", url_name="take-duty-group")
+    def take_duty_group(self, request: Request) -> Response:
+        vehicles = self._group(request)
+        vehicle_take_duty(vehicles=vehicles, pilot=request.user, vvm=platform_vvm())
+        return self._shown_group(vehicles)
+
+    @extend_schema(
+        request=DutyGroupSerializer,
+        responses={200: VehicleOutSerializer(many=True), **STAFF_ERRORS, 409: DetailSerializer},
+        description="Hand several vehicles over at once (all or none), as .../hand-over/.",
+        operation_id="vehicles_hand_over_group",
+    )
+    @action(detail=False, methods=["post"], url_path="hand-over", url_name="hand-over-group")
+    def hand_over_group(self, request: Request) -> Response:
+        given = DutyGroupSerializer(data=request.data)
+        given.is_valid(raise_exception=True)
+        vehicles = self._group(request)
+        to = self._pilot(given.validated_data.get("to"))
+        vehicle_hand_over(vehicles=vehicles, by=request.user, to=to, vvm=platform_vvm())
+        return self._shown_group(vehicles)
+
+    def _group(self, request: Request) -> list[Vehicle]:
+        given = DutyGroupSerializer(data=request.data)
+        given.is_valid(raise_exception=True)
+        wanted = list(dict.fromkeys(given.validated_data["vehicles"]))
+        found = {v.pk: v for v in self._vehicles().filter(pk__in=wanted)}
+        missing = [pk for pk in wanted if pk not in found or found[pk].status == "removed"]
+        if missing:
+            raise NotFound(f"No vehicle with id {missing[0]!r}.")
+        return [found[pk] for pk in wanted]
+
+    def _shown_group(self, vehicles: list[Vehicle]) -> Response:
+        fresh = self._vehicles().filter(pk__in=[v.pk for v in vehicles])
+        return Response(self.get_serializer(fresh, many=True).data)
+
+    @staticmethod
+    def _pilot(username: str | None) -> User | None:
+        if username is None:
+            return None
+        pilot = User.objects.filter(username=username, is_active=True, is_staff=True).first()
+        if pilot is None:
+            raise ValidationError({"to": [f"No pilot named {username!r}."]})
+        return pilot
 
 
 @extend_schema_view(
@@ -310,9 +432,10 @@ class GroundStationViewSet(
 ):
     """The ground stations (staff only). One holding VVs that have not ended cannot be deleted."""
 
-    permission_classes = [IsAuthenticated, IsStaff]
+    permission_classes = [IsAuthenticated, StaffPermission]
     serializer_class = GroundStationOutSerializer
     noun = "ground station"
+    staff_model = GroundStation
 
     def get_queryset(self) -> QuerySet[GroundStation]:
         return with_active_vv_count(ground_station_list(), name="vvs_here")

@@ -34,7 +34,9 @@ WAITING_SCHEMA = {
     "nullable": True,
     "description": "What the VV waits for, in your words; null when it runs without waiting "
     "or has ended. `reason`: `no_vehicle` (no vehicle in service covers its next task; it "
-    "continues when one does), `queue` (behind your other VVs: your limit of VVs in "
+    "continues when one does), `no_pilot` (the vehicles in service that cover its next task "
+    "have no pilot on duty, where the provider requires one; it continues when one comes on "
+    "duty), `queue` (behind your other VVs: your limit of VVs in "
     "parallel), `service_level` (queued and held back "
     "while another service class misses its target and yours keeps its own with room to "
     "spare, never longer than your class's target allows), `flying` (a vehicle flies to its task) or `message` (its program waits "
@@ -44,7 +46,7 @@ WAITING_SCHEMA = {
     "properties": {
         "reason": {
             "type": "string",
-            "enum": ["no_vehicle", "queue", "service_level", "flying", "message"],
+            "enum": ["no_vehicle", "no_pilot", "queue", "service_level", "flying", "message"],
         },
         "message": {"type": "string"},
         # (OpenAPI 3.1: drf-spectacular makes only the field itself nullable.)

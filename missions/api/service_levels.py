@@ -23,7 +23,8 @@ from rest_framework.request import Request
 from rest_framework.response import Response
 from rest_framework.views import APIView
 
-from cpcc_site.api import DetailSerializer, IsStaff
+from cpcc_site.api import DetailSerializer
+from cpcc_site.permissions import StaffPermission
 from vvm_worker.clock import SystemClock
 from vvm_worker.services.service_levels import (
     HoldShown,
@@ -178,7 +179,8 @@ def hold_shown(hold: HoldShown) -> dict[str, object]:
 
 
 class ServiceLevelsView(APIView):
-    permission_classes = [IsAuthenticated, IsStaff]
+    permission_classes = [IsAuthenticated, StaffPermission]
+    staff_perms = {m: ("accounts.view_serviceclass",) for m in ("GET", "HEAD", "OPTIONS")}
 
     @extend_schema(
         summary="Service levels per customer and class over a period (staff only)",

@@ -35,7 +35,8 @@ from tests.live import Web
 
 EXAMPLES = 15
 
-# Operations whose bodies have rules beyond the schema (see the module's docstring).
+# Operations whose bodies have rules beyond the schema (see the module's docstring; and an
+# invitation to an address that is a member's already).
 RULES_BEYOND_THE_SCHEMA = {
     "POST /api/v1/vvs/",
     "POST /api/v1/vvs/dry-run/",
@@ -45,6 +46,7 @@ RULES_BEYOND_THE_SCHEMA = {
     "PUT /api/v1/customers/{id}/",
     "PATCH /api/v1/customers/{id}/",
     "POST /api/v1/webhooks/",
+    "POST /api/v1/invites/",  # an address that is a member's already
     "GET /api/v1/service-levels/",  # since and until: an instant each, since before until
 }
 
@@ -123,3 +125,44 @@ def test_the_running_api_keeps_its_schema_for_a_customer(case, server, customer_
 )
 def test_the_running_api_keeps_its_schema_for_staff(case, server) -> None:
     _check(case, server, token_of("live-staff", is_staff=True, is_superuser=True))
+
+
+# Each role besides the two above (issue 57): every operation, a few cases each, in one
+# hypothesis example per role (one flush of the database, not one per operation).
+ROLE_CASES = 3
+
+
+def _role_headers(role: str, customer) -> dict[str, str]:
+    from django.contrib.auth.models import Group
+
+    from accounts.roles import STAFF_GROUPS
+
+    username = f"live-{role.replace(' ', '-')}"
+    if role in STAFF_GROUPS:
+        headers = token_of(username, is_staff=True)
+        from accounts.models import User
+
+        User.objects.get(username=username).groups.add(Group.objects.get(name=role))
+        return headers
+    return token_of(username, customer=customer, role=role)
+
+
+@pytest.mark.django_db(transaction=True, serialized_rollback=True)
+@pytest.mark.parametrize("role", ["developer", "viewer", "fleet manager", "pilot", "support"])
+def test_the_running_api_keeps_its_schema_for_each_role(role, server, customer_a) -> None:
+    from hypothesis import given
+    from hypothesis import strategies as st
+
+    headers = _role_headers(role, customer_a)
+    operations = [result.ok() for result in schema.get_all_operations()]
+
+    @given(data=st.data())
+    @hypothesis_settings(
+        max_examples=1, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True
+    )
+    def every_operation(data) -> None:
+        for operation in operations:
+            for _ in range(ROLE_CASES):
+                _check(data.draw(operation.as_strategy(), label=operation.label), server, headers)
+
+    every_operation()

@@ -13,12 +13,17 @@ webhook with a delivery attempt):
 - a list shows its caller's data only (its VVs, its API tokens, its customer's webhooks);
 - anyone who is not logged in is sent to the login page (pages, admin) or refused (API);
 - staff routes refuse customers' users, and let staff in;
+- roles (issue 57): each of a customer's members (owner, developer, viewer, and a read-only
+  token) may do what the route's ``needs`` says for each method and gets 403 naming the role
+  otherwise; each staff group (fleet manager, pilot, support) may do what ``staff`` (or
+  STAFF_MODEL_ACCESS for the admin's model views) says, 403 otherwise;
 - the live map's socket refuses strangers and other sites, and never sends a customer another
   customer's VVs.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import re
 from collections.abc import Iterator
@@ -41,6 +46,7 @@ from django.db.models import QuerySet
 from django.http import HttpResponseBase
 from django.test import Client, RequestFactory, override_settings
 from django.urls import URLResolver, get_resolver, resolve
+from django.utils import timezone
 from django.utils.encoding import force_bytes
 from django.utils.http import urlsafe_base64_encode
 from rest_framework.authtoken.models import Token
@@ -49,15 +55,17 @@ from rest_framework.test import APIClient
 from accounts.models import (
     ApiToken,
     Customer,
+    Invite,
     NotifyEvent,
     ServiceClass,
     User,
     Webhook,
     WebhookDelivery,
 )
+from accounts.roles import DEVELOPER, FLEET_MANAGER, OWNER, PILOT, SUPPORT, VIEWER, allows
 from cpcc_site.asgi import application
 from cpcc_site.websocket import SameOriginValidator
-from fleet.models import GroundStation, SensorType, Vehicle
+from fleet.models import GroundStation, PilotDuty, SensorType, TakeOff, Vehicle
 from missions.api.views import UUID_PATTERN
 from missions.consumers import MapConsumer
 from missions.events import EVENTS_STREAM, POSITIONS_STREAM, VEHICLES_HASH
@@ -83,7 +91,14 @@ ANY = METHODS  # a plain Django view answers whatever the method
 MISSING_VV = "00000000-0000-4000-8000-000000000000"
 MISSING_ID = "987654321"
 # The objects of a customer that the URLs name, each as one that does not exist.
-MISSING = {"vv": MISSING_VV, "queued": MISSING_VV, "api_token": MISSING_ID, "webhook": MISSING_ID}
+MISSING = {
+    "vv": MISSING_VV,
+    "queued": MISSING_VV,
+    "api_token": MISSING_ID,
+    "webhook": MISSING_ID,
+    "member": MISSING_ID,
+    "invite": MISSING_ID,
+}
 # What a hole would act on: a valid program, a name, a form's confirmation, a webhook (on this
 # machine: TestHttp allows such URLs, as the tests' receivers need), an e-mail choice.
 HOOK_URL = "http://127.0.0.1:9/taken-over"
@@ -93,6 +108,8 @@ API_BODY = {
     "value": "taken over",
     "url": HOOK_URL,
     "events": ["vv.finished"],
+    "email": "taken-over@example.com",
+    "role": "viewer",
 }
 FORM_BODY = {
     "name": "taken over",
@@ -104,6 +121,7 @@ FORM_BODY = {
     "events": "vv.finished",
     "email": "taken-over@example.com",
     "email_events": "vv.finished",
+    "role": "viewer",
 }
 
 
@@ -143,9 +161,40 @@ class Route:
     # SIGNED_IN: the view revokes the caller's own token (the one an administrator made):
     # B's request may change that, and nothing else.
     revokes_own_token: bool = False
+    # The customer's role each method needs (accounts.roles; "*" for every method): else a
+    # viewer reads and a developer changes.
+    needs: dict[str, str] = field(default_factory=dict)
+    # STAFF: what each staff group may do (the methods; others answer 403). The admin's model
+    # views say it in STAFF_MODEL_ACCESS instead.
+    staff: dict[str, tuple[str, ...]] | None = None
+    # PUBLIC: what GET answers when it is not 200 or a redirect.
+    public_status: int | None = None
+
+    def role_needed(self, method: str) -> str:
+        if method in self.needs:
+            return self.needs[method]
+        if "*" in self.needs:
+            return self.needs["*"]
+        return VIEWER if method in ("GET", "HEAD", "OPTIONS") else DEVELOPER
 
 
 # --- the classification -----------------------------------------------------------------------
+
+READS = ("GET", "HEAD")
+WRITES = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE")
+PERSONAL = {"*": VIEWER}  # the caller's own account: any member, whatever their role
+ONLY_READS = {"*": VIEWER}  # a view that changes nothing, whatever the method
+OWNERS_CHANGE = {"POST": OWNER, "PUT": OWNER, "PATCH": OWNER, "DELETE": OWNER}
+
+
+def staff(
+    fleet_manager: tuple[str, ...] = (), pilot: tuple[str, ...] = (), support: tuple[str, ...] = ()
+) -> dict[str, tuple[str, ...]]:
+    """What each staff group may do on a staff route: the methods (others: 403)."""
+    return {FLEET_MANAGER: fleet_manager, PILOT: pilot, SUPPORT: support}
+
+
+EVERY_GROUP = staff(WRITES, WRITES, WRITES)
 
 ROUTES: dict[str, Route] = {
     # Django's auth views (the site's login) and the icon.
@@ -153,7 +202,7 @@ ROUTES: dict[str, Route] = {
     "accounts/login/": Route(Kind.PUBLIC, "/accounts/login/"),
     "accounts/logout/": Route(Kind.PUBLIC, "/accounts/logout/", ("POST",)),
     "accounts/password_change/": Route(
-        Kind.SIGNED_IN, "/accounts/password_change/", ("GET", "POST")
+        Kind.SIGNED_IN, "/accounts/password_change/", ("GET", "POST"), needs=PERSONAL
     ),
     "accounts/password_change/done/": Route(Kind.SIGNED_IN, "/accounts/password_change/done/"),
     "accounts/password_reset/": Route(Kind.PUBLIC, "/accounts/password_reset/"),
@@ -164,17 +213,40 @@ ROUTES: dict[str, Route] = {
     # The Account pages (accounts/urls.py): the user's own API tokens (a POST makes one), the
     # customer's webhooks and the user's e-mail choice (a POST saves it).
     "accounts/tokens/": Route(
-        Kind.OWN_LIST, "/accounts/tokens/", ("GET", "POST"), lists="api tokens"
+        Kind.OWN_LIST, "/accounts/tokens/", ("GET", "POST"), lists="api tokens", needs=PERSONAL
     ),
     "accounts/tokens/<int:token_id>/revoke/": Route(
-        Kind.OBJECT, "/accounts/tokens/{api_token}/revoke/", ("POST",)
+        Kind.OBJECT, "/accounts/tokens/{api_token}/revoke/", ("POST",), needs=PERSONAL
     ),
     # The caller's own token made by an administrator (drf_create_token): no id in the URL.
     "accounts/tokens/operator/revoke/": Route(
-        Kind.SIGNED_IN, "/accounts/tokens/operator/revoke/", ("POST",), revokes_own_token=True
+        Kind.SIGNED_IN,
+        "/accounts/tokens/operator/revoke/",
+        ("POST",),
+        revokes_own_token=True,
+        needs=PERSONAL,
     ),
+    # The customer's webhooks (developers add them) and the caller's own e-mail choice.
     "accounts/notifications/": Route(
-        Kind.OWN_LIST, "/accounts/notifications/", ("GET", "POST"), lists="webhooks"
+        Kind.OWN_LIST, "/accounts/notifications/", ("GET", "POST"), lists="webhooks", needs=PERSONAL
+    ),
+    # The customer's members and invitations (every member reads; owners invite, change
+    # roles, remove members and withdraw invitations).
+    "accounts/members/": Route(
+        Kind.OWN_LIST, "/accounts/members/", ("GET", "POST"), lists="members", needs=OWNERS_CHANGE
+    ),
+    "accounts/members/<int:member_id>/role/": Route(
+        Kind.OBJECT, "/accounts/members/{member}/role/", ("POST",), needs=OWNERS_CHANGE
+    ),
+    "accounts/members/<int:member_id>/remove/": Route(
+        Kind.OBJECT, "/accounts/members/{member}/remove/", ("POST",), needs=OWNERS_CHANGE
+    ),
+    "accounts/invites/<int:invite_id>/withdraw/": Route(
+        Kind.OBJECT, "/accounts/invites/{invite}/withdraw/", ("POST",), needs=OWNERS_CHANGE
+    ),
+    # An invitation's link: a link that is no invitation says so (410).
+    "accounts/invite/<str:signed>/": Route(
+        Kind.PUBLIC, "/accounts/invite/not-a-link/", ("GET", "POST"), public_status=410
     ),
     # Adds a webhook to the caller's customer; the answer is the caller's Notifications page.
     "accounts/webhooks/new/": Route(Kind.SIGNED_IN, "/accounts/webhooks/new/", ("POST",)),
@@ -226,38 +298,102 @@ ROUTES: dict[str, Route] = {
     "api/v1/sensors/": Route(Kind.SIGNED_IN, "/api/v1/sensors/"),
     # Where tasks can be served: the same for everyone, no vehicle named.
     "api/v1/service-area/": Route(Kind.SIGNED_IN, "/api/v1/service-area/"),
-    "api/v1/service-levels/": Route(Kind.STAFF, "/api/v1/service-levels/"),
-    "api/v1/vehicles/$": Route(Kind.STAFF, "/api/v1/vehicles/", ("GET", "POST")),
+    "api/v1/service-levels/": Route(
+        Kind.STAFF, "/api/v1/service-levels/", staff=staff(READS, (), READS)
+    ),
+    # The fleet: fleet managers change it; pilots operate the RVs they are assigned (the
+    # world's pilot flies Heli One); support reads.
+    "api/v1/vehicles/$": Route(
+        Kind.STAFF, "/api/v1/vehicles/", ("GET", "POST"), staff=staff(WRITES, READS, READS)
+    ),
     "api/v1/vehicles/(?P<pk>[^/.]+)/$": Route(
-        Kind.STAFF, "/api/v1/vehicles/{vehicle}/", ("GET", "PATCH", "DELETE")
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/",
+        ("GET", "PATCH", "DELETE"),
+        staff=staff(WRITES, READS, READS),
     ),
     "api/v1/vehicles/(?P<pk>[^/.]+)/maintenance/$": Route(
-        Kind.STAFF, "/api/v1/vehicles/{vehicle}/maintenance/", ("POST",)
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/maintenance/",
+        ("POST",),
+        staff=staff(WRITES, WRITES, READS),
     ),
     "api/v1/vehicles/(?P<pk>[^/.]+)/remove/$": Route(
-        Kind.STAFF, "/api/v1/vehicles/{vehicle}/remove/", ("POST",)
+        Kind.STAFF, "/api/v1/vehicles/{vehicle}/remove/", ("POST",), staff=staff(WRITES)
     ),
     "api/v1/vehicles/(?P<pk>[^/.]+)/return/$": Route(
-        Kind.STAFF, "/api/v1/vehicles/{vehicle}/return/", ("POST",)
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/return/",
+        ("POST",),
+        staff=staff(WRITES, WRITES, READS),
     ),
     # An operator's commands (issue 26).
     "api/v1/vehicles/(?P<pk>[^/.]+)/return-home/$": Route(
-        Kind.STAFF, "/api/v1/vehicles/{vehicle}/return-home/", ("POST",)
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/return-home/",
+        ("POST",),
+        staff=staff(WRITES, WRITES, READS),
     ),
     "api/v1/vehicles/(?P<pk>[^/.]+)/land/$": Route(
-        Kind.STAFF, "/api/v1/vehicles/{vehicle}/land/", ("POST",)
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/land/",
+        ("POST",),
+        staff=staff(WRITES, WRITES, READS),
     ),
-    "api/v1/ground-stations/$": Route(Kind.STAFF, "/api/v1/ground-stations/", ("GET", "POST")),
+    # A pilot in command (issue 57): one RV or a group on duty, and handed over. A fleet
+    # manager may ask (and is told they are not its pilot: 409).
+    "api/v1/vehicles/(?P<pk>[^/.]+)/take-duty/$": Route(
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/take-duty/",
+        ("POST",),
+        staff=staff(WRITES, WRITES, READS),
+    ),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/hand-over/$": Route(
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/hand-over/",
+        ("POST",),
+        staff=staff(WRITES, WRITES, READS),
+    ),
+    # A group: the body here names none (400).
+    "api/v1/vehicles/take-duty/$": Route(
+        Kind.STAFF,
+        "/api/v1/vehicles/take-duty/",
+        ("POST",),
+        staff_status=400,
+        staff=staff(WRITES, WRITES, READS),
+    ),
+    "api/v1/vehicles/hand-over/$": Route(
+        Kind.STAFF,
+        "/api/v1/vehicles/hand-over/",
+        ("POST",),
+        staff_status=400,
+        staff=staff(WRITES, WRITES, READS),
+    ),
+    "api/v1/ground-stations/$": Route(
+        Kind.STAFF, "/api/v1/ground-stations/", ("GET", "POST"), staff=staff(WRITES, READS, READS)
+    ),
     "api/v1/ground-stations/(?P<pk>[^/.]+)/$": Route(
-        Kind.STAFF, "/api/v1/ground-stations/{gs}/", ("GET", "PUT", "PATCH", "DELETE")
+        Kind.STAFF,
+        "/api/v1/ground-stations/{gs}/",
+        ("GET", "PUT", "PATCH", "DELETE"),
+        staff=staff(WRITES, READS, READS),
     ),
-    "api/v1/customers/$": Route(Kind.STAFF, "/api/v1/customers/", ("GET", "POST")),
-    "api/v1/service-classes/$": Route(Kind.STAFF, "/api/v1/service-classes/", ("GET", "POST")),
+    # Customers: fleet managers change their quotas and classes (a superuser adds and
+    # deletes customers); support reads; pilots see no customer.
+    "api/v1/customers/$": Route(
+        Kind.STAFF, "/api/v1/customers/", ("GET", "POST"), staff=staff(READS, (), READS)
+    ),
+    "api/v1/service-classes/$": Route(
+        Kind.STAFF, "/api/v1/service-classes/", ("GET", "POST"), staff=staff(WRITES, (), READS)
+    ),
     "api/v1/service-classes/(?P<pk>[^/.]+)/$": Route(
-        Kind.STAFF, "/api/v1/service-classes/{service_class}/"
+        Kind.STAFF, "/api/v1/service-classes/{service_class}/", staff=staff(READS, (), READS)
     ),
     "api/v1/customers/(?P<pk>[^/.]+)/$": Route(
-        Kind.STAFF, "/api/v1/customers/{customer}/", ("GET", "PUT", "PATCH", "DELETE")
+        Kind.STAFF,
+        "/api/v1/customers/{customer}/",
+        ("GET", "PUT", "PATCH", "DELETE"),
+        staff=staff(("GET", "PUT", "PATCH"), (), READS),
     ),
     # A user's named API tokens (made with a session only) and a customer's webhooks.
     "api/v1/tokens/$": Route(
@@ -266,9 +402,26 @@ ROUTES: dict[str, Route] = {
         ("GET", "POST"),
         lists="api tokens",
         session_only=("POST",),
+        needs=PERSONAL,
     ),
+    # A token may revoke only itself: another one is revoked with a session.
     "api/v1/tokens/(?P<pk>[^/.]+)/$": Route(
-        Kind.OBJECT, "/api/v1/tokens/{api_token}/", ("GET", "DELETE")
+        Kind.OBJECT,
+        "/api/v1/tokens/{api_token}/",
+        ("GET", "DELETE"),
+        needs=PERSONAL,
+        session_only=("DELETE",),
+    ),
+    # The customer's members and invitations: every member reads, owners change.
+    "api/v1/members/$": Route(Kind.OWN_LIST, "/api/v1/members/", lists="members"),
+    "api/v1/members/(?P<pk>[^/.]+)/$": Route(
+        Kind.OBJECT, "/api/v1/members/{member}/", ("GET", "PATCH", "DELETE"), needs=OWNERS_CHANGE
+    ),
+    "api/v1/invites/$": Route(
+        Kind.OWN_LIST, "/api/v1/invites/", ("GET", "POST"), lists="invites", needs=OWNERS_CHANGE
+    ),
+    "api/v1/invites/(?P<pk>[^/.]+)/$": Route(
+        Kind.OBJECT, "/api/v1/invites/{invite}/", ("GET", "DELETE"), needs=OWNERS_CHANGE
     ),
     "api/v1/webhooks/$": Route(
         Kind.OWN_LIST, "/api/v1/webhooks/", ("GET", "POST"), lists="webhooks"
@@ -294,46 +447,68 @@ ROUTES: dict[str, Route] = {
         # The editor starts from one of the user's VVs with ?from=; a POST ignores it.
         also="/vvs/new/?from={vv}",
         also_methods=("GET", "HEAD", "PUT", "PATCH", "DELETE", "OPTIONS"),
+        needs={"*": DEVELOPER},  # the editor is for submitting
     ),
     "vvs/check/": Route(Kind.SIGNED_IN, "/vvs/check/", ("POST",)),
     "vvs/<uuid:vv_id>/": Route(Kind.OBJECT, "/vvs/{vv}/", ANY),
-    "vvs/<uuid:vv_id>/edit/": Route(Kind.OBJECT, "/vvs/{queued}/edit/", ANY),
+    "vvs/<uuid:vv_id>/edit/": Route(
+        Kind.OBJECT, "/vvs/{queued}/edit/", ANY, needs={"*": DEVELOPER}
+    ),
     "vvs/<uuid:vv_id>/cancel/": Route(Kind.OBJECT, "/vvs/{queued}/cancel/", ("POST",)),
     "vvs/<uuid:vv_id>/restart/": Route(Kind.OBJECT, "/vvs/{vv}/restart/", ("POST",)),
-    "vvs/<uuid:vv_id>/storage.json": Route(Kind.OBJECT, "/vvs/{vv}/storage.json", ANY),
-    "vvs/<uuid:vv_id>/map.json": Route(Kind.OBJECT, "/vvs/{vv}/map.json", ANY),
+    "vvs/<uuid:vv_id>/storage.json": Route(
+        Kind.OBJECT, "/vvs/{vv}/storage.json", ANY, needs=ONLY_READS
+    ),
+    "vvs/<uuid:vv_id>/map.json": Route(Kind.OBJECT, "/vvs/{vv}/map.json", ANY, needs=ONLY_READS),
     # The live map's page holds no data: it comes over the socket (tested at the end).
     "map/": Route(Kind.SIGNED_IN, "/map/"),
     # The maps' background: the simulated world, no one's data (fleet/views.py).
     "tiles/<int:z>/<int:x>/<int:y>.png": Route(Kind.PUBLIC, "/tiles/0/0/0.png"),
     # The admin site's own views (every one behind AdminSite.admin_view but the login).
-    "admin/": Route(Kind.STAFF, "/admin/", ("GET", "POST")),
+    "admin/": Route(Kind.STAFF, "/admin/", ("GET", "POST"), staff=EVERY_GROUP),
     "admin/login/": Route(Kind.PUBLIC, "/admin/login/"),
-    "admin/logout/": Route(Kind.STAFF, "/admin/logout/", ("POST",)),
-    "admin/password_change/": Route(Kind.STAFF, "/admin/password_change/", ("GET", "POST")),
-    "admin/password_change/done/": Route(Kind.STAFF, "/admin/password_change/done/"),
+    "admin/logout/": Route(Kind.STAFF, "/admin/logout/", ("POST",), staff=EVERY_GROUP),
+    "admin/password_change/": Route(
+        Kind.STAFF, "/admin/password_change/", ("GET", "POST"), staff=EVERY_GROUP
+    ),
+    "admin/password_change/done/": Route(
+        Kind.STAFF, "/admin/password_change/done/", staff=EVERY_GROUP
+    ),
     # The task admin's autocompletion of VVs: their names and customers, to staff only.
     "admin/autocomplete/": Route(
-        Kind.STAFF, "/admin/autocomplete/?app_label=missions&model_name=task&field_name=vv&term=a"
+        Kind.STAFF,
+        "/admin/autocomplete/?app_label=missions&model_name=task&field_name=vv&term=a",
+        staff=staff(READS, (), READS),
     ),
-    "admin/jsi18n/": Route(Kind.STAFF, "/admin/jsi18n/"),
+    "admin/jsi18n/": Route(Kind.STAFF, "/admin/jsi18n/", staff=EVERY_GROUP),
     # "View on site" of A's customer: customers have no page of their own on the site.
     "admin/r/<path:content_type_id>/<path:object_id>/": Route(
-        Kind.STAFF, "/admin/r/{customer_type}/{customer}/", staff_status=404
+        Kind.STAFF, "/admin/r/{customer_type}/{customer}/", staff_status=404, staff=EVERY_GROUP
     ),
-    "admin/(?P<app_label>{apps})/$": Route(Kind.STAFF, "/admin/missions/", ("GET", "POST")),
-    "admin/(?P<url>.*)$": Route(Kind.STAFF, "/admin/no/such/page/", staff_status=404),
+    # The VVs' section: pilots see none of it.
+    "admin/(?P<app_label>{apps})/$": Route(
+        Kind.STAFF, "/admin/missions/", ("GET", "POST"), staff=staff(WRITES, (), WRITES)
+    ),
+    "admin/(?P<url>.*)$": Route(
+        Kind.STAFF, "/admin/no/such/page/", staff_status=404, staff=EVERY_GROUP
+    ),
     # Custom views of the model admins (ModelAdmin.get_urls overrides).
-    "admin/fleet/vehicle/overview/": Route(Kind.STAFF, "/admin/fleet/vehicle/overview/"),
+    "admin/fleet/vehicle/overview/": Route(
+        Kind.STAFF, "/admin/fleet/vehicle/overview/", staff=EVERY_GROUP
+    ),
     "admin/accounts/serviceclass/levels/": Route(
-        Kind.STAFF, "/admin/accounts/serviceclass/levels/"
+        Kind.STAFF, "/admin/accounts/serviceclass/levels/", staff=staff(READS, (), READS)
     ),
     # An action of the fleet overview: a POST without one is refused, saying which there are.
     "admin/fleet/vehicle/overview/<int:object_id>/act/": Route(
-        Kind.STAFF, "/admin/fleet/vehicle/overview/{vehicle}/act/", ("POST",), staff_status=400
+        Kind.STAFF,
+        "/admin/fleet/vehicle/overview/{vehicle}/act/",
+        ("POST",),
+        staff_status=400,
+        staff=staff(WRITES, WRITES, READS),
     ),
     "admin/accounts/user/<id>/password/": Route(
-        Kind.STAFF, "/admin/accounts/user/{user}/password/", ("GET", "POST")
+        Kind.STAFF, "/admin/accounts/user/{user}/password/", ("GET", "POST"), staff=staff()
     ),
 }
 
@@ -346,6 +521,50 @@ ADMIN_MODEL_VIEWS = {
     "<path:object_id>/delete/": "{obj}/delete/",
     "<path:object_id>/change/": "{obj}/change/",
     "<path:object_id>/": "{obj}/",
+}
+
+
+# What each staff group may do with each model in the admin: "v"iew, "a"dd, "c"hange,
+# "d"elete (accounts.staff_groups). A model the admin registers must be here.
+_FLEET = {FLEET_MANAGER: "vacd", PILOT: "v", SUPPORT: "v"}
+_READ = {FLEET_MANAGER: "v", PILOT: "", SUPPORT: "v"}
+_NONE = {FLEET_MANAGER: "", PILOT: "", SUPPORT: ""}
+STAFF_MODEL_ACCESS: dict[str, dict[str, str]] = {
+    "accounts.apitoken": _NONE,  # keys: a superuser's
+    "accounts.customer": {FLEET_MANAGER: "vc", PILOT: "", SUPPORT: "v"},
+    "accounts.invite": _READ,
+    "accounts.serviceclass": {FLEET_MANAGER: "vacd", PILOT: "", SUPPORT: "v"},
+    "accounts.user": _READ,
+    "accounts.webhook": _READ,
+    "auditlog.logentry": _READ,
+    "auth.group": _NONE,
+    "authtoken.tokenproxy": _NONE,
+    "axes.accessattempt": _NONE,
+    "axes.accessfailurelog": _NONE,
+    "axes.accesslog": _NONE,
+    "fleet.groundstation": _FLEET,
+    "fleet.noflyzone": _FLEET,
+    "fleet.rallypoint": _FLEET,
+    "fleet.sensortype": _FLEET,
+    "fleet.vehicle": _FLEET,
+    "fleet.pilotduty": {FLEET_MANAGER: "v", PILOT: "v", SUPPORT: "v"},
+    "fleet.takeoff": {FLEET_MANAGER: "v", PILOT: "v", SUPPORT: "v"},
+    "missions.logentry": _READ,
+    "missions.message": _READ,
+    "missions.migration": _READ,
+    "missions.storagedocument": _READ,
+    "missions.task": _READ,
+    # Fleet managers may cancel a VV that harms the fleet.
+    "missions.virtualvehicle": {FLEET_MANAGER: "vc", PILOT: "", SUPPORT: "v"},
+}
+# What each of the admin's model views needs (ADMIN_MODEL_VIEWS).
+ADMIN_VIEW_NEEDS = {
+    "": "v",
+    "add/": "a",
+    "<path:object_id>/history/": "v",
+    "<path:object_id>/delete/": "d",
+    "<path:object_id>/change/": "v",
+    "<path:object_id>/": "",  # a redirect to .../change/, for any staff
 }
 
 
@@ -446,9 +665,14 @@ class Side:
     markers: tuple[str, ...] = ()  # strings that are its data and nobody else's
     api_token: ApiToken | None = None  # the user's named API token
     webhook: Webhook | None = None  # the customer's webhook, with one delivery attempt
+    # Its members besides ``user`` (its owner): a developer and a viewer.
+    members: dict[str, User] = field(default_factory=dict)
+    invite: Invite | None = None  # an owner's invitation not accepted yet
+    read_only_key: str = ""  # the key of a named token of ``user`` that acts as a viewer
 
     def values(self) -> dict[str, str]:
         assert self.api_token is not None and self.webhook is not None
+        assert self.invite is not None
         return {
             "vv": str(self.flown.pk),
             "queued": str(self.queued.pk),
@@ -456,15 +680,20 @@ class Side:
             "key": self.key,
             "api_token": str(self.api_token.pk),
             "webhook": str(self.webhook.pk),
+            "member": str(self.members[VIEWER].pk),
+            "invite": str(self.invite.pk),
         }
 
     def listed(self, what: str) -> str:
         """What a list of the caller's ``what`` (Route.lists) shows of its own."""
         assert self.api_token is not None and self.webhook is not None
+        assert self.invite is not None
         return {
             "vvs": self.flown.name,
             "api tokens": self.api_token.name,
             "webhooks": self.webhook.url,
+            "members": self.user.username,
+            "invites": self.invite.email,
         }[what]
 
 
@@ -474,6 +703,8 @@ class World:
     b: Side
     staff: User
     media: Path
+    # A staff user in each group (accounts.roles.STAFF_GROUPS); the pilot flies Heli One.
+    groups: dict[str, User] = field(default_factory=dict)
     ids: dict[str, str] = field(default_factory=dict)  # staff objects, mostly A's
     # The SQL of ``fingerprint``'s queries, by the user left out (None: nobody).
     fingerprint_sql: dict[int | None, dict[str, tuple[str, tuple[Any, ...]]]] = field(
@@ -552,8 +783,24 @@ def _finish(side: Side, prefix: str, vvm: Any) -> None:
         status_code=503,
         error=f"{prefix}-delivery-secret",
     )
+    for role in (DEVELOPER, VIEWER):
+        member = UserFactory(username=f"{prefix}-{role}", customer=side.customer, role=role)
+        Token.objects.create(user=member)
+        side.members[role] = member
+    _, side.read_only_key = api_token_create(
+        user=side.user, name=f"{prefix}-dashboard", role=VIEWER
+    )
+    side.invite = Invite.objects.create(
+        customer=side.customer,
+        email=f"{prefix}-invitee-secret@example.com",
+        role=VIEWER,
+        invited_by=side.user,
+        expires=timezone.now() + dt.timedelta(days=7),
+    )
     side.markers = (
         side.customer.name,
+        *(member.username for member in side.members.values()),
+        side.invite.email,
         side.user.username,
         side.flown.name,
         side.queued.name,
@@ -604,6 +851,12 @@ def world(django_db_setup, django_db_blocker, tmp_path_factory) -> Iterator[Worl
         _finish(b, "bravo", waiting)
         staff = UserFactory(username="isolation-staff", is_staff=True, is_superuser=True)
         world = World(a=a, b=b, staff=staff, media=media)
+        for name in (FLEET_MANAGER, PILOT, SUPPORT):
+            member = UserFactory(username=f"isolation-{name.replace(' ', '-')}", is_staff=True)
+            member.groups.add(Group.objects.get(name=name))
+            Token.objects.create(user=member)
+            world.groups[name] = member
+        vehicle.pilots.add(world.groups[PILOT])
         world.ids = _staff_ids(world, vehicle, station)
         yield world
         transaction.set_rollback(True)
@@ -612,6 +865,7 @@ def world(django_db_setup, django_db_blocker, tmp_path_factory) -> Iterator[Worl
 def _staff_ids(world: World, vehicle: Vehicle, station: GroundStation) -> dict[str, str]:
     """The objects the staff routes name: A's where they belong to a customer."""
     from auditlog.models import LogEntry as AuditEntry
+    from axes.models import AccessAttempt, AccessFailureLog, AccessLog
     from django.contrib.contenttypes.models import ContentType
 
     a, vv = world.a, world.a.flown
@@ -622,6 +876,22 @@ def _staff_ids(world: World, vehicle: Vehicle, station: GroundStation) -> dict[s
         "accounts.user": a.user,
         "authtoken.tokenproxy": a.user,  # the token admin looks tokens up by their user
         "auditlog.logentry": AuditEntry.objects.get_for_object(a.customer).first(),
+        "accounts.invite": a.invite,
+        "accounts.apitoken": a.api_token,
+        "accounts.webhook": a.webhook,
+        "auth.group": Group.objects.get(name=SUPPORT),
+        "missions.message": Message.objects.filter(customer=a.customer).first(),
+        "axes.accessattempt": AccessAttempt.objects.create(
+            username="someone", ip_address="192.0.2.1", failures_since_start=1
+        ),
+        "axes.accesslog": AccessLog.objects.create(username="someone", ip_address="192.0.2.1"),
+        "axes.accessfailurelog": AccessFailureLog.objects.create(
+            username="someone", ip_address="192.0.2.1"
+        ),
+        "fleet.pilotduty": PilotDuty.objects.create(
+            vehicle=vehicle, pilot=world.groups[PILOT], pilot_name="pilot", started=timezone.now()
+        ),
+        "fleet.takeoff": TakeOff.objects.create(vehicle=vehicle, at=timezone.now(), at_s=0.0),
         "fleet.sensortype": SensorType.objects.order_by("pk").first(),
         "fleet.groundstation": station,
         "fleet.vehicle": vehicle,
@@ -727,6 +997,10 @@ def _fingerprint_queries(world: World, revoked: Side | None) -> dict[str, QueryS
         "log": LogEntry.objects.filter(**of_a).values("pk"),
         "customers": Customer.objects.order_by("pk").values(),
         "user": User.objects.filter(pk=a.user.pk).values(),
+        "members": User.objects.filter(customer=a.customer)
+        .order_by("pk")
+        .values("pk", "username", "email", "role", "is_active", "customer_id"),
+        "invites": Invite.objects.filter(customer=a.customer).order_by("pk").values(),
         "tokens": tokens.values(),
         "api tokens": ApiToken.objects.filter(user=a.user).order_by("pk").values(),
         "webhooks": Webhook.objects.filter(customer=a.customer).order_by("pk").values(),
@@ -954,7 +1228,11 @@ class TestHttp:
     ) -> None:
         path = world.url(url)
         response, body = send(Client(), method, path)
-        assert response.status_code < 400 or method not in ROUTES[key].methods, body[:300]
+        route = ROUTES[key]
+        if route.public_status is not None and method in ("GET", *route.methods):
+            assert response.status_code == route.public_status, body[:300]
+        else:
+            assert response.status_code < 400 or method not in route.methods, body[:300]
         assert not is_login_redirect(response, django_settings.LOGIN_URL)
         assert not leaked(body, world.a.markers + world.b.markers, ""), body[:500]
 
@@ -1037,6 +1315,207 @@ class TestHttp:
             assert response.status_code == 302, template
             after = fingerprint(world)
             assert all(after[part] != before[part] for part in parts), template
+
+
+# --- roles: a customer's members and the staff groups ---------------------------------------------
+
+READ_ONLY_TOKEN = "read-only token"
+MEMBER_ACTORS = (OWNER, DEVELOPER, VIEWER, READ_ONLY_TOKEN)
+
+
+def member_client(world: World, actor: str, via: str) -> Client:
+    """A's owner, developer or viewer (by token or session), or A's owner's read-only token."""
+    a = world.a
+    if actor == READ_ONLY_TOKEN:
+        client = APIClient()
+        client.credentials(HTTP_AUTHORIZATION=f"Token {a.read_only_key}")
+        return client
+    user = a.user if actor == OWNER else a.members[actor]
+    if via == "session":
+        return session_client(user)
+    key = a.token if actor == OWNER else Token.objects.get(user=user).key
+    client = APIClient()
+    client.credentials(HTTP_AUTHORIZATION=f"Token {key}")
+    return client
+
+
+def staff_client(world: World, group: str, path: str) -> Client:
+    user = world.groups[group]
+    if not path.startswith("/api/"):
+        return session_client(user)
+    client = APIClient()
+    client.credentials(HTTP_AUTHORIZATION=f"Token {Token.objects.get(user=user).key}")
+    return client
+
+
+def send_undone(client: Client, method: str, url: str) -> tuple[HttpResponseBase, bytes]:
+    """``send``, with whatever the request changes rolled back: the next one finds the world
+    as it was."""
+    with transaction.atomic():
+        answer = send(client, method, url)
+        transaction.set_rollback(True)
+    return answer
+
+
+def _role_methods(route: Route) -> tuple[str, ...]:
+    # A view that answers any method is tried with a read and a change.
+    return ("GET", "POST") if route.methods == ANY else route.methods
+
+
+def _customer_routes() -> list[Any]:
+    return [
+        pytest.param(key, id=route.url)
+        for key, route in ROUTES.items()
+        if route.kind in (Kind.OWN_LIST, Kind.OBJECT, Kind.SIGNED_IN)
+    ]
+
+
+def _staff_routes() -> list[Any]:
+    return [
+        pytest.param(key, id=route.url) for key, route in ROUTES.items() if route.kind is Kind.STAFF
+    ]
+
+
+def _staff_allows(key: str, route: Route, group: str, method: str) -> bool:
+    """What the table says a staff group may do on a staff route."""
+    if route.model:
+        access = STAFF_MODEL_ACCESS[route.model][group]
+        pattern = key.removeprefix(f"admin/{route.model.replace('.', '/')}/")
+        needed = ADMIN_VIEW_NEEDS[pattern]
+        return all(letter in access for letter in needed)
+    assert route.staff is not None
+    return method in route.staff[group]
+
+
+def test_every_staff_route_says_what_each_staff_group_may_do() -> None:
+    missing = [
+        key
+        for key, route in ROUTES.items()
+        if route.kind is Kind.STAFF and not route.model and route.staff is None
+    ]
+    assert not missing, f"STAFF routes with no staff= in ROUTES: {missing}"
+    registered = {model._meta.label_lower for model in admin.site._registry}
+    assert registered == set(STAFF_MODEL_ACCESS), (
+        "models the admin registers and STAFF_MODEL_ACCESS differ: say what each staff group "
+        f"may do with {sorted(registered ^ set(STAFF_MODEL_ACCESS))}"
+    )
+
+
+@pytest.mark.django_db
+class TestRoles:
+    @pytest.fixture(autouse=True)
+    def _world_media(self, settings, world: World) -> None:
+        settings.MEDIA_ROOT = world.media
+        settings.CPCC_WEBHOOK_ALLOW_PRIVATE = True
+
+    @pytest.mark.parametrize("key", _customer_routes())
+    def test_each_member_may_do_what_their_role_allows(self, world: World, key: str) -> None:
+        """A's owner, developer, viewer and read-only token on A's own objects: allowed where
+        the role suffices (never a 403, never a 404 for its own object), else 403 naming the
+        role, with nothing changed."""
+        route = ROUTES[key]
+        path = world.url(route.url)
+        # The API asks the role the same way whatever the authentication (the tests above try
+        # both): a token here, as scripts use it.
+        vias = ("token",) if path.startswith("/api/") else ("session",)
+        for method in _role_methods(route):
+            needed = route.role_needed(method)
+            for actor in MEMBER_ACTORS:
+                for via in vias:
+                    if actor == READ_ONLY_TOKEN and via == "session":
+                        continue
+                    role = VIEWER if actor == READ_ONLY_TOKEN else actor
+                    # Its own object (an API token is its user's: the owner's here).
+                    mine = (
+                        route.kind is not Kind.OBJECT
+                        or route.needs is not PERSONAL
+                        or actor in (OWNER, READ_ONLY_TOKEN)
+                    )
+                    token_refused = via == "token" and method in route.session_only and mine
+                    before = fingerprint(world) if not allows(role, needed) else None
+                    response, body = send_undone(member_client(world, actor, via), method, path)
+                    case = f"{method} {path} as {actor} by {via}"
+                    if token_refused:
+                        assert response.status_code == 403, case
+                    elif allows(role, needed):
+                        assert response.status_code != 403, (case, body[:300])
+                        assert not is_login_redirect(response, django_settings.LOGIN_URL), case
+                        if route.kind is Kind.OBJECT and mine:
+                            assert response.status_code != 404, (case, body[:300])
+                    else:
+                        assert response.status_code == 403, (case, body[:300])
+                        assert f"needs the {needed} role".encode() in body, (case, body[:300])
+                        assert fingerprint(world) == before, case
+
+    @pytest.mark.parametrize("key", _customer_routes())
+    def test_staff_groups_on_the_customers_routes(self, world: World, key: str) -> None:
+        """Fleet managers and support read customers' VVs, pilots see none (404); only fleet
+        managers may change one: pilots and support are refused whatever needs a developer
+        (403, or 404 for what belongs to a customer and so is no staff user's: a webhook, a
+        member), and nothing changes."""
+        route = ROUTES[key]
+        path = world.url(route.url)
+        vv_route = path.startswith(("/api/v1/vvs/", "/vvs/"))
+        for method in _role_methods(route):
+            refused = route.role_needed(method) == DEVELOPER
+            for group in (FLEET_MANAGER, PILOT, SUPPORT):
+                client = staff_client(world, group, path)
+                before = fingerprint(world)
+                response, body = send_undone(client, method, path)
+                case = f"{method} {path} as {group}"
+                if refused and group != FLEET_MANAGER:
+                    hidden = route.kind is Kind.OBJECT and not vv_route
+                    assert response.status_code in ((403, 404) if hidden else (403,)), (
+                        case,
+                        body[:300],
+                    )
+                    assert fingerprint(world) == before, case
+                elif method == "GET" and vv_route and route.kind is Kind.OBJECT:
+                    expected = (404,) if group == PILOT else (200, 302)
+                    assert response.status_code in expected, (case, body[:300])
+
+    @pytest.mark.parametrize("key", _staff_routes())
+    def test_each_staff_group_may_do_what_the_table_says(self, world: World, key: str) -> None:
+        route = ROUTES[key]
+        path = world.url(route.url)
+        methods = ("GET",) if route.model else route.methods
+        for method in methods:
+            for group in (FLEET_MANAGER, PILOT, SUPPORT):
+                allowed = _staff_allows(key, route, group, method)
+                if route.model and key.endswith(("/add/", "/delete/")) and allowed:
+                    model_admin = admin.site._registry[apps.get_model(route.model)]
+                    request = RequestFactory().get(path)
+                    request.user = world.staff
+                    allowed = (
+                        model_admin.has_add_permission(request)
+                        if key.endswith("/add/")
+                        else model_admin.has_delete_permission(request)
+                    )
+                before = None if allowed else fingerprint(world)
+                client = staff_client(world, group, path)
+                response, body = send_undone(client, method, path)
+                case = f"{method} {path} as {group}"
+                assert not is_login_redirect(response, "/admin/login/"), case
+                if allowed:
+                    assert response.status_code != 403, (case, body[:300])
+                elif path.startswith("/api/"):
+                    assert response.status_code == 403, (case, body[:300])
+                else:  # the admin hides a section from those who may see nothing of it
+                    assert response.status_code in (403, 404), (case, body[:300])
+                if not allowed:
+                    assert fingerprint(world) == before, case
+
+    def test_a_pilot_operates_only_the_rvs_they_are_assigned(self, world: World) -> None:
+        other = VehicleFactory(name="Heli Elsewhere")
+        pilot = staff_client(world, PILOT, "/api/")
+        for act in ("maintenance", "return-home", "land", "return", "take-duty"):
+            response, body = send_undone(pilot, "POST", f"/api/v1/vehicles/{other.pk}/{act}/")
+            assert response.status_code in (403, 409), (act, body[:300])
+            assert b"not one of Heli Elsewhere's pilots" in body, (act, body[:300])
+        response, body = send_undone(
+            pilot, "POST", f"/api/v1/vehicles/{world.ids['vehicle']}/land/"
+        )
+        assert response.status_code == 200, body[:300]
 
 
 # --- the live map's socket ----------------------------------------------------------------------

@@ -76,6 +76,7 @@ def test_each_rv_has_its_actions_each_with_the_question_it_asks(client, staff) -
         ("return", ""),
         ("return_home", ""),
         ("land", ""),
+        ("take_duty", ""),  # (a superuser may take any RV on duty)
     ]
     assert 'data-confirm="Land Heli One now, where it is? It goes into maintenance' in row
 

@@ -157,7 +157,30 @@ def test_demo_serves_the_web_pages_runs_the_scenario_and_stops_on_ctrl_c(tmp_pat
         f"CPCC is running at http://127.0.0.1:{port}/",
         admin[0],
         *(f"  customer: customer-{x} / demo-pass-123" for x in "abcd"),
+        # To try the roles (issue 57): a viewer of the first customer, a pilot of every RV.
+        "  viewer: customer-a-viewer / demo-pass-123  (Customer A, read only)",
+        "  pilot: pilot / demo-pass-123  (staff, may fly Heli One, Heli Two; not on duty)",
     ]
+    import sqlite3
+
+    with sqlite3.connect(tmp_path / "db.sqlite3") as db:
+        viewer = db.execute(
+            "SELECT u.role, c.name FROM accounts_user u JOIN accounts_customer c"
+            " ON u.customer_id = c.id WHERE u.username = 'customer-a-viewer'"
+        ).fetchall()
+        pilot = db.execute(
+            "SELECT u.is_staff, u.is_superuser, g.name FROM accounts_user u"
+            " JOIN accounts_user_groups ug ON ug.user_id = u.id JOIN auth_group g"
+            " ON g.id = ug.group_id WHERE u.username = 'pilot'"
+        ).fetchall()
+        flown = db.execute(
+            "SELECT v.name, v.pilot_on_duty_id FROM fleet_vehicle v JOIN fleet_vehicle_pilots p"
+            " ON p.vehicle_id = v.id JOIN accounts_user u ON u.id = p.user_id"
+            " WHERE u.username = 'pilot' ORDER BY v.name"
+        ).fetchall()
+    assert viewer == [("viewer", "Customer A")]
+    assert pilot == [(1, 0, "pilot")]
+    assert flown == [("Heli One", None), ("Heli Two", None)]
 
 
 def test_demo_flies_the_papers_figure_3_over_mavlink(tmp_path: Path) -> None:

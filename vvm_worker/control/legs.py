@@ -57,13 +57,18 @@ class Legs(LoopState):
         """Fly the next leg of the way (``_via``): to a turn point, or to the way's end."""
         point = self._via.pop(0)
         tolerance_m = TURN_TOLERANCE_M if self._via or self._homing else self._tolerance_m
-        if self.driver.is_landed_at(now):
+        landed = self.driver.is_landed_at(now)
+        if landed:
             logger.info("%s taking off", self.name, extra=self._log())
         try:
             arrival = self.driver.fly_to(point, now)
         except DriverError as exc:
             self._failed(exc)
             return
+        if landed and arrival > now:
+            # It leaves the ground now (a real vehicle's telemetry may say so only later): the
+            # next report carries the take-off, which the store keeps with its pilot then.
+            self._took_off_s = now
         self._leg = (point, tolerance_m, arrival)
         self.scheduler.call_at(
             self._first_look(now, arrival), lambda: self._arrive(token, point, tolerance_m, arrival)

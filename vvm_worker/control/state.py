@@ -90,6 +90,8 @@ class LoopState:
         self._landing_due: float | None = None
         self.command: OperatorCommand | None = None  # the operator's last, as obeyed
         self._token = 0  # invalidates the arrival of a leg that was replaced
+        # When the loop last flew the vehicle off the ground, until a report says so.
+        self._took_off_s: float | None = None
 
     def _start_the_view(self) -> None:
         """What the live map and the benchmarks see of a loop that has not planned yet."""
@@ -185,13 +187,21 @@ class LoopState:
             distance_m=self.driver.distance_m(now),
             flight_s=self.driver.flight_s(now),
             planner_state=self.planner.state(),
+            took_off_s=self._took_off_s,
         )
         last = self._last_state
         moved = last is None or state.position != last.position
-        if last is not None and not moved and _same_report(state, last):
+        if (
+            last is not None
+            and not moved
+            and state.took_off_s is None
+            and _same_report(state, last)
+        ):
             return  # the store says all this already (a second look at the same moment)
         self.store.record_state(state, moved=moved)
-        self._last_state = state  # only once recorded: work redone after an outage records it
+        # Only once recorded: work redone after an outage records it (and the take-off).
+        self._last_state = state
+        self._took_off_s = None
 
 
 def _percent(fraction: float | None) -> str:

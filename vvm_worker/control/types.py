@@ -86,7 +86,8 @@ class OperatorCommand:
 
 @dataclass(frozen=True)
 class VehicleState:
-    """What the loop reports of its vehicle at ``t_s``."""
+    """What the loop reports of its vehicle at ``t_s``; ``took_off_s``: it left the ground
+    at that time since the last report (the loop flew it off from landed), else None."""
 
     t_s: float
     position: Position
@@ -94,6 +95,7 @@ class VehicleState:
     distance_m: float
     flight_s: float
     planner_state: Any
+    took_off_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -135,7 +137,8 @@ class Store(Protocol):
         ...
 
     def record_state(self, state: VehicleState, *, moved: bool) -> None:
-        """The vehicle is here now (``moved``: somewhere else than at the last record)."""
+        """The vehicle is here now (``moved``: somewhere else than at the last record); a
+        take-off it reports (``took_off_s``) is kept with its pilot in command then."""
         ...
 
     def area(self) -> Area: ...

@@ -6,10 +6,12 @@ import math
 from collections.abc import Sequence
 from typing import TypedDict
 
+from django.contrib.auth.models import Group
 from django.core.exceptions import ValidationError
 from django.db import transaction
 from django.utils.text import slugify
 
+from accounts import roles
 from accounts.models import Customer, ServiceClass, User
 from missions.models import ENDED_STATUSES
 from vvm_worker.runtime import VVM_API_CALLS, Limits
@@ -163,16 +165,45 @@ def customer_class_set(
 
 
 def user_set_login(
-    *, username: str, password: str, customer: Customer | None = None, staff: bool = False
+    *,
+    username: str,
+    password: str,
+    customer: Customer | None = None,
+    staff: bool = False,
+    role: str | None = None,
+    groups: Sequence[str] | None = None,
 ) -> User:
-    """Create the user (or take the existing one) and set its password; ``customer`` makes it
-    one of that customer's users, ``staff`` an administrator of the platform."""
+    """Create the user (or take the existing one) and set its password.
+
+    ``customer`` makes it one of that customer's users, with ``role`` (accounts.roles; None:
+    a new user is an owner, an existing one keeps its role); ``staff`` an administrator of the
+    platform (a superuser); ``groups`` staff in exactly these staff groups
+    (accounts.roles.STAFF_GROUPS), with what they allow and no more.
+    Raises ValueError for a role or a group that is not one, or a group the migrations have
+    not made.
+    """
+    if role is not None and not roles.is_role(role):
+        raise ValueError(f"{role!r} is not a role; one of {', '.join(roles.CUSTOMER_ROLES)}")
+    unknown = sorted(set(groups or ()) - set(roles.STAFF_GROUPS))
+    if unknown:
+        raise ValueError(
+            f"not staff groups: {', '.join(unknown)}; they are {', '.join(roles.STAFF_GROUPS)}"
+        )
     with transaction.atomic():
         user, _ = User.objects.get_or_create(username=username)
         if customer is not None:
             user.customer = customer
+        if role is not None:
+            user.role = role
         if staff:
             user.is_staff = user.is_superuser = True
+        if groups is not None:
+            user.is_staff = True
         user.set_password(password)
         user.save()
+        if groups is not None:
+            found = list(Group.objects.filter(name__in=groups))
+            if len(found) != len(set(groups)):
+                raise ValueError("the staff groups are missing: run manage.py migrate")
+            user.groups.set(found)
     return user

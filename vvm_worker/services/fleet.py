@@ -4,6 +4,7 @@ service, their workers' leases and live state, and what each change means for th
 from __future__ import annotations
 
 import dataclasses
+import datetime as dt
 import time
 from collections.abc import Sequence
 from typing import Any, TypedDict
@@ -17,6 +18,7 @@ from fleet.geo import Position
 from fleet.models import (
     GroundStation,
     NoFlyZone,
+    PilotDuty,
     RallyPoint,
     SensorType,
     Vehicle,
@@ -43,7 +45,7 @@ from vvm_worker.services.routing import (
     vv_record_migration,
     vv_release_tasks,
 )
-from vvm_worker.services.store import track_points_aboard, vehicle_report
+from vvm_worker.services.store import take_offs_insert, track_points_aboard, vehicle_report
 
 # Changing any of these may leave tasks planned on the RV that it can no longer serve.
 REACH_FIELDS = ("area", "min_altitude_m", "max_altitude_m")
@@ -205,6 +207,110 @@ def vehicle_command_take(*, vehicle_id: int, command: str, asked: Any) -> bool:
     return bool(taken)
 
 
+class DutyRefused(Exception):
+    """A pilot may not take or hand over this RV: the message says why."""
+
+
+def vehicle_take_duty(*, vehicles: Sequence[Vehicle], pilot: Any, vvm: VVM) -> list[Vehicle]:
+    """``pilot`` takes these RVs on duty (one, or a group at once): they become their pilot
+    in command, recorded from now (``PilotDuty``) and in the audit log with every change of
+    the RV. All or none: DutyRefused when ``pilot`` is not among an RV's pilots (a superuser
+    may take any), when another pilot is on duty for one (they hand it over first), or when
+    one was removed. With CPCC_REQUIRE_PILOT, VVs waiting for a pilot are looked at again."""
+    now = timezone.now()
+    with transaction.atomic():
+        held = list(
+            Vehicle.objects.select_for_update()
+            .filter(pk__in=[v.pk for v in vehicles])
+            .order_by("pk")
+        )
+        assigned = set(
+            Vehicle.pilots.through.objects.filter(
+                vehicle_id__in=[v.pk for v in held], user_id=pilot.pk
+            ).values_list("vehicle_id", flat=True)
+        )
+        for vehicle in held:
+            if vehicle.status == VehicleStatus.REMOVED:
+                raise DutyRefused(f"{vehicle.name} was removed from the fleet.")
+            if vehicle.pk not in assigned and not pilot.is_superuser:
+                raise DutyRefused(
+                    f"You are not one of {vehicle.name}'s pilots: a fleet manager assigns them."
+                )
+            if vehicle.pilot_on_duty_id not in (None, pilot.pk):
+                other = vehicle.pilot_on_duty.get_username()
+                raise DutyRefused(
+                    f"{other} is on duty for {vehicle.name}: they hand it over to you first."
+                )
+        for vehicle in held:
+            if vehicle.pilot_on_duty_id == pilot.pk:
+                continue
+            vehicle.pilot_on_duty = pilot
+            vehicle.save(update_fields=["pilot_on_duty", "updated"])
+            PilotDuty.objects.create(
+                vehicle=vehicle, pilot=pilot, pilot_name=pilot.get_username(), started=now
+            )
+            vvm.dispatcher.vehicle_changed(vehicle.pk)
+            logger.info(
+                "vehicle %s: %s on duty",
+                vehicle.name,
+                pilot.get_username(),
+                extra={"vehicle": vehicle.name, "pilot": pilot.get_username()},
+            )
+    vvs_reroute_waiting(vvm=vvm)
+    return held
+
+
+def vehicle_hand_over(
+    *, vehicles: Sequence[Vehicle], by: Any, to: Any | None, vvm: VVM
+) -> list[Vehicle]:
+    """The pilot on duty (``by``; or staff who may change vehicles, for a pilot who left)
+    hands these RVs over to another of their pilots (``to``), or to nobody: with
+    CPCC_REQUIRE_PILOT an RV with no pilot on duty then takes no new work. All or none:
+    DutyRefused when ``by`` is not on duty for one and may not change vehicles, or ``to``
+    is not one of its pilots."""
+    now = timezone.now()
+    with transaction.atomic():
+        held = list(
+            Vehicle.objects.select_for_update()
+            .filter(pk__in=[v.pk for v in vehicles])
+            .order_by("pk")
+        )
+        manager = by.has_perm("fleet.change_vehicle")
+        assigned = set()
+        if to is not None:
+            assigned = set(
+                Vehicle.pilots.through.objects.filter(
+                    vehicle_id__in=[v.pk for v in held], user_id=to.pk
+                ).values_list("vehicle_id", flat=True)
+            )
+        for vehicle in held:
+            if vehicle.pilot_on_duty_id != by.pk and not manager:
+                raise DutyRefused(f"You are not on duty for {vehicle.name}.")
+            if to is not None and vehicle.pk not in assigned and not to.is_superuser:
+                raise DutyRefused(f"{to.get_username()} is not one of {vehicle.name}'s pilots.")
+        for vehicle in held:
+            if vehicle.pilot_on_duty_id == (to.pk if to is not None else None):
+                continue
+            PilotDuty.objects.filter(vehicle=vehicle, ended__isnull=True).update(
+                ended=now, handed_to=to.get_username() if to is not None else ""
+            )
+            vehicle.pilot_on_duty = to
+            vehicle.save(update_fields=["pilot_on_duty", "updated"])
+            if to is not None:
+                PilotDuty.objects.create(
+                    vehicle=vehicle, pilot=to, pilot_name=to.get_username(), started=now
+                )
+            vvm.dispatcher.vehicle_changed(vehicle.pk)
+            logger.info(
+                "vehicle %s: handed over to %s",
+                vehicle.name,
+                to.get_username() if to is not None else "nobody",
+                extra={"vehicle": vehicle.name, "by": by.get_username()},
+            )
+    vvs_reroute_waiting(vvm=vvm)
+    return held
+
+
 def vvs_reroute_waiting(*, vvm: VVM) -> None:
     """Look again at every VV waiting on a ground station for an RV (after a fleet change)."""
     waiting = VirtualVehicle.objects.filter(
@@ -225,10 +331,10 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
     vvs_reroute_waiting(vvm=vvm)
     with transaction.atomic():
         vehicle = Vehicle.objects.prefetch_related("sensors").get(pk=vehicle.pk)
-        if vehicle.status != VehicleStatus.ACTIVE:
+        newcomer = vehicle_caps(vehicle)
+        if not newcomer.active:  # (out of service, or with no pilot on duty where one is due)
             return
         fleet = {c.id: c for c in fleet_caps(vvm)}
-        newcomer = vehicle_caps(vehicle)
         if vehicle.pk in fleet:  # where it is now (its host may know better than its row)
             newcomer = dataclasses.replace(newcomer, position=fleet[vehicle.pk].position)
         aboard_others = (
@@ -477,12 +583,15 @@ def vehicle_record_state(
     state: VehicleState,
     track_aboard: bool = False,
     tasks_done: int = 0,
+    take_offs: Sequence[tuple[float, dt.datetime]] = (),
 ) -> None:
     """What an RV's control loop reports of its vehicle (``state``): where it is at its time,
     its flight phase, its odometer and flight time, and the planner's state (kept for a
     restarted worker); ``track_aboard``: every VV aboard now gets this point on its track
     (found by the database in the same statement); ``tasks_done``: the RV served that many
-    more tasks. Inside the caller's transaction when there is one."""
+    more tasks; ``take_offs``: it took off then (platform clock, date), each recorded with
+    its pilot on duty (``vehicle_record_take_offs``), in the same commit. Inside the caller's
+    transaction when there is one."""
     here = state.position
     values = {
         "lat": here.lat,
@@ -495,7 +604,16 @@ def vehicle_record_state(
     }
     add = {"tasks_done": tasks_done} if tasks_done else None
     track_point = (state.t_s, here) if track_aboard else None
-    vehicle_report(vehicle_id, values=values, add=add, track_point=track_point)
+    vehicle_report(vehicle_id, values=values, add=add, track_point=track_point, take_offs=take_offs)
+
+
+def vehicle_record_take_offs(
+    *, vehicle_id: int, take_offs: Sequence[tuple[float, dt.datetime]]
+) -> None:
+    """The RV took off at these times (platform clock, date): a ``TakeOff`` each, with the
+    pilot on duty for it (none: empty) as the database has it when this is written, which
+    is with the loop's next report, in the caller's transaction (or in a commit of its own)."""
+    take_offs_insert(vehicle_id, take_offs)
 
 
 def vehicle_record_track(*, vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:

@@ -10,6 +10,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
+from django.conf import settings
 from django.db.models import Count, Max, QuerySet
 from django.db.models.signals import m2m_changed, post_delete, post_save
 from shapely import STRtree
@@ -66,10 +67,19 @@ from vvm_worker.services.store import (
 from vvm_worker.services.waiting import vv_wait_end, vv_wait_start
 
 
+def takes_work(vehicle: Vehicle, *, require_pilot: bool) -> bool:
+    """Whether routing gives the RV new work: it is in service and, where a pilot is
+    required (``require_pilot``: CPCC_REQUIRE_PILOT, read once by the caller), a pilot is on
+    duty for it. (Its worker being online is the caller's to add.)"""
+    return vehicle.status == VehicleStatus.ACTIVE and (
+        not require_pilot or vehicle.pilot_on_duty_id is not None
+    )
+
+
 def vehicle_caps(
     vehicle: Vehicle, open_tasks: int = 0, route: tuple[Position, ...] = ()
 ) -> VehicleCaps:
-    """The mapper's view of one RV."""
+    """The mapper's view of one RV (active: it takes new work, ``takes_work``)."""
     return VehicleCaps(
         id=vehicle.pk,
         name=vehicle.name,
@@ -77,7 +87,7 @@ def vehicle_caps(
         min_altitude_m=vehicle.min_altitude_m,
         max_altitude_m=vehicle.max_altitude_m,
         sensors=_sensor_names(vehicle),
-        active=vehicle.status == VehicleStatus.ACTIVE,
+        active=takes_work(vehicle, require_pilot=settings.CPCC_REQUIRE_PILOT),
         position=vehicle.position,
         max_speed_mps=vehicle.max_speed_mps,
         climb_rate_mps=vehicle.climb_rate_mps,
@@ -204,8 +214,9 @@ def fleet_caps(
     vvm: VVM, requests: Sequence[TaskRequest] | None = None, shape: _FleetShape | None = None
 ) -> list[VehicleCaps]:
     """The mapper's view of the fleet: every RV that is in service or in maintenance; one whose
-    worker is gone counts as in maintenance (it may come back). With ``requests``, only the RVs
-    whose areas hold one of them: no other could serve them (`map_task` decides the same)."""
+    worker is gone counts as in maintenance (it may come back), and so does one with no pilot
+    on duty where CPCC_REQUIRE_PILOT requires one. With ``requests``, only the RVs whose areas
+    hold one of them: no other could serve them (`map_task` decides the same)."""
     return fleet_caps_and_rows(vvm, requests, shape)[0]
 
 
@@ -215,10 +226,34 @@ def fleet_caps_and_rows(
     """``fleet_caps`` and the rows of those RVs as read for it (by id): one read of the RVs,
     one of their open tasks (none when ``requests`` leave one RV to choose: its caps then
     say nothing of its open tasks)."""
+    view = _fleet_view(vvm, requests, shape, require_pilot=settings.CPCC_REQUIRE_PILOT)
+    return view.caps, view.rows
+
+
+@dataclasses.dataclass(frozen=True)
+class _FleetView:
+    """``fleet_caps_and_rows``' answer, and the RVs among them that are in service with their
+    worker online but count as out of it for want of a pilot on duty (``pilotless``)."""
+
+    caps: list[VehicleCaps]
+    rows: dict[int, Vehicle]
+    pilotless: frozenset[int] = frozenset()
+
+
+def _fleet_view(
+    vvm: VVM,
+    requests: Sequence[TaskRequest] | None,
+    shape: _FleetShape | None,
+    *,
+    require_pilot: bool,
+) -> _FleetView:
+    """``fleet_caps_and_rows``, with ``require_pilot`` (CPCC_REQUIRE_PILOT, read once by the
+    caller): an RV with no pilot on duty is not active then. (The rows carry their pilot on
+    duty: no read of its own.)"""
     shape = shape or _fleet_shape()
     wanted = shape.covering(requests) if requests is not None else set(shape.ids)
     if not wanted:
-        return [], {}
+        return _FleetView([], {})
     # An RV's open tasks, in its plan's order, rank it against the others: with one RV to
     # choose (the common case where areas do not overlap), they are not read.
     ranked = requests is None or len(wanted) > 1
@@ -230,23 +265,28 @@ def fleet_caps_and_rows(
     found = _rows_hosted_here(vvm, known, shape)
     found.add(_rows_hosted_elsewhere(vvm, sorted(wanted - set(known)), ranked=ranked))
     caps = []
+    pilotless = set()
     for pk, static in shape.caps.items():
         vehicle = found.rows.get(pk)
         if vehicle is None:
             continue
         reported = vehicle.lat is not None and vehicle.lng is not None
         route = found.routes.get(pk, ())
+        in_service = vehicle.status == VehicleStatus.ACTIVE and found.online[pk]
+        if in_service and require_pilot and vehicle.pilot_on_duty_id is None:
+            in_service = False
+            pilotless.add(pk)
         caps.append(
             dataclasses.replace(
                 static,
-                active=vehicle.status == VehicleStatus.ACTIVE and found.online[pk],
+                active=in_service,
                 position=vehicle.position if reported else static.position,
                 open_tasks=len(route),
                 route=route,
                 task_classes=found.classes.get(pk, ()),
             )
         )
-    return caps, found.rows
+    return _FleetView(caps, found.rows, frozenset(pilotless))
 
 
 @dataclasses.dataclass
@@ -376,33 +416,46 @@ def vv_route(*, vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None 
     ones not saved yet: they are saved assigned, or rejected, by the caller); None: read them.
     The caller saves the VV.
 
-    A VV parked on a ground station because only RVs out of service could serve its next
-    task waits (``vv_wait_start``: its owner reads why); one that waited and moves on stops
-    waiting (``vv_wait_end``). Neither writes anything for a VV that did not wait and does
-    not (the common case)."""
+    A VV parked on a ground station because only RVs out of service (or, with
+    CPCC_REQUIRE_PILOT, in service with no pilot on duty) could serve its next task waits
+    (``vv_wait_start``: its owner reads why); one that waited and moves on stops waiting
+    (``vv_wait_end``). Neither writes anything for a VV that did not wait and does not (the
+    common case)."""
     waited = bool(vv.waiting_reason)
     again, parked = _route(vv, vvm, open_tasks)
     if parked is not None:
-        vv_wait_start(vv=vv, task=parked, vvm=vvm)
+        vv_wait_start(vv=vv, task=parked.task, vvm=vvm, no_pilot=parked.no_pilot)
     elif waited:
         vv_wait_end(vv=vv, vvm=vvm)
     return again
 
 
+@dataclasses.dataclass(frozen=True)
+class _Parked:
+    """The task a parked VV waits for, and whether a pilot coming on duty would do
+    (``no_pilot``: an RV that serves it is in service, with no pilot on duty)."""
+
+    task: Task
+    no_pilot: bool = False
+
+
 def _route(
     vv: VirtualVehicle, vvm: VVM, open_tasks: Sequence[Task] | None
-) -> tuple[bool, Task | None]:
-    """``vv_route``'s decision: whether the VV must step again, and the task it waits for
-    when it is parked until an RV that serves it is in service again (else None)."""
+) -> tuple[bool, _Parked | None]:
+    """``vv_route``'s decision: whether the VV must step again, and what it waits for when it
+    is parked until an RV that serves it is in service again (else None)."""
     pending = pending_of(vv)
     assert pending is not None
     if open_tasks is None:
         open_tasks = request_tasks_of(vv.pk, pending.q)
+    require_pilot = settings.CPCC_REQUIRE_PILOT
     shape = _fleet_shape()
-    stays, mine = _stays_aboard_alone(vv, open_tasks, shape, vvm)
+    stays, mine = _stays_aboard_alone(vv, open_tasks, shape, vvm, require_pilot=require_pilot)
     if stays:
         return False, None
-    fleet, rows = fleet_caps_and_rows(vvm, [request_of(t) for t in open_tasks], shape)
+    requests = [request_of(t) for t in open_tasks]
+    view = _fleet_view(vvm, requests, shape, require_pilot=require_pilot)
+    fleet, rows = view.caps, view.rows
     due = _due_in(vv, vvm)
     service_class = vv.customer.service_class_id
     # Where more than one RV is to choose from, the classes with slack leave a reserve.
@@ -410,10 +463,8 @@ def _route(
     if sum(1 for caps in fleet if caps.active) > 1:
         reserve = Reserve(classes_giving_way(now_s=vvm.clock.now_s(), vvm=vvm))
     decisions = [
-        map_task(
-            request_of(t), fleet, due_in_s=due(t), service_class=service_class, reserve=reserve
-        )
-        for t in open_tasks
+        map_task(r, fleet, due_in_s=due(t), service_class=service_class, reserve=reserve)
+        for t, r in zip(open_tasks, requests, strict=True)
     ]
     host = vv.host_rv
     if host is not None and mine and _stays(host, open_tasks, mine, fleet, decisions, due):
@@ -433,25 +484,40 @@ def _route(
     if best is not None:
         _move_to(vv, rows[best.id], _servable(best, open_tasks), open_tasks, vvm)
         return False, None
-    # Only RVs in maintenance could serve it: park on a ground station until one returns.
+    # Only RVs in maintenance (or with no pilot on duty) could serve it: park on a ground
+    # station until one returns.
     if vv.host_rv is not None:
         vv_migrate_to_ground_station(
             vv=vv, reason="waiting for a vehicle", vvm=vvm, open_tasks=open_tasks
         )
-    return False, next((t for t, d in zip(open_tasks, decisions, strict=True) if d.parked), None)
+    k = next((k for k, d in enumerate(decisions) if d.parked), None)
+    if k is None:
+        return False, None
+    # A pilot would do where an RV in service that serves it lacks one (one in maintenance
+    # besides may come back too, but the pilot is what the owner can be told to wait for).
+    no_pilot = any(c.id in view.pilotless and c.can_serve(requests[k]) for c in fleet)
+    return False, _Parked(open_tasks[k], no_pilot=no_pilot)
 
 
 def _stays_aboard_alone(
-    vv: VirtualVehicle, open_tasks: Sequence[Task], shape: _FleetShape, vvm: VVM
+    vv: VirtualVehicle,
+    open_tasks: Sequence[Task],
+    shape: _FleetShape,
+    vvm: VVM,
+    *,
+    require_pilot: bool,
 ) -> tuple[bool, list[Task]]:
-    """The common case, which needs no look at the rest of the fleet: the RV aboard is in
-    service and can serve the tasks (``mine``: those it can), and no other RV's area overlaps
-    its own, so they go on its list; or it serves none of them but has them on its list
-    already. Gives back whether the VV stays so, and ``mine``. (The RV's area, altitudes and
-    sensors are the shape's, of the version just read.)"""
+    """The common case, which needs no look at the rest of the fleet: the RV aboard takes
+    work (in service; with ``require_pilot``, a pilot on duty) and can serve the tasks
+    (``mine``: those it can), and no other RV's area overlaps its own, so they go on its
+    list; or it serves none of them but has them on its list already (also when, with no
+    pilot on duty, it takes no new work). Gives back whether the VV stays so, and ``mine``.
+    (The RV's area, altitudes and sensors are the shape's, of the version just read.)"""
     host = vv.host_rv
     if host is None or host.status != VehicleStatus.ACTIVE:
         return False, []
+    if not takes_work(host, require_pilot=require_pilot):
+        return bool(open_tasks) and all(t.vehicle_id == host.pk for t in open_tasks), []
     caps = shape.caps.get(host.pk) or dataclasses.replace(
         vehicle_caps(host), no_fly=shape.airspace.zones
     )

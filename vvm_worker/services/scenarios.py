@@ -7,13 +7,18 @@ from __future__ import annotations
 import hashlib
 import secrets
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from django.contrib.auth.hashers import make_password
+from django.contrib.auth.models import Group
+from django.core.exceptions import ValidationError
+from django.core.validators import validate_email
 from django.db import transaction
 from django.utils.text import slugify
 
 from accounts.models import Customer, User
+from accounts.roles import PILOT, VIEWER
 from fleet.models import GroundStation, NoFlyZone, SensorType, Vehicle, VehicleStatus
 from missions.models import (
     ACTIVE_STATUSES,
@@ -26,27 +31,64 @@ from missions.models import (
 from vvm_worker.scenario import (
     CustomerSpec,
     FleetEvent,
+    MemberSpec,
     Scenario,
     ScenarioError,
+    StaffSpec,
     VehicleSpec,
     VVSpec,
     vv_instances,
 )
 from vvm_worker.services.admission import vv_submit
 from vvm_worker.services.base import VVM
-from vvm_worker.services.customers import service_class_save
+from vvm_worker.services.customers import service_class_save, user_set_login
 from vvm_worker.services.fleet import vehicle_register, vehicle_set_status
 
 
 @dataclass
 class LoadedScenario:
     """What a scenario put into the database; ``logins`` holds (username, password or None
-    when an existing user kept its password)."""
+    when an existing user kept its password), and ``labels`` says who each login is that is
+    not a customer's own: a member's customer and role (``"Customer A, viewer"``), a staff
+    user's groups (``"pilot"``)."""
 
     customers: dict[str, Customer] = field(default_factory=dict)
     vehicles: dict[str, Vehicle] = field(default_factory=dict)
     ground_stations: dict[str, GroundStation] = field(default_factory=dict)
     logins: list[tuple[str, str | None]] = field(default_factory=list)
+    # The customers' users the scenario names (besides their own logins) and its staff.
+    members: dict[str, User] = field(default_factory=dict)
+    staff: dict[str, User] = field(default_factory=dict)
+    labels: dict[str, str] = field(default_factory=dict)
+
+
+class _Passwords:
+    """The passwords a scenario gives its logins: ``password`` to every one (hashed once: the
+    hasher is slow on purpose, and a team of users would cost a third of a second each);
+    without it a generated one to each new user, while an existing user keeps its own. With
+    ``logins`` off, a new user gets no usable password (nobody logs in to a simulation)."""
+
+    def __init__(self, password: str | None, *, logins: bool) -> None:
+        self.password = password
+        self.logins = logins
+        self.hashed: str | None = None
+
+    def give(self, user: User, *, new: bool) -> str | None:
+        """Set the user's password (not saved); returns it, or None when it kept its own."""
+        if not self.logins:
+            if new:
+                user.set_unusable_password()
+            return None
+        if self.password is None:
+            if not new:
+                return None
+            password = secrets.token_urlsafe(9)
+            user.set_password(password)
+            return password
+        if self.hashed is None:
+            self.hashed = make_password(self.password)
+        user.password = self.hashed
+        return self.password
 
 
 def _check_vv_names(scenario: Scenario) -> None:
@@ -89,6 +131,81 @@ def _check_sensors(scenario: Scenario) -> None:
                 )
 
 
+def _check_people(scenario: Scenario) -> None:
+    """The users and staff a scenario names are not someone else in the database (another
+    customer's user, staff for a customer's user or the other way round, a customer's own
+    login), their e-mail addresses are addresses, their groups are there, and every pilot it
+    does not name itself is staff in the database."""
+    file = str(scenario.path) if scenario.path else None
+    own_logins = {slugify(c.name): (i, c.name) for i, c in enumerate(scenario.customers)}
+    people: list[tuple[str, str, str | None, str | None]] = [
+        (f"customers[{i}].users[{k}]", user.name, customer.name, user.email)
+        for i, customer in enumerate(scenario.customers)
+        for k, user in enumerate(customer.users)
+    ]
+    people += [
+        (f"staff[{i}]", user.name, None, user.email) for i, user in enumerate(scenario.staff)
+    ]
+    existing = {
+        user.username: user
+        for user in User.objects.filter(username__in=[p[1] for p in people]).select_related(
+            "customer"
+        )
+    }
+    for path, name, customer_name, email in people:
+        if name in own_logins:
+            i, owner = own_logins[name]
+            raise ScenarioError(
+                f"{path}.name",
+                f"{name!r} is the login of customer {owner!r} (customers[{i}]), which every "
+                "customer gets as its owner: choose another name",
+                file=file,
+            )
+        user = existing.get(name)
+        if user is not None:
+            theirs = user.customer.name if user.customer is not None else None
+            if theirs != customer_name:
+                if theirs is not None:
+                    what = f"a user of customer {theirs!r}"
+                else:
+                    what = "staff" if user.is_staff else "a user of no customer"
+                wanted = f"a user of customer {customer_name!r}" if customer_name else "staff"
+                raise ScenarioError(
+                    f"{path}.name",
+                    f"{name!r} is {what} in the database, so it cannot be {wanted}: "
+                    "choose another name",
+                    file=file,
+                )
+        if email is not None:
+            try:
+                validate_email(email)
+            except ValidationError:
+                raise ScenarioError(
+                    f"{path}.email", f"{email!r} is not an e-mail address", file=file
+                ) from None
+    groups = {group for user in scenario.staff for group in user.groups}
+    missing = groups - set(Group.objects.filter(name__in=groups).values_list("name", flat=True))
+    if missing:
+        raise ScenarioError(
+            "staff",
+            f"the staff group(s) {', '.join(sorted(missing))} are not in the database: "
+            "run manage.py migrate",
+            file=file,
+        )
+    names = [name for _, name in scenario.outside_pilots]
+    staff = set(
+        User.objects.filter(username__in=names, is_staff=True).values_list("username", flat=True)
+    )
+    for place, name in scenario.outside_pilots:
+        if name not in staff:
+            raise ScenarioError(
+                place,
+                f"no staff user {name!r}: a pilot is one of the scenario's staff or a staff "
+                "user in the database",
+                file=file,
+            )
+
+
 def vehicle_upsert(*, spec: VehicleSpec) -> Vehicle:
     """Create or update an RV from its scenario description (in service, at its depot)."""
     vehicle, _ = Vehicle.objects.update_or_create(
@@ -116,6 +233,8 @@ def vehicle_upsert(*, spec: VehicleSpec) -> Vehicle:
         },
     )
     vehicle.sensors.set(SensorType.objects.filter(name__in=spec.sensors))
+    if spec.pilots is not None:  # left out: the pilots an administrator gave it stay
+        vehicle.pilots.set(User.objects.filter(username__in=spec.pilots, is_staff=True))
     return vehicle
 
 
@@ -137,36 +256,70 @@ def _customer_upsert(spec: CustomerSpec) -> Customer:
     return customer
 
 
-def _login_for(customer: Customer, password: str | None) -> tuple[str, str | None]:
+def _login_for(customer: Customer, passwords: _Passwords) -> tuple[str, str | None]:
     username = customer.slug
     user = User.objects.filter(username=username).first()
+    new = user is None
     if user is None:
-        password = password or secrets.token_urlsafe(9)
-        user = User(username=username, customer=customer)
-        user.set_password(password)
-        user.save()
-        return username, password
+        user = User(username=username)
     user.customer = customer
-    if password is not None:
-        user.set_password(password)
+    password = passwords.give(user, new=new)
     user.save()
     return username, password
+
+
+def _member_upsert(
+    spec: MemberSpec, customer: Customer, passwords: _Passwords
+) -> tuple[User, str | None]:
+    """A user of ``customer`` with the scenario's role (``_check_people`` made sure the name
+    is no one else's), and the password it was given (None: it kept its own)."""
+    user = User.objects.filter(username=spec.name).first()
+    new = user is None
+    if user is None:
+        user = User(username=spec.name)
+    user.customer, user.role = customer, spec.role
+    if spec.email is not None:
+        user.email = spec.email
+    password = passwords.give(user, new=new)
+    user.save()
+    return user, password
+
+
+def _staff_upsert(spec: StaffSpec, passwords: _Passwords) -> tuple[User, str | None]:
+    """A staff user in exactly the scenario's groups (a superuser stays one), and the password
+    it was given (None: it kept its own)."""
+    user = User.objects.filter(username=spec.name).first()
+    new = user is None
+    if user is None:
+        user = User(username=spec.name)
+    user.is_staff = True
+    if spec.email is not None:
+        user.email = spec.email
+    password = passwords.give(user, new=new)
+    user.save()
+    user.groups.set(Group.objects.filter(name__in=spec.groups))
+    return user, password
 
 
 def scenario_apply(
     *, scenario: Scenario, logins: bool = True, password: str | None = None
 ) -> LoadedScenario:
-    """Put the scenario's SDC additions, ground stations, RVs, no-fly zones and customers
-    (with a login user each, unless ``logins`` is False) into the database. Running it twice
-    changes nothing the second time. A customer's login gets ``password``; without one, a new
-    login gets a generated password and an existing one keeps its own (``logins`` says
-    which).
+    """Put the scenario's SDC additions, ground stations, staff (in their groups), RVs (with
+    their pilots), no-fly zones and customers (with a login user each, an owner, unless
+    ``logins`` is False; and the users it names, with their roles) into the database. Running
+    it twice changes nothing the second time. Every login gets ``password``; without one, a
+    new login gets a generated password and an existing one keeps its own (``logins`` says
+    which). Without ``logins``, the customers get no login of their own and the users and
+    staff the scenario names no usable password.
 
     Raises ScenarioError for a vehicle sensor that is in neither the SDC nor the scenario,
-    or that the vehicle's kind cannot carry (``SensorType.kinds``), and for a VV's name with
-    a control or bidirectional formatting character (which ``vv_submit`` would refuse).
+    or that the vehicle's kind cannot carry (``SensorType.kinds``), for a VV's name with
+    a control or bidirectional formatting character (which ``vv_submit`` would refuse), for
+    a user or staff name that is someone else's in the database (``_check_people``), and for
+    a pilot that is neither the scenario's staff nor staff in the database.
     """
     loaded = LoadedScenario()
+    passwords = _Passwords(password, logins=logins)
     with transaction.atomic():
         for entry in scenario.sensors:
             SensorType.objects.update_or_create(
@@ -182,6 +335,13 @@ def scenario_apply(
             )
         _check_sensors(scenario)
         _check_vv_names(scenario)
+        _check_people(scenario)
+        staff_logins = []
+        for staff_spec in scenario.staff:  # before the vehicles they fly
+            user, given = _staff_upsert(staff_spec, passwords)
+            loaded.staff[staff_spec.name] = user
+            loaded.labels[staff_spec.name] = ", ".join(staff_spec.groups) or "in no group"
+            staff_logins.append((staff_spec.name, given))
         for gs in scenario.ground_stations:
             loaded.ground_stations[gs.name], _ = GroundStation.objects.update_or_create(
                 name=gs.name,
@@ -201,8 +361,16 @@ def scenario_apply(
         for customer_spec in scenario.customers:
             customer = _customer_upsert(customer_spec)
             loaded.customers[customer_spec.name] = customer
-            if logins:  # a password costs a third of a second to hash, on purpose
-                loaded.logins.append(_login_for(customer, password))
+            if logins:
+                loaded.logins.append(_login_for(customer, passwords))
+            for member in customer_spec.users:
+                user, given = _member_upsert(member, customer, passwords)
+                loaded.members[member.name] = user
+                loaded.labels[member.name] = f"{customer.name}, {member.role}"
+                if logins:
+                    loaded.logins.append((member.name, given))
+        if logins:
+            loaded.logins += staff_logins
     return loaded
 
 
@@ -285,6 +453,32 @@ def scenario_event_apply(
         reason=f"the scenario's event at {event.at_s:g} s",
     )
     return vehicle
+
+
+DEMO_PILOT = "pilot"
+
+
+def demo_people(
+    *, customer: Customer | None, vehicles: Sequence[Vehicle], password: str
+) -> tuple[User | None, User]:
+    """The demo's people to try the roles with, each with ``password``: a viewer of
+    ``customer`` (``<slug>-viewer``: reads everything of the customer, changes nothing; None
+    without a customer), and a pilot (``pilot``: staff in the pilot group, one of the pilots
+    of ``vehicles``). The pilot is not put on duty: the demo's RVs need none
+    (CPCC_REQUIRE_PILOT is off), and a pilot who tries takes them on duty through the API."""
+    with transaction.atomic():
+        viewer = None
+        if customer is not None:
+            viewer = user_set_login(
+                username=f"{customer.slug}-viewer",
+                password=password,
+                customer=customer,
+                role=VIEWER,
+            )
+        pilot = user_set_login(username=DEMO_PILOT, password=password, groups=[PILOT])
+        for vehicle in vehicles:
+            vehicle.pilots.add(pilot)
+    return viewer, pilot
 
 
 def demo_reset(*, reason: str) -> None:

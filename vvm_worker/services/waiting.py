@@ -1,6 +1,7 @@
 """Why a VV waits, as its owner reads it: parked on a ground station while no RV in service
-covers its next task (routing starts and ends that, each with a line in the VV's log), and
-when the RV it is aboard expects to reach its next task (that RV's control loop's plan).
+covers its next task, or (CPCC_REQUIRE_PILOT) none of those in service has a pilot on duty
+(routing starts and ends that, each with a line in the VV's log), and when the RV it is
+aboard expects to reach its next task (that RV's control loop's plan).
 
 The queue (a customer's limit of VVs in parallel) needs nothing here: a queued VV's place in
 it is read when it is shown (``missions.waiting``).
@@ -32,23 +33,38 @@ def no_vehicle_message(task: Task) -> str:
     )
 
 
-def vv_wait_start(*, vv: VirtualVehicle, task: Task, vvm: VVM) -> None:
+# What a VV waits for while the RVs in service that cover its next task have no pilot on duty
+# (CPCC_REQUIRE_PILOT), in the customer's words (naming neither a vehicle nor a pilot).
+NO_PILOT_MESSAGE = (
+    "no pilot on duty for the vehicles that cover its next task; it continues when one comes "
+    "on duty"
+)
+
+
+def vv_wait_start(*, vv: VirtualVehicle, task: Task, vvm: VVM, no_pilot: bool = False) -> None:
     """The VV waits for an RV in service that covers its next task ``task``: routing parks it
     on a ground station because only RVs out of service (maintenance, charging, a worker that
-    is gone) could serve it. Its row says so and its log gets ``waiting: ...``; a VV that
+    is gone) could serve it, or, with ``no_pilot``, RVs in service with no pilot on duty
+    (CPCC_REQUIRE_PILOT). Its row says so and its log gets ``waiting: ...``; a VV that
     already waits so is left alone (nothing is written: routing looks at it again at every
     fleet change). The caller holds the VV's row."""
-    message = no_vehicle_message(task)
-    if vv.waiting_reason == WaitReason.NO_VEHICLE and vv.waiting_message == message:
+    if no_pilot:
+        reason, message = WaitReason.NO_PILOT, NO_PILOT_MESSAGE
+    else:
+        reason, message = WaitReason.NO_VEHICLE, no_vehicle_message(task)
+    if vv.waiting_reason == reason and vv.waiting_message == message:
         return
     now = vvm.clock.now_s()
     if not vv.waiting_reason:
         vv.waiting_since_s = now
-    vv.waiting_reason, vv.waiting_message = WaitReason.NO_VEHICLE, message
+    vv.waiting_reason, vv.waiting_message = reason, message
     note = LogEntry(vv=vv, at_s=now, level=PLATFORM_NOTE, message=f"waiting: {message}")
     vv_fields_save(vv, WAITING_FIELDS, note=note)
     logger.info(
-        "vv waits: no vehicle in service covers its next task",
+        "vv waits: %s",
+        "no pilot on duty for the RVs that cover its next task"
+        if no_pilot
+        else "no vehicle in service covers its next task",
         extra={"vv": str(vv.id), "customer": customer_named(vv), "task": task.pk},
     )
 

@@ -14,7 +14,10 @@ customer of their own, the examples of VVs that message each other and look at t
 chosen.
 
 Its terminal shows the platform's own lines and every error, not a line for each request the
-web server answers (``--access-log`` shows those too). The logins are kept in
+web server answers (``--access-log`` shows those too). Besides the administrator and each
+customer's own login (its owner), there is a viewer of the first customer (read only) and a
+pilot of every RV (staff in the pilot group, not on duty: the demo's RVs fly without one,
+CPCC_REQUIRE_PILOT being off), so that both roles can be tried. The logins are kept in
 ``demo-logins.txt`` of the var folder (CPCC_VAR_DIR) as well, and printed again when the user
 presses Enter.
 """
@@ -47,6 +50,7 @@ from vvm_worker.platform import platform_vvm
 from vvm_worker.scenario import FleetEvent, ScenarioError, load_scenario
 from vvm_worker.services import user_set_login, vehicle_update
 from vvm_worker.services.scenarios import (
+    demo_people,
     demo_reset,
     scenario_apply,
     scenario_event_apply,
@@ -108,6 +112,8 @@ def _served_as_in_production(host: str) -> dict[str, str]:
         # Webhooks to a receiver on this machine (a customer trying them out); e-mails are
         # printed by the workers (no EMAIL_HOST: Django's console backend).
         "CPCC_WEBHOOK_ALLOW_PRIVATE": "1",
+        # The RVs fly without a pilot on duty; the demo's pilot may take them on duty to try.
+        "CPCC_REQUIRE_PILOT": "0",
     }
     env = {**chosen, **os.environ}
     # (Of two filters for one warning, the one given last wins: this one, over the environment's.)
@@ -233,6 +239,13 @@ def _scenario_paths(options: dict[str, Any]) -> list[str]:
     return [options["scenario"] or str(DEFAULT_SCENARIO), *also]
 
 
+def _login_line(kind: str, username: str, password: str | None, label: str | None) -> str:
+    """A scenario's login as the demo prints it: a customer's own (its owner) as before; one of
+    a customer's users or staff the scenario names with who they are."""
+    line = f"  {kind}: {username} / {password or '(unchanged)'}"
+    return f"{line}  ({label})" if label else line
+
+
 def _wait_for_port(host: str, port: int, processes: Processes) -> None:
     deadline = time.monotonic() + START_TIMEOUT_S
     while time.monotonic() < deadline:
@@ -327,6 +340,13 @@ class Command(BaseCommand):
                 name: gs for each in loaded for name, gs in each.ground_stations.items()
             }
             vehicles = {name: vehicle for each in loaded for name, vehicle in each.vehicles.items()}
+            # To try the roles: a viewer of the first customer, a pilot of every RV.
+            first_customer = next(
+                (customer for each in loaded for customer in each.customers.values()), None
+            )
+            viewer, pilot = demo_people(
+                customer=first_customer, vehicles=list(vehicles.values()), password=password
+            )
             # daphne's verbosity 0 turns off its access log (a line for every static file and
             # map tile, a thousand in a few minutes) and nothing else: the web process logs
             # through Django's LOGGING (settings.py), errors and the platform's own lines.
@@ -357,11 +377,24 @@ class Command(BaseCommand):
                 f"CPCC is running at {url}",
                 f"  admin: admin / {admin_password}  ({url}admin/)",
                 *(
-                    f"  customer: {username} / {login_password or '(unchanged)'}"
+                    _login_line(
+                        "staff" if username in each.staff else "customer",
+                        username,
+                        login_password,
+                        each.labels.get(username),
+                    )
                     for each in loaded
                     for username, login_password in each.logins
                 ),
             ]
+            if viewer is not None and first_customer is not None:
+                self.logins.append(
+                    f"  viewer: {viewer.username} / {password}  ({first_customer.name}, read only)"
+                )
+            flown = ", ".join(vehicles) or "no RV"
+            self.logins.append(
+                f"  pilot: {pilot.username} / {password}  (staff, may fly {flown}; not on duty)"
+            )
             self.logins_path = Path(settings.VAR_DIR) / "demo-logins.txt"
             _write_private(self.logins_path, "\n".join(self.logins) + "\n")
             self.enter = EnterKey(sys.stdin, pressed=self._show_logins)

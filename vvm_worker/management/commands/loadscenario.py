@@ -14,9 +14,10 @@ from vvm_worker.services.scenarios import scenario_apply, scenario_submit_all
 
 class Command(BaseCommand):
     help = (
-        "Put a scenario's SDC additions, ground stations, vehicles and customers (with a login "
-        "user each; password from CPCC_SCENARIO_PASSWORD or generated) into the configured database "
-        "(idempotent) and submit its VVs."
+        "Put a scenario's SDC additions, ground stations, vehicles (with their pilots), staff "
+        "(in their groups) and customers (with a login user each, its owner, and the users the "
+        "scenario names, with their roles; passwords from CPCC_SCENARIO_PASSWORD or generated) "
+        "into the configured database (idempotent) and submit its VVs."
     )
 
     def add_arguments(self, parser: CommandParser) -> None:
@@ -39,7 +40,10 @@ class Command(BaseCommand):
         )
         for username, password in loaded.logins:
             shown = password if password is not None else "(unchanged)"
-            self.stdout.write(f"  login {username} / {shown}")
+            label = loaded.labels.get(username)
+            if label is not None and username in loaded.staff:
+                label = f"staff: {label}"
+            self.stdout.write(f"  login {username} / {shown}" + (f"  ({label})" if label else ""))
         if options["no_vvs"]:
             return
         # Queued only: the ground-station workers admit them within each customer's quota.

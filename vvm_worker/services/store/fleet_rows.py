@@ -1,22 +1,24 @@
 """The fleet's rows in the store, as the task path reads and writes them: RVs' statuses and
 rows, their open tasks (in a planner's order or with their customers' weights), tasks put on
-an RV's list, what a control loop reports of its vehicle, and the track points of the VVs
-aboard."""
+an RV's list, what a control loop reports of its vehicle (its take-offs with their pilot in
+command), and the track points of the VVs aboard."""
 
 from __future__ import annotations
 
 import contextlib
+import datetime as dt
 import functools
 import uuid
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from django.contrib.auth import get_user_model
 from django.db import connection, transaction
 from django.db.models import BooleanField, ExpressionWrapper, Q, QuerySet
 
 from cpcc_site.prepared import Many, PreparedRead, deferred, update_row, update_row_with
 from fleet.geo import Position
-from fleet.models import GroundStation, Vehicle, VehicleStatus
+from fleet.models import GroundStation, TakeOff, Vehicle, VehicleStatus
 from missions.models import ACTIVE_STATUSES, Task, TaskStatus, TrackPoint, VirtualVehicle
 from vvm_worker.services.store.units import db_time_ago
 
@@ -145,20 +147,50 @@ def vehicle_report(
     values: dict[str, Any],
     add: dict[str, int] | None,
     track_point: tuple[float, Position] | None = None,
+    take_offs: Sequence[tuple[float, dt.datetime]] = (),
 ) -> None:
     """The RV's row: ``values`` set, ``add`` added to its counters; with ``track_point``
     (time, position), that point on the track of every VV aboard now, found by the database
-    in the same commit (on PostgreSQL, the same statement). Inside the caller's transaction
+    in the same commit (on PostgreSQL, the same statement); ``take_offs`` (platform clock,
+    date) recorded in the same commit (``take_offs_insert``). Inside the caller's transaction
     when there is one."""
-    if track_point is None:
+    if track_point is None and not take_offs:
         with deferred():
             update_row(Vehicle, vehicle_id, values=values, add=add)
         return
-    # One commit for the track points and the row (a lone UPDATE commits by itself).
+    # One commit for the track points, the take-offs and the row (a lone UPDATE commits by
+    # itself).
     alone = connection.get_autocommit()
     with transaction.atomic() if alone else contextlib.nullcontext(), deferred():
+        take_offs_insert(vehicle_id, take_offs)
+        if track_point is None:
+            update_row(Vehicle, vehicle_id, values=values, add=add)
+            return
         track = _track_points_statement(vehicle_id, [track_point])
         update_row_with(Vehicle, vehicle_id, values=values, add=add, write=track)
+
+
+def take_offs_insert(vehicle_id: int, take_offs: Sequence[tuple[float, dt.datetime]]) -> None:
+    """The RV's take-offs (platform clock, date), each with the pilot on duty for it as the
+    database has it now: one INSERT ... SELECT from the RV's row (its pilot's name joined),
+    no read of its own; sent without waiting in a pipelined unit of work."""
+    if not take_offs:
+        return
+    users = get_user_model()
+    username = users._meta.get_field(users.USERNAME_FIELD).column
+    adapt = connection.ops.adapt_datetimefield_value
+    rows = " UNION ALL ".join(['SELECT %s AS "at", %s AS "at_s"'] * len(take_offs))
+    sql = (
+        f'INSERT INTO "{TakeOff._meta.db_table}" '
+        '("vehicle_id", "at", "at_s", "pilot_id", "pilot_name") '
+        f'SELECT v."id", p."at", p."at_s", v."pilot_on_duty_id", COALESCE(u."{username}", \'\') '
+        f'FROM ({rows}) p CROSS JOIN "{Vehicle._meta.db_table}" v '
+        f'LEFT JOIN "{users._meta.db_table}" u ON u."id" = v."pilot_on_duty_id" '
+        'WHERE v."id" = %s'
+    )
+    params = [value for at_s, at in take_offs for value in (adapt(at), at_s)]
+    with deferred(), connection.cursor() as cursor:
+        cursor.execute(sql, [*params, vehicle_id])
 
 
 def track_points_aboard(vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:
