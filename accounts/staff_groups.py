@@ -18,6 +18,9 @@ SECRET_MODELS = frozenset({("authtoken", "tokenproxy"), ("authtoken", "token")})
 READ_APPS = ("accounts", "fleet", "missions", "auditlog")
 
 FLEET_MODELS = ("vehicle", "groundstation", "noflyzone", "rallypoint", "sensortype")
+# Batteries and maintenance intervals: fleet managers change them; maintenance records are
+# added (through the service), never changed.
+MAINTENANCE_MODELS = ("battery", "maintenanceinterval")
 
 # Per group: (app label, codename) pairs; "view:<app>" stands for every view_ permission of the
 # app's models (the secret ones left out).
@@ -30,6 +33,13 @@ STAFF_GROUP_PERMISSIONS: dict[str, tuple[str, ...]] = {
             for verb in ("add", "change", "delete")
         ),
         "fleet.operate_vehicle",
+        *(
+            f"fleet.{verb}_{model}"
+            for model in MAINTENANCE_MODELS
+            for verb in ("add", "change", "delete")
+        ),
+        "fleet.add_maintenancerecord",
+        "fleet.swap_battery",
         # Customers' quotas and classes (not adding or removing customers: a superuser's).
         "accounts.change_customer",
         "accounts.add_serviceclass",
@@ -39,8 +49,14 @@ STAFF_GROUP_PERMISSIONS: dict[str, tuple[str, ...]] = {
         "missions.change_virtualvehicle",
     ),
     PILOT: (
-        *(f"fleet.view_{model}" for model in (*FLEET_MODELS, "pilotduty", "takeoff")),
+        *(
+            f"fleet.view_{model}"
+            for model in (*FLEET_MODELS, "pilotduty", "flight", *MAINTENANCE_MODELS)
+        ),
+        "fleet.view_maintenancerecord",
         "fleet.operate_vehicle",
+        # A battery swap on the RVs they are assigned.
+        "fleet.swap_battery",
     ),
     SUPPORT: tuple(f"view:{app}" for app in READ_APPS),
 }

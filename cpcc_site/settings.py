@@ -312,6 +312,10 @@ CPCC_INVITE_DAYS = env_float("CPCC_INVITE_DAYS", 7.0, minimum=0.01)
 # An RV takes new work only while a pilot is on duty for it (its VVs wait with the reason "no
 # pilot on duty"); off by default and in the demo.
 CPCC_REQUIRE_PILOT = env_bool("CPCC_REQUIRE_PILOT", False)
+# A flight's .tlog (fleet.Flight.log, under MEDIA_ROOT/flights/) is deleted this many days
+# after the flight ended (`manage.py flightlogs --prune`, and daily by each RV worker); the
+# flight's record stays.
+CPCC_FLIGHT_LOG_DAYS = env_float("CPCC_FLIGHT_LOG_DAYS", 90.0, minimum=0.01)
 
 # Named API tokens (accounts.ApiToken, django-rest-knox's model with a name and when it was last
 # used): only a digest of each key is kept; keys start with "cpcc_" (so that secret scanners

@@ -18,39 +18,57 @@ from django.shortcuts import get_object_or_404
 from django.template.response import TemplateResponse
 from django.urls import URLPattern, path, reverse
 from django.utils import timezone
+from django.utils.html import format_html
 
 from accounts.roles import PILOT
 from cpcc_site.admin_display import METRES, SPEED, PositionShown, duration, rounded
 from cpcc_site.admin_site import ExplainedWhenEmpty
+from fleet.maintenance import (
+    Due,
+    MaintenanceDue,
+    battery_due_list,
+    fleet_maintenance,
+    intervals_for,
+    vehicle_batteries,
+    vehicle_maintenance,
+)
 from fleet.models import (
+    CYCLE_RULE,
+    Battery,
     Driver,
+    Flight,
     GroundStation,
+    MaintenanceInterval,
+    MaintenanceRecord,
     NoFlyZone,
     PilotDuty,
     RallyPoint,
     SensorType,
-    TakeOff,
     Vehicle,
     VehicleCommand,
     VehicleKind,
     VehicleStatus,
 )
 from fleet.selectors import (
+    flight_list,
     ground_station_list,
     sensor_carriers,
     sensors_not_carried,
     vehicle_list,
+    vehicle_logbook,
 )
 from fleet.widgets import AreaWidget, map_media
-from missions.selectors import with_active_vv_count
+from missions.selectors import flight_tasks, with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     DutyRefused,
     GroundStationConfig,
     VehicleConfig,
     VehicleRemoved,
+    battery_swap,
     ground_station_create,
     ground_station_update,
+    maintenance_record,
     no_fly_zone_delete,
     no_fly_zone_save,
     rally_point_delete,
@@ -61,6 +79,7 @@ from vvm_worker.services import (
     vehicle_set_status,
     vehicle_take_duty,
     vehicle_update,
+    vehicles_check_maintenance,
 )
 
 
@@ -250,10 +269,31 @@ def _command(vehicle: Vehicle) -> dict[str, Any] | None:
     }
 
 
-def _overview_row(vehicle: Any, now: datetime, lease_s: float, user: Any) -> dict[str, Any]:
+_DUE_UNITS = {"hours": "flight hours", "flights": "flights", "days": "days", "cycles": "cycles"}
+
+
+def _due_text(due: Due) -> str:
+    """ "25-hour inspection: 23.5 of 25 flight hours" (a battery's: its name too)."""
+    battery = f" (battery {due.battery})" if due.battery else ""
+    return f"{due.name}{battery}: {due.used:g} of {due.limit:g} {_DUE_UNITS[due.kind]}"
+
+
+def _maintenance_shown(due: MaintenanceDue | None) -> dict[str, list[str]]:
+    if due is None:
+        return {"due_soon": [], "overdue": []}
+    return {
+        "due_soon": [_due_text(d) for d in due.due_soon],
+        "overdue": [_due_text(d) for d in due.overdue],
+    }
+
+
+def _overview_row(
+    vehicle: Any, now: datetime, lease_s: float, user: Any, due: MaintenanceDue | None = None
+) -> dict[str, Any]:
     """What the fleet overview shows of an RV (annotated with ``vvs_aboard``) to ``user``
-    (the actions they may do). Its worker's reports keep the page live
-    (static/js/admin/fleet-overview.js); its speed and next task are known from them only."""
+    (the actions they may do), with its maintenance due soon and overdue (``due``). Its
+    worker's reports keep the page live (static/js/admin/fleet-overview.js); its speed and
+    next task are known from them only."""
     if vehicle.worker_seen is None:
         lease, lease_text = "never", "never reported"
     else:
@@ -294,11 +334,19 @@ def _overview_row(vehicle: Any, now: datetime, lease_s: float, user: Any) -> dic
         "command": _command(vehicle),
         "pilot_on_duty": pilot.get_username() if (pilot := vehicle.pilot_on_duty) else "",
         "actions": _actions(vehicle, _acts_allowed(user, vehicle)),
+        "maintenance": _maintenance_shown(due),
     }
 
 
 # What the page's table shows and its map's data leaves out.
-_NOT_FOR_THE_MAP = ("actions", "command", "status_changed", "health_changed", "pilot_on_duty")
+_NOT_FOR_THE_MAP = (
+    "actions",
+    "command",
+    "status_changed",
+    "health_changed",
+    "pilot_on_duty",
+    "maintenance",
+)
 
 
 class SensorTypeForm(forms.ModelForm):
@@ -481,6 +529,7 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
         "phase",
         "tasks_done",
         "worker_seen",
+        "logbook_link",
     ]
     list_filter = ["status", "kind", "driver"]
     search_fields = ["name"]
@@ -591,7 +640,38 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
             self.admin_site.admin_view(self.act_view),
             name="fleet_vehicle_act",
         )
-        return [overview, act, *super().get_urls()]
+        logbook = path(
+            "<int:object_id>/logbook/",
+            self.admin_site.admin_view(self.logbook_view),
+            name="fleet_vehicle_logbook",
+        )
+        return [overview, act, logbook, *super().get_urls()]
+
+    @admin.display(description="logbook")
+    def logbook_link(self, vehicle: Vehicle) -> str:
+        url = reverse("admin:fleet_vehicle_logbook", args=[vehicle.pk])
+        return format_html('<a href="{}">Logbook</a>', url)
+
+    def logbook_view(self, request: HttpRequest, object_id: int) -> TemplateResponse:
+        """An RV's logbook: its totals (flights, hours, distance, take-offs and landings, last
+        flight), its battery's logbook, what maintenance is due, and its flights, newest
+        first, each linked to its page."""
+        if not (self.has_view_permission(request) and request.user.has_perm("fleet.view_flight")):
+            raise PermissionDenied
+        vehicle = get_object_or_404(Vehicle, pk=object_id)
+        flights = list(flight_list(vehicle_id=vehicle.pk)[:LOGBOOK_FLIGHTS])
+        context = {
+            **self.admin_site.each_context(request),
+            "title": f"{vehicle.name}: logbook",
+            "opts": self.opts,
+            "vehicle": vehicle,
+            "book": vehicle_logbook(vehicle=vehicle),
+            "batteries": vehicle_batteries(vehicle=vehicle),
+            "due": vehicle_maintenance(vehicle=vehicle, now=timezone.now()),
+            "flights": [(f, _duration_text(f.duration_s)) for f in flights],
+            "shown": len(flights),
+        }
+        return TemplateResponse(request, "admin/fleet/vehicle/logbook.html", context)
 
     def overview_view(self, request: HttpRequest) -> TemplateResponse:
         """The whole fleet on a map and in a table: status, position, battery, tasks done,
@@ -600,10 +680,9 @@ class VehicleAdmin(PositionShown, ExplainedWhenEmpty):
             raise PermissionDenied
         now = timezone.now()
         lease_s = settings.CPCC_RV_LEASE_S
-        vehicles = [
-            _overview_row(v, now, lease_s, request.user)
-            for v in with_active_vv_count(vehicle_list(), name="vvs_aboard")
-        ]
+        fleet = list(with_active_vv_count(vehicle_list(), name="vvs_aboard"))
+        due = fleet_maintenance(vehicles=fleet, now=now)
+        vehicles = [_overview_row(v, now, lease_s, request.user, due.get(v.pk)) for v in fleet]
         stations = [
             {**_station(gs), "alt": gs.alt, "vvs_here": gs.vvs_here}
             for gs in with_active_vv_count(ground_station_list(), name="vvs_here")
@@ -793,16 +872,293 @@ class PilotDutyAdmin(_Record):
         return duty.handed_to or NOBODY
 
 
-@admin.register(TakeOff)
-class TakeOffAdmin(_Record):
-    """Every take-off of an RV with its pilot in command then, as its worker recorded it."""
+def _duration_text(seconds: float | None) -> str:
+    if seconds is None:
+        return "in flight"
+    minutes, rest = divmod(round(seconds), 60)
+    return f"{minutes} min {rest:02d} s"
 
-    list_display = ["vehicle", "pilot_shown", "at"]
-    list_filter = ["vehicle"]
+
+# The flights an RV's logbook page lists (the CSV export has them all).
+LOGBOOK_FLIGHTS = 200
+
+
+@admin.register(Flight)
+class FlightAdmin(_Record):
+    """Every flight of an RV, take-off to landing, with its pilot in command, as its worker
+    recorded it."""
+
+    list_display = [
+        "vehicle",
+        "started",
+        "pilot_shown",
+        "duration_shown",
+        "distance_shown",
+        "tasks_served",
+        "ended_how",
+    ]
+    list_filter = ["vehicle", "ended_how"]
     list_select_related = ["vehicle"]
     search_fields = ["vehicle__name", "pilot_name"]
-    date_hierarchy = "at"
+    date_hierarchy = "started"
 
     @admin.display(description="pilot in command", ordering="pilot_name")
-    def pilot_shown(self, take_off: TakeOff) -> str:
-        return take_off.pilot_name or "none on duty"
+    def pilot_shown(self, flight: Flight) -> str:
+        return flight.pilot_name or "none on duty"
+
+    @admin.display(description="duration", ordering="duration_s")
+    def duration_shown(self, flight: Flight) -> str:
+        return _duration_text(flight.duration_s)
+
+    def change_view(
+        self,
+        request: HttpRequest,
+        object_id: str,
+        form_url: str = "",
+        extra_context: dict[str, Any] | None = None,
+    ) -> Any:
+        """A flight's page: its facts, where it flew with a replay, its altitude and battery
+        over time, the tasks it served and its log (a record: nothing to change)."""
+        if request.method != "GET" or not self.has_view_permission(request):
+            return super().change_view(request, object_id, form_url, extra_context)
+        flight = self.get_object(request, object_id)
+        if flight is None:
+            return self._get_obj_does_not_exist_redirect(request, self.opts, object_id)
+        tasks = flight_tasks(flight=flight)
+        context = {
+            **self.admin_site.each_context(request),
+            "title": f"{flight.vehicle.name}, {flight.started:%Y-%m-%d %H:%M} UTC",
+            "opts": self.opts,
+            "flight": flight,
+            "duration": _duration_text(flight.duration_s),
+            "tasks": tasks,
+            "track": bool(flight.track),
+            "media": map_media(),
+            "page_data": {
+                "track": flight.track,
+                "started_s": flight.started_s,
+                "tiles": settings.CPCC_MAP_TILES,
+            },
+        }
+        return TemplateResponse(request, "admin/fleet/flight/page.html", context)
+
+    @admin.display(description="distance", ordering="distance_m")
+    def distance_shown(self, flight: Flight) -> str:
+        return "" if flight.distance_m is None else f"{flight.distance_m / 1000:.2f} km"
+
+
+# --- batteries and maintenance ------------------------------------------------------------------
+
+
+@admin.register(Battery)
+class BatteryAdmin(ExplainedWhenEmpty):
+    """The batteries: their logbooks (cycles, flights, hours, lowest charge), the RV each is in,
+    what is due and whether it is retired. A swap is recorded as maintenance (or seen from the
+    autopilot's battery id or serial): the RV a battery is in is not changed here."""
+
+    empty_list_help = (
+        "A battery appears when an RV's worker reports its charge (named by the autopilot's "
+        "battery id or serial, else after its RV), or when someone records a battery swap "
+        "(Maintenance records, add: battery put in). " + CYCLE_RULE
+    )
+    list_display = [
+        "name",
+        "vehicle",
+        "cycles",
+        "flights",
+        "hours_shown",
+        "lowest_pct",
+        "due_shown",
+        "retired",
+    ]
+    list_filter = [("retired", admin.EmptyFieldListFilter), "vehicle"]
+    list_select_related = ["vehicle"]
+    search_fields = ["name", "serial", "vehicle__name"]
+    fields = [
+        "name",
+        "serial",
+        "autopilot_id",
+        "vehicle",
+        "installed",
+        "cycles",
+        "flights",
+        "flight_s",
+        "lowest_pct",
+        "retired",
+        "created",
+    ]
+    readonly_fields = [
+        "vehicle",
+        "installed",
+        "cycles",
+        "flights",
+        "flight_s",
+        "lowest_pct",
+        "retired",
+        "created",
+    ]
+
+    @admin.display(description="flight hours", ordering="flight_s")
+    def hours_shown(self, battery: Battery) -> str:
+        return f"{battery.flight_s / 3600:.2f}"
+
+    @admin.display(description="due")
+    def due_shown(self, battery: Battery) -> str:
+        due = battery_due_list(batteries=[battery])[battery.pk]
+        return "; ".join(_due_text(d) for d in due) or "-"
+
+
+@admin.register(MaintenanceInterval)
+class MaintenanceIntervalAdmin(ExplainedWhenEmpty):
+    """Maintenance intervals: for the RVs of a kind, one RV or every RV, every so many flight
+    hours, flights or days, and their batteries' cycles. Saving or deleting one looks at the
+    fleet again: an RV now overdue is grounded, one no longer overdue goes back into service."""
+
+    empty_list_help = (
+        "A maintenance interval says when maintenance is due ('25-hour inspection': every 25 "
+        "flight hours), for every RV, the RVs of a kind or one RV, and when a battery is "
+        "serviced or retired (by its cycles). Due soon at 90 %; overdue, the RV is grounded "
+        "until someone records the maintenance."
+    )
+    list_display = [
+        "name",
+        "applies_to",
+        "every_hours",
+        "every_flights",
+        "every_days",
+        "every_cycles",
+        "retire_cycles",
+    ]
+    list_filter = ["kind", "vehicle"]
+    search_fields = ["name"]
+    fields = [
+        "name",
+        ("kind", "vehicle"),
+        ("every_hours", "every_flights", "every_days"),
+        ("every_cycles", "retire_cycles"),
+    ]
+
+    @admin.display(description="for")
+    def applies_to(self, interval: MaintenanceInterval) -> str:
+        if interval.vehicle is not None:
+            return str(interval.vehicle)
+        return interval.get_kind_display() if interval.kind else "every RV"
+
+    def _fleet_checked(self, request: HttpRequest) -> None:
+        grounded = vehicles_check_maintenance(vvm=platform_vvm())
+        if grounded:
+            self.message_user(
+                request, f"Grounded (overdue): {', '.join(grounded)}", messages.WARNING
+            )
+
+    def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
+        super().save_model(request, obj, form, change)
+        self._fleet_checked(request)
+
+    def delete_model(self, request: HttpRequest, obj: Any) -> None:
+        super().delete_model(request, obj)
+        self._fleet_checked(request)
+
+    def delete_queryset(self, request: HttpRequest, queryset: QuerySet[Any]) -> None:
+        super().delete_queryset(request, queryset)
+        self._fleet_checked(request)
+
+
+class MaintenanceRecordForm(forms.ModelForm):
+    """Maintenance done: on an RV or a battery, an interval's or in words; or a battery swap
+    (the battery put in, by name)."""
+
+    swap_to = forms.CharField(
+        required=False,
+        max_length=120,
+        label="Battery put in",
+        help_text="A battery swap on the vehicle: the name of the battery put in (a new name "
+        "makes one). Leave the rest empty but the notes.",
+    )
+
+    class Meta:
+        model = MaintenanceRecord
+        fields = ["vehicle", "battery", "interval", "what", "notes"]
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if "what" in self.fields:  # (the record's page shows it read-only)
+            self.fields["what"].required = False
+            self.fields["what"].help_text = "What was done, in words (empty: the interval's name)."
+
+    def clean(self) -> dict[str, Any]:
+        data = super().clean() or {}
+        if data.get("swap_to") and data.get("vehicle") is None:
+            raise forms.ValidationError({"vehicle": "name the vehicle whose battery was swapped"})
+        if data.get("vehicle") is None and data.get("battery") is None:
+            raise forms.ValidationError("name the vehicle or the battery maintained")
+        if not data.get("swap_to") and data.get("interval") is None and not data.get("what"):
+            raise forms.ValidationError({"what": "say what was done, or choose the interval"})
+        swap_to, vehicle, interval = data.get("swap_to"), data.get("vehicle"), data.get("interval")
+        if swap_to and Battery.objects.filter(name=swap_to.strip(), retired__isnull=False):
+            raise forms.ValidationError({"swap_to": f"battery {swap_to} is retired"})
+        if interval is not None and vehicle is not None and not intervals_for(vehicle, [interval]):
+            raise forms.ValidationError({"interval": f"{interval} is not one of {vehicle}'s"})
+        return data
+
+
+@admin.register(MaintenanceRecord)
+class MaintenanceRecordAdmin(ExplainedWhenEmpty):
+    """Maintenance records: who did what, when, on which RV or battery. Added through the
+    service (an RV grounded for it goes back into service), never changed or deleted."""
+
+    form = MaintenanceRecordForm
+    empty_list_help = (
+        "A maintenance record says who did what maintenance on an RV or a battery, and when; "
+        "recording an interval's maintenance starts it again and puts an RV grounded for it "
+        "back into service. A battery swap is recorded here too."
+    )
+    list_display = ["at", "what", "vehicle", "battery", "by_name"]
+    list_filter = ["vehicle", "interval"]
+    list_select_related = ["vehicle", "battery"]
+    search_fields = ["what", "by_name", "vehicle__name", "battery__name", "notes"]
+    date_hierarchy = "at"
+
+    def get_fields(self, request: HttpRequest, obj: Any = None) -> list[str]:
+        if obj is None:
+            return ["vehicle", "battery", "interval", "what", "swap_to", "notes"]
+        return ["vehicle", "battery", "interval", "what", "notes", "by_name", "at"]
+
+    def get_readonly_fields(self, request: HttpRequest, obj: Any = None) -> list[str]:
+        if obj is None:
+            return []
+        return ["vehicle", "battery", "interval", "what", "notes", "by_name", "at"]
+
+    def has_change_permission(self, request: HttpRequest, obj: Any = None) -> bool:
+        return False
+
+    def has_delete_permission(self, request: HttpRequest, obj: Any = None) -> bool:
+        return False
+
+    def save_model(self, request: HttpRequest, obj: Any, form: Any, change: bool) -> None:
+        data = form.cleaned_data
+        if data.get("swap_to"):
+            battery = battery_swap(
+                vehicle=data["vehicle"],
+                name=data["swap_to"],
+                by=request.user,
+                notes=data.get("notes", ""),
+                vvm=platform_vvm(),
+            )
+            saved = battery.maintenance_records.order_by("-at", "-id")[0]
+        else:
+            saved = maintenance_record(
+                vehicle=data.get("vehicle"),
+                battery=data.get("battery"),
+                interval=data.get("interval"),
+                by=request.user,
+                what=data.get("what", ""),
+                notes=data.get("notes", ""),
+                vvm=platform_vvm(),
+            )
+        # The admin logs and shows the record as the service saved it.
+        for model_field in MaintenanceRecord._meta.concrete_fields:
+            setattr(obj, model_field.attname, getattr(saved, model_field.attname))
+
+    def save_related(self, request: HttpRequest, form: Any, formsets: Any, change: bool) -> None:
+        pass  # the service saved it

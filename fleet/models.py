@@ -385,21 +385,256 @@ class PilotDuty(models.Model):
         return f"{self.pilot_name} on {self.vehicle}"
 
 
-class TakeOff(models.Model):
-    """One take-off of an RV, with its pilot in command then (empty: none on duty)."""
+class FlightEnd(models.TextChoices):
+    """How a flight ended."""
 
-    vehicle = models.ForeignKey(Vehicle, on_delete=models.CASCADE, related_name="take_offs")
-    at = models.DateTimeField()
-    at_s = models.FloatField(help_text="Platform clock.")
+    LANDED_HOME = "landed_home", "Landed at home"
+    LANDED_ELSEWHERE = "landed_elsewhere", "Landed elsewhere"
+    LINK_LOST = "link_lost", "Link lost"
+    FAILSAFE = "failsafe", "Failsafe (the autopilot took over)"
+    OPERATOR = "operator", "An operator's command"
+
+
+class Flight(models.Model):
+    """One flight of an RV, from its take-off to its landing (open while it flies), written
+    by its control loop with its reports: who was its pilot in command, how long and how far
+    it flew, how high, its battery then, the tasks it served and how it ended."""
+
+    vehicle = models.ForeignKey(Vehicle, on_delete=models.CASCADE, related_name="flights")
     pilot = models.ForeignKey(
         settings.AUTH_USER_MODEL, null=True, blank=True, on_delete=models.SET_NULL, related_name="+"
     )
+    # Kept as it was at the take-off: the record outlives a pilot's account.
     pilot_name = models.CharField(max_length=150, blank=True)
+    started = models.DateTimeField()
+    started_s = models.FloatField(help_text="Platform clock.")
+    ended = models.DateTimeField(null=True, blank=True)
+    ended_s = models.FloatField(null=True, blank=True, help_text="Platform clock.")
+    ended_how = models.CharField(max_length=20, choices=FlightEnd.choices, blank=True)
+    # The vehicle's odometers at the take-off: the flight's distance and time are what they
+    # gained until the landing.
+    odometer_start_m = models.FloatField(default=0.0)
+    flight_s_start = models.FloatField(default=0.0)
+    duration_s = models.FloatField(null=True, blank=True)
+    distance_m = models.FloatField(null=True, blank=True)
+    max_alt_m = models.FloatField(null=True, blank=True, help_text="Highest, above home.")
+    battery_start_pct = models.FloatField(null=True, blank=True)
+    battery_end_pct = models.FloatField(null=True, blank=True)
+    battery_name = models.CharField(
+        max_length=120, blank=True, help_text="The battery flown (the autopilot's id or serial)."
+    )
+    tasks_served = models.PositiveIntegerField(default=0)
+    # [{"id", "name"}] of the customers whose tasks it served (staff data).
+    customers = models.JSONField(default=list, blank=True)
+    vvs = models.JSONField(default=list, blank=True, help_text="The VVs aboard: [{id, name}].")
+    # Where it flew: [t_s, lat, lng, alt, battery_pct or null] at each report of its loop (the
+    # ends of its legs and where it stopped), for the flight's page and a simulated RV's log.
+    track = models.JSONField(default=list, blank=True)
+    log = models.FileField(upload_to="flights/", blank=True)
+
+    class Meta:
+        ordering = ["-started", "-id"]
+        indexes = [
+            models.Index(fields=["vehicle", "-started"], name="flight_vehicle_started"),
+            models.Index(fields=["started"], name="flight_started"),
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.vehicle} at {self.started:%Y-%m-%d %H:%M:%S}"
+
+
+# The battery cycle rule (``fleet.maintenance.cycle_step``): a charge from below CYCLE_LOW_PCT
+# to above CYCLE_FULL_PCT counts one cycle.
+CYCLE_LOW_PCT = 50.0
+CYCLE_FULL_PCT = 90.0
+CYCLE_RULE = (
+    "A charge from below 50 % to above 90 % counts one cycle: a battery seen below 50 % and "
+    "later above 90 % counts one, then it must go below 50 % again. A swap that shows a full "
+    "battery after a low one (the same battery, charged) counts one too."
+)
+
+
+class Battery(models.Model):
+    """A battery pack and its logbook: the RV it is in now, its cycles (CYCLE_RULE), flights,
+    flight hours and lowest charge seen, and whether it is retired. Identified by the
+    autopilot's serial (SMART_BATTERY_INFO) or battery id (BATTERY_STATUS.id) where it reports
+    one, else named by the operator when it is swapped."""
+
+    name = models.CharField(max_length=120, unique=True)
+    serial = models.CharField(
+        max_length=120, blank=True, help_text="The autopilot's serial of it, where it reports one."
+    )
+    autopilot_id = models.PositiveSmallIntegerField(
+        null=True, blank=True, help_text="The autopilot's battery id (BATTERY_STATUS.id)."
+    )
+    vehicle = models.ForeignKey(
+        Vehicle,
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
+        related_name="batteries",
+        help_text="The RV it is in now (empty: in none).",
+    )
+    installed = models.DateTimeField(null=True, blank=True, help_text="Put into its RV then.")
+    cycles = models.PositiveIntegerField(default=0, help_text=CYCLE_RULE)
+    # The cycle rule's memory: seen below CYCLE_LOW_PCT since it last counted a cycle.
+    below_low = models.BooleanField(default=False)
+    lowest_pct = models.FloatField(null=True, blank=True, help_text="The lowest charge seen, %.")
+    flights = models.PositiveIntegerField(default=0)
+    flight_s = models.FloatField(default=0.0, help_text="Flight time, seconds.")
+    # The flights of its RVs that ended up to then are counted in flights and flight_s.
+    counted_until = models.DateTimeField(null=True, blank=True)
+    retired = models.DateTimeField(
+        null=True, blank=True, help_text="Retired then (past its retirement cycles): not flown."
+    )
+    created = models.DateTimeField(auto_now_add=True)
+
+    class Meta:
+        ordering = ["name"]
+        verbose_name_plural = "batteries"
+        permissions = [("swap_battery", "Can record a battery swap on an RV")]
+        constraints = [
+            # One battery in an RV at a time: another one seen is a swap.
+            models.UniqueConstraint(
+                fields=["vehicle"],
+                condition=models.Q(vehicle__isnull=False),
+                name="battery_one_per_vehicle",
+            ),
+            models.UniqueConstraint(
+                fields=["serial"], condition=~models.Q(serial=""), name="battery_serial_unique"
+            ),
+        ]
+
+    def __str__(self) -> str:
+        return self.name
+
+
+class MaintenanceInterval(models.Model):
+    """A maintenance interval ("25-hour inspection"): for the RVs of a kind, one RV, or every
+    RV (neither given), due every so many flight hours, flights or days; for their batteries,
+    every so many cycles, and a battery retires at so many cycles. Due soon at 90 % of a
+    limit; overdue (the RV is grounded) at 100 % until someone records the maintenance."""
+
+    name = models.CharField(max_length=80)
+    kind = models.CharField(
+        max_length=10,
+        choices=VehicleKind.choices,
+        blank=True,
+        help_text="The RVs of this kind; empty (and no vehicle): every RV.",
+    )
+    vehicle = models.ForeignKey(
+        Vehicle,
+        null=True,
+        blank=True,
+        on_delete=models.CASCADE,
+        related_name="maintenance_intervals",
+        help_text="Only this RV (then no kind).",
+    )
+    every_hours = models.FloatField(
+        null=True, blank=True, validators=[MinValueValidator(0.01)], help_text="Flight hours."
+    )
+    every_flights = models.PositiveIntegerField(
+        null=True, blank=True, validators=[MinValueValidator(1)]
+    )
+    every_days = models.PositiveIntegerField(
+        null=True, blank=True, validators=[MinValueValidator(1)]
+    )
+    every_cycles = models.PositiveIntegerField(
+        null=True, blank=True, validators=[MinValueValidator(1)], help_text="Battery cycles."
+    )
+    retire_cycles = models.PositiveIntegerField(
+        null=True,
+        blank=True,
+        validators=[MinValueValidator(1)],
+        help_text="A battery retires at this many cycles: its RV is grounded until it is swapped.",
+    )
+    created = models.DateTimeField(auto_now_add=True)
+
+    class Meta:
+        ordering = ["name", "pk"]
+        constraints = [
+            models.CheckConstraint(
+                condition=~(models.Q(vehicle__isnull=False) & ~models.Q(kind="")),
+                name="interval_kind_or_vehicle",
+            ),
+            models.CheckConstraint(
+                condition=models.Q(every_hours__isnull=False)
+                | models.Q(every_flights__isnull=False)
+                | models.Q(every_days__isnull=False)
+                | models.Q(every_cycles__isnull=False)
+                | models.Q(retire_cycles__isnull=False),
+                name="interval_has_a_limit",
+            ),
+            models.CheckConstraint(
+                condition=models.Q(every_hours__isnull=True) | models.Q(every_hours__gt=0),
+                name="interval_hours_positive",
+            ),
+        ]
+
+    def __str__(self) -> str:
+        return self.name
+
+    def clean(self) -> None:
+        super().clean()
+        if self.vehicle_id is not None and self.kind:
+            raise ValidationError({"kind": "an interval is for a kind or for one vehicle"})
+        limits = (
+            self.every_hours,
+            self.every_flights,
+            self.every_days,
+            self.every_cycles,
+            self.retire_cycles,
+        )
+        if all(limit is None for limit in limits):
+            raise ValidationError("give at least one limit: hours, flights, days or cycles")
+
+
+class MaintenanceRecord(models.Model):
+    """Maintenance a person did (or a battery swap they recorded), on an RV or a battery: who,
+    what (an interval, or free text), when and notes. Recording an interval's maintenance
+    starts it again."""
+
+    vehicle = models.ForeignKey(
+        Vehicle,
+        null=True,
+        blank=True,
+        on_delete=models.CASCADE,
+        related_name="maintenance_records",
+    )
+    battery = models.ForeignKey(
+        Battery,
+        null=True,
+        blank=True,
+        on_delete=models.CASCADE,
+        related_name="maintenance_records",
+    )
+    interval = models.ForeignKey(
+        MaintenanceInterval,
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
+        related_name="records",
+    )
+    what = models.CharField(max_length=200)
+    by = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, blank=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    # Kept as it was: the record outlives a person's account.
+    by_name = models.CharField(max_length=150)
+    at = models.DateTimeField()
+    notes = models.TextField(blank=True)
+    # The battery's cycles then: its cycle intervals count from them.
+    battery_cycles = models.PositiveIntegerField(null=True, blank=True)
 
     class Meta:
         ordering = ["-at", "-id"]
-        verbose_name = "take-off"
-        indexes = [models.Index(fields=["vehicle", "-at"])]
+        indexes = [models.Index(fields=["vehicle", "interval", "-at"], name="maint_vehicle_at")]
+        constraints = [
+            models.CheckConstraint(
+                condition=models.Q(vehicle__isnull=False) | models.Q(battery__isnull=False),
+                name="maint_record_has_subject",
+            )
+        ]
 
     def __str__(self) -> str:
-        return f"{self.vehicle} at {self.at:%Y-%m-%d %H:%M:%S}"
+        return f"{self.what} by {self.by_name} at {self.at:%Y-%m-%d %H:%M}"

@@ -2,15 +2,24 @@
 
 from __future__ import annotations
 
+import datetime as dt
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from django.db.models import Q, QuerySet
+from django.db.models import Count, Max, Q, QuerySet, Sum
 
 from fleet.geo import Position
 from fleet.kinds import a_vehicle
-from fleet.models import GroundStation, NoFlyZone, RallyPoint, SensorType, Vehicle, VehicleStatus
+from fleet.models import (
+    Flight,
+    GroundStation,
+    NoFlyZone,
+    RallyPoint,
+    SensorType,
+    Vehicle,
+    VehicleStatus,
+)
 from fleet.service_area import Exclusion, Reach, service_area_geojson
 
 
@@ -123,3 +132,45 @@ def service_area() -> dict[str, Any]:
         for z in NoFlyZone.objects.order_by("pk")
     ]
     return service_area_geojson(reaches, zones)
+
+
+# --- flights and the logbook (staff data) ------------------------------------------------------
+
+
+def flight_list(
+    *,
+    vehicle_id: int | None = None,
+    since: dt.datetime | None = None,
+    until: dt.datetime | None = None,
+) -> QuerySet[Flight]:
+    """Flights newest first, of one RV or all, that took off within [since, until)."""
+    flights = Flight.objects.select_related("vehicle").order_by("-started", "-id")
+    if vehicle_id is not None:
+        flights = flights.filter(vehicle_id=vehicle_id)
+    if since is not None:
+        flights = flights.filter(started__gte=since)
+    if until is not None:
+        flights = flights.filter(started__lt=until)
+    return flights
+
+
+def vehicle_logbook(*, vehicle: Vehicle) -> dict[str, Any]:
+    """An RV's logbook: its flights, hours, distance, take-offs and landings, last flight (from
+    its recorded flights; one still in the air counts as a take-off, not yet a landing)."""
+    flights = Flight.objects.filter(vehicle=vehicle)
+    totals = flights.aggregate(
+        take_offs=Count("id"),
+        landings=Count("id", filter=Q(ended__isnull=False)),
+        flight_s=Sum("duration_s"),
+        distance_m=Sum("distance_m"),
+        last=Max("started"),
+    )
+    return {
+        "flights": totals["landings"],
+        "take_offs": totals["take_offs"],
+        "landings": totals["landings"],
+        "flight_hours": round((totals["flight_s"] or 0.0) / 3600.0, 3),
+        "distance_km": round((totals["distance_m"] or 0.0) / 1000.0, 3),
+        "last_flight": totals["last"],
+        "in_flight": flights.filter(ended__isnull=True).exists(),
+    }

@@ -6,6 +6,7 @@ both for a missing VV and for another customer's, so a caller cannot tell them a
 
 from __future__ import annotations
 
+import datetime as dt
 import uuid
 from collections.abc import Sequence
 from typing import Any, TypeVar
@@ -429,3 +430,23 @@ def map_snapshot_for_user(*, user: User, vv_id: uuid.UUID | str | None = None) -
         ],
         "vvs": listed,
     }
+
+
+def flight_tasks(*, flight: Any) -> list[Task]:
+    """The tasks an RV served on a flight (staff data): done by it between its take-off and
+    its landing (now, while it flies), in the order they were done, with their VV and its
+    customer; each with ``done_at``, the date it was done (the flight's clock)."""
+    until_s = flight.ended_s if flight.ended_s is not None else float("inf")
+    tasks = list(
+        Task.objects.filter(
+            vehicle_id=flight.vehicle_id,
+            status=TaskStatus.DONE,
+            done_s__gte=flight.started_s,
+            done_s__lte=until_s,
+        )
+        .select_related("vv__customer")
+        .order_by("done_s", "pk")
+    )
+    for task in tasks:
+        task.done_at = flight.started + dt.timedelta(seconds=task.done_s - flight.started_s)  # type: ignore[attr-defined]
+    return tasks

@@ -11,6 +11,7 @@ nothing that has not changed.
 from __future__ import annotations
 
 import datetime as dt
+import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -25,8 +26,9 @@ from fleet.airspace import Airspace
 from fleet.driving import Driver, Sample, SensorFailure, SensorRead
 from fleet.geo import Position, within_m
 from fleet.kinds import limits_of
+from fleet.mavlink.tlog_sim import simulated_tlog
 from fleet.models import Driver as DriverKind
-from fleet.models import SensorType, Vehicle, VehicleStatus
+from fleet.models import Flight, SensorType, Vehicle, VehicleStatus
 from fleet.plugins import SensorPlugin, plugin_class
 from fleet.simulation import SimVehicle
 from fleet.simulation import VehicleSpec as KinematicSpec
@@ -36,6 +38,7 @@ from vvm_worker.control import (
     REACH_SLACK_M,
     Area,
     ControlLoop,
+    Landing,
     LoopConfig,
     LoopTask,
     OperatorCommand,
@@ -49,16 +52,20 @@ from vvm_worker.sensing import read_sensors, vehicle_reading
 from vvm_worker.services import (
     VVM,
     task_complete,
+    vehicle_check_maintenance,
     vehicle_command_take,
+    vehicle_record_flights,
     vehicle_record_state,
-    vehicle_record_take_offs,
     vehicle_record_track,
     vehicle_set_status,
 )
 from vvm_worker.services.base import LocalRV, Settled
+from vvm_worker.services.flight_logs import flight_log_save
 from vvm_worker.services.routing import fleet_airspace, planned_order
-from vvm_worker.services.store import vehicle_tasks
+from vvm_worker.services.store import LandingRow, TakeOffRow, vehicle_tasks
 from vvm_worker.services.waiting import vvs_record_next_task_eta
+
+logger = logging.getLogger("cpcc.flights")
 
 _SDC_TTL_S = 10.0
 # An estimate of when an RV reaches a VV's task is written again when it moves by more.
@@ -160,9 +167,11 @@ class DatabaseStore:
         # and, with ``ticks``, the estimates that wait for the map tick to be written.
         self._estimates: dict[Any, float] = {}
         self._etas_waiting: dict[Any, float] = {}
-        # The take-offs the loop reported (platform clock), written with the next write of the
-        # row or of the track (in its unit of work), which reads the pilot on duty then.
-        self._take_offs: list[float] = []
+        # The take-offs the loop reported (platform clock, the odometers then) and the ends
+        # of flights (``Landing``), written with the next write of the row or of the track
+        # (in its unit of work), which reads the pilot on duty then.
+        self._take_offs: list[_TakeOff] = []
+        self._landings: list[Landing] = []
 
     def changed(self) -> None:
         """The RV's tasks or status may have changed: read them again when next asked."""
@@ -299,8 +308,11 @@ class DatabaseStore:
                 self._write(arrival, moved=True)
 
     def record_state(self, state: VehicleState, *, moved: bool) -> None:
-        if state.took_off_s is not None and state.took_off_s not in self._take_offs:
-            self._take_offs.append(state.took_off_s)  # (once, if the work is done again)
+        # (Each once, if the work is done again.)
+        if state.took_off_s is not None and all(t.t_s != state.took_off_s for t in self._take_offs):
+            self._take_offs.append(_TakeOff(state.took_off_s, state.distance_m, state.flight_s))
+        if state.landing is not None and state.landing not in self._landings:
+            self._landings.append(state.landing)
         if self.defer_reports:
             if moved:
                 self._points.append(state)
@@ -352,14 +364,20 @@ class DatabaseStore:
     def write_waiting(self) -> None:
         """Write the report that waits, if any (the host's map tick: a row is never more than
         a tick behind what its loop said). Where it stopped to serve a task waits for the
-        answer, which writes it. Then the take-offs that wait (none, mostly: they go with a
-        report) and the estimates that wait (see ``estimated``)."""
+        answer, which writes it. Then the take-offs and landings that wait (none, mostly: they
+        go with a report) and the estimates that wait (see ``estimated``)."""
         if self._waiting is not None:
             self._write(self._waiting, moved=False)
-        elif self._take_offs:
-            take_offs = self._dated(self._take_offs)
-            vehicle_record_take_offs(vehicle_id=self.vehicle_id, take_offs=take_offs)
+        elif self._take_offs or self._landings:
+            take_offs, landings = self._take_offs, self._landings
+            vehicle_record_flights(
+                vehicle_id=self.vehicle_id,
+                take_offs=self._take_off_rows(take_offs),
+                landings=self._landing_rows(landings),
+            )
             self._take_offs = self._take_offs[len(take_offs) :]
+            self._landings = self._landings[len(landings) :]
+            self._keep_logs(landings)
         write_estimates([self])
 
     def seen_aboard(self, vvs: list[dict[str, Any]]) -> None:
@@ -367,21 +385,27 @@ class DatabaseStore:
         self._aboard = vvs
 
     def settle(self, *, tasks_done: int = 0) -> Settled:
-        """Write the track points and take-offs that wait (``defer_reports``), in the
-        caller's transaction, and count ``tasks_done`` more tasks (written with the row);
+        """Write the track points, take-offs and landings that wait (``defer_reports``), in
+        the caller's transaction, and count ``tasks_done`` more tasks (written with the row);
         where the RV last said it is (None: it has said nothing since the row was written)."""
         take_offs, self._take_offs = self._take_offs, []
-        if take_offs:
-            vehicle_record_take_offs(vehicle_id=self.vehicle_id, take_offs=self._dated(take_offs))
+        landings, self._landings = self._landings, []
+        if take_offs or landings:
+            vehicle_record_flights(
+                vehicle_id=self.vehicle_id,
+                take_offs=self._take_off_rows(take_offs),
+                landings=self._landing_rows(landings),
+            )
+            self._keep_logs(landings)
         if self._points:
             points, self._points = self._points, []
             vehicle_record_track(
                 vehicle_id=self.vehicle_id, points=[(p.t_s, p.position) for p in points]
             )
             if self.settled_log is not None:
-                self.settled_log.append((self, _Waiting(points, tasks_done, take_offs)))
-        elif (tasks_done or take_offs) and self.settled_log is not None:
-            self.settled_log.append((self, _Waiting([], tasks_done, take_offs)))
+                self.settled_log.append((self, _Waiting(points, tasks_done, take_offs, landings)))
+        elif (tasks_done or take_offs or landings) and self.settled_log is not None:
+            self.settled_log.append((self, _Waiting([], tasks_done, take_offs, landings)))
         self._tasks_done += tasks_done
         return Settled(None if self._latest is None else self._latest.position)
 
@@ -390,12 +414,30 @@ class DatabaseStore:
         self._points = [*waiting.points, *self._points]
         self._tasks_done -= waiting.tasks_done
         self._take_offs = [*waiting.take_offs, *self._take_offs]
+        self._landings = [*waiting.landings, *self._landings]
 
-    def _dated(self, take_offs: Sequence[float]) -> list[tuple[float, dt.datetime]]:
-        """Take-offs (platform clock) with their dates (the platform clock's epoch)."""
-        epoch_ms = self.vvm.clock.epoch_ms
+    def _date(self, t_s: float) -> dt.datetime:
+        """The date of a time of the platform clock (its epoch)."""
+        return dt.datetime.fromtimestamp(self.vvm.clock.epoch_ms(t_s) / 1000, tz=dt.UTC)
+
+    def _take_off_rows(self, take_offs: Sequence[_TakeOff]) -> list[TakeOffRow]:
+        return [TakeOffRow(t.t_s, self._date(t.t_s), t.distance_m, t.flight_s) for t in take_offs]
+
+    def _landing_rows(self, landings: Sequence[Landing]) -> list[LandingRow]:
         return [
-            (t_s, dt.datetime.fromtimestamp(epoch_ms(t_s) / 1000, tz=dt.UTC)) for t_s in take_offs
+            LandingRow(
+                took_off_s=x.took_off_s,
+                t_s=x.t_s,
+                at=self._date(x.t_s),
+                how=x.how,
+                distance_m=x.distance_m,
+                flight_s=x.flight_s,
+                max_alt_m=x.max_alt_m,
+                battery_start_pct=x.battery_start_pct,
+                battery_end_pct=x.battery_end_pct,
+                track=x.track,
+            )
+            for x in landings
         ]
 
     def flush(self) -> None:
@@ -426,14 +468,56 @@ class DatabaseStore:
 
     def _write(self, state: VehicleState, *, moved: bool) -> None:
         self._waiting = None  # said by this report, or by an earlier one than this
-        # The end of a straight leg is on the track of every VV aboard; the take-offs since
-        # the last write go in the same commit (cleared once it is done: work redone after an
-        # outage writes them again).
-        take_offs = self._dated(self._take_offs)
+        # The end of a straight leg is on the track of every VV aboard; the take-offs and
+        # landings since the last write go in the same commit (cleared once it is done: work
+        # redone after an outage writes them again).
+        take_offs, landings = self._take_offs, self._landings
         vehicle_record_state(
-            vehicle_id=self.vehicle_id, state=state, track_aboard=moved, take_offs=take_offs
+            vehicle_id=self.vehicle_id,
+            state=state,
+            track_aboard=moved,
+            take_offs=self._take_off_rows(take_offs),
+            landings=self._landing_rows(landings),
         )
         self._take_offs = self._take_offs[len(take_offs) :]
+        self._landings = self._landings[len(landings) :]
+        self._keep_logs(landings)
+
+    def _keep_logs(self, landings: Sequence[Landing]) -> None:
+        """Once the landings just written commit: the RV's maintenance looked at again
+        (``vehicle_check_maintenance``: what the flights made due grounds it), and each
+        flight's telemetry log, through
+        Django's storage (``flight_log_save``): the one the driver recorded (a MAVLink RV),
+        else the messages the simulator would have sent along the flight's track. Not in
+        ``simulate`` (``defer_reports``: its database is thrown away). A log that cannot be
+        kept is logged and left out; the flight stays recorded."""
+        if self.defer_reports or not landings:
+            return
+        landed = list(landings)
+        transaction.on_commit(lambda: self._save_logs(landed), robust=True)
+
+    def _save_logs(self, landings: Sequence[Landing]) -> None:
+        # What the flight makes due (flight hours, flights, battery cycles) may ground the RV.
+        vehicle_check_maintenance(vehicle_id=self.vehicle_id, vvm=self.vvm)
+        epoch_s = self.vvm.clock.epoch_ms(0.0) / 1000.0
+        for landing in landings:
+            flight = Flight.objects.filter(
+                vehicle_id=self.vehicle_id, started_s=landing.took_off_s
+            ).first()
+            if flight is None:
+                if landing.log is not None:
+                    landing.log.close()
+                continue
+            try:
+                if landing.log is not None:
+                    with landing.log as log:
+                        flight_log_save(flight=flight, data=log)
+                elif len(landing.track) >= 2:
+                    flight_log_save(flight=flight, data=_simulated_log(landing, epoch_s))
+            except (OSError, ValueError):
+                logger.exception(
+                    "flight %s: its log could not be kept", flight.pk, extra={"flight": flight.pk}
+                )
 
     def area(self) -> Area:
         vehicle = Vehicle.objects.get(pk=self.vehicle_id)
@@ -457,13 +541,39 @@ def read_aboard(vehicle_ids: Sequence[int]) -> dict[int, list[dict[str, Any]]]:
 
 
 @dataclass(frozen=True)
+class _TakeOff:
+    """A take-off the loop reported: when (platform clock) and the odometers then."""
+
+    t_s: float
+    distance_m: float
+    flight_s: float
+
+
+def _simulated_log(landing: Landing, epoch_s: float) -> bytes:
+    """The .tlog a simulated RV's flight would have: the simulator's messages along its
+    track (``fleet.mavlink.tlog_sim``), its battery as measured or estimated (full when
+    neither)."""
+    track = [(t, lat, lng, alt) for t, lat, lng, alt, _ in landing.track]
+    start = landing.battery_start_pct
+    end = landing.battery_end_pct
+    return simulated_tlog(
+        track,
+        epoch_s=epoch_s,
+        system_id=1,
+        battery_start=1.0 if start is None else start / 100.0,
+        battery_end=(1.0 if start is None else start / 100.0) if end is None else end / 100.0,
+    )
+
+
+@dataclass(frozen=True)
 class _Waiting:
     """What one ``settle`` of an RV wrote or counted: the ends of legs, tasks served, its
-    take-offs (platform clock)."""
+    take-offs and landings."""
 
     points: list[VehicleState]
     tasks_done: int
-    take_offs: list[float] = field(default_factory=list)
+    take_offs: list[_TakeOff] = field(default_factory=list)
+    landings: list[Landing] = field(default_factory=list)
 
 
 class PlatformSensing:

@@ -54,16 +54,19 @@ from vvm_worker.runtime.pool import POOL
 from vvm_worker.services import (
     VVM,
     LeasesUnsure,
+    vehicle_check_maintenance,
     vehicle_heartbeat,
     vehicle_record_health,
     vehicle_register,
     vehicle_set_status,
     vehicles_check_leases,
+    vehicles_check_maintenance,
     vehicles_worker_stopped,
     vv_admit_queued,
     vv_advance,
     vvs_reroute_waiting,
 )
+from vvm_worker.services.flight_logs import flight_logs_prune
 from vvm_worker.services.routing import fleet_airspace, online_vehicles
 from vvm_worker.services.store import db_time_ago
 
@@ -71,6 +74,10 @@ logger = logging.getLogger("cpcc.hosts")
 
 WAIT_S = 60.0  # how long a Celery task waits for the host thread
 SWEEP_S = 5.0  # how often a host looks for work a lost message would have started
+# How often an RV worker deletes the flight logs past CPCC_FLIGHT_LOG_DAYS (the platform has no
+# scheduler of its own; every worker doing it is harmless), first this long after it starts.
+FLIGHT_LOG_PRUNE_S = 24 * 3600.0
+FLIGHT_LOG_PRUNE_FIRST_S = 600.0
 WAITING_LOOK_S = 30.0  # how often a ground station routes a VV waiting for an RV again
 # Warm V8 contexts an RV worker keeps per vehicle it hosts (about 1 MB each, more for a VV
 # with a large heap), and at most in all; a VV beyond them resumes by replay.
@@ -479,6 +486,7 @@ class RVHost:
         self.scheduler.call_at(now + settings.CPCC_RV_LEASE_S / 4, self._heartbeat)
         self.scheduler.call_at(now + SWEEP_S, self._sweep)
         self.scheduler.call_at(now, self._beacon)
+        self.scheduler.call_at(now + FLIGHT_LOG_PRUNE_FIRST_S, self._prune_flight_logs)
 
     def _each(self, work: Callable[[HostedRV], None], what: str) -> None:
         """Do a vehicle's part of a periodic job for each vehicle: one whose part fails for
@@ -528,6 +536,19 @@ class RVHost:
         }
         self._each(lambda rv: rv.look_again(*seen.get(rv.vehicle_id, (None, True))), "sweep")
         self.scheduler.call_at(self.clock.now_s() + SWEEP_S, self._sweep)
+
+    def _prune_flight_logs(self) -> None:
+        """Daily: the flight logs older than CPCC_FLIGHT_LOG_DAYS go, and the maintenance
+        due by the days passed grounds its RVs (what flights make due is looked at when
+        each flight ends)."""
+        try:
+            flight_logs_prune()
+            vehicles_check_maintenance(vvm=self.vvm)
+        except Exception as exc:
+            if database.is_outage(exc):
+                raise
+            logger.exception("flight log prune failed", extra={"vehicle": self.name})
+        self.scheduler.call_at(self.clock.now_s() + FLIGHT_LOG_PRUNE_S, self._prune_flight_logs)
 
     def _aboard_may_have_changed(self, now: float) -> bool:
         """Whether the map tick reads the VVs aboard the vehicles again: after work of this
@@ -761,7 +782,10 @@ class HostedRV:
         step = health.get("battery_pct")
         seen = health | {"battery_pct": None if step is None else 5 * round(step / 5)}
         if seen != self._health:
-            vehicle_record_health(vehicle_id=self.vehicle_id, health=health)
+            if vehicle_record_health(vehicle_id=self.vehicle_id, health=health):
+                # Another battery, or one retired: grounded, or no longer (at once, before
+                # the RV takes off with it).
+                vehicle_check_maintenance(vehicle_id=self.vehicle_id, vvm=self.host.vvm)
             self._health = seen
         return health
 

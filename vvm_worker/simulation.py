@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Any
 
 from django.conf import settings
-from django.db.models import Prefetch
+from django.db.models import Count, Prefetch, Sum
 
 from fleet.geo import Position
-from fleet.models import Vehicle
+from fleet.models import Flight, Vehicle
 from fleet.simulation import SensorField
 from missions.models import (
     ENDED_STATUSES,
@@ -216,14 +216,15 @@ class Simulation:
 
     # --- running -------------------------------------------------------------------------------
 
-    def run(self, *, progress: ProgressFn | None = None) -> dict[str, Any]:
-        """Run the scenario until nothing is left to happen; returns the summary."""
+    def run(self, *, progress: ProgressFn | None = None, flights: bool = False) -> dict[str, Any]:
+        """Run the scenario until nothing is left to happen; returns the summary (with
+        ``flights``: each RV's flights too)."""
         started = time.perf_counter()
         with _no_statement_log():
             if self.loaded is None:
                 self._setup()
             self.drain(progress=progress, total=self.vv_count)
-            summary = self.summary()
+            summary = self.summary(flights=flights)
         self.wall_s = time.perf_counter() - started
         return summary
 
@@ -298,7 +299,9 @@ class Simulation:
 
     # --- the summary (DESIGN.md section 5) --------------------------------------------------
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self, *, flights: bool = False) -> dict[str, Any]:
+        """The run's results (DESIGN.md section 5); with ``flights``, each RV's flights under
+        "flights" (only then: a summary without it is as it always was)."""
         end = self.clock.t
         vvs = []
         # Three reads for all of them (the VVs, their tasks, their storage), only what the
@@ -376,7 +379,38 @@ class Simulation:
         # Only with classes, so that a scenario without any sums up as it always did.
         if service_levels_classed(vv_ids=self.vv_ids):
             summary["service_levels"] = self.service_levels()
+        if flights:
+            summary["flights"] = self.flights()
         return summary
+
+    def flights(self) -> list[dict[str, Any]]:
+        """Each RV's flights in this run, by name: how many, and their time and distance
+        (those ended; one still in the air counts, its time and distance not yet)."""
+        totals = {
+            vehicle_id: (count, flight_s, distance_m)
+            for vehicle_id, count, flight_s, distance_m in Flight.objects.filter(
+                vehicle_id__in=list(self.rigs)
+            )
+            .values("vehicle_id")
+            .annotate(count=Count("id"), flight_s=Sum("duration_s"), distance_m=Sum("distance_m"))
+            .values_list("vehicle_id", "count", "flight_s", "distance_m")
+        }
+        rows = []
+        for pk, name in (
+            Vehicle.objects.filter(pk__in=list(self.rigs))
+            .order_by("name")
+            .values_list("pk", "name")
+        ):
+            count, flight_s, distance_m = totals.get(pk, (0, None, None))
+            rows.append(
+                {
+                    "vehicle": name,
+                    "flights": count,
+                    "flight_s": _r(flight_s or 0.0),
+                    "distance_m": _r(distance_m or 0.0),
+                }
+            )
+        return rows
 
     def service_levels(self) -> dict[str, list[dict[str, object]]]:
         """How each class's target was kept in this run: the report of the platform

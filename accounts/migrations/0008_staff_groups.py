@@ -31,7 +31,7 @@ GROUPS = {
                 "rallypoint",
                 "sensortype",
                 "pilotduty",
-                "takeoff",
+                "flight",
             )
         ),
         "fleet.operate_vehicle",

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from django.utils import timezone
 from drf_spectacular.utils import extend_schema_field
 from rest_framework import serializers
 
 from cpcc_site.api import StrictCharField, StrictFloatField, StrictIntegerField
+from fleet.maintenance import vehicle_maintenance
 from fleet.models import Driver, GroundStation, SensorType, Vehicle, VehicleKind
 from vvm_worker.services import GroundStationConfig, VehicleConfig
 
@@ -161,6 +163,26 @@ class VehicleInSerializer(serializers.Serializer):
         return None if names is None else list(names)
 
 
+class DueSerializer(serializers.Serializer):
+    """One limit of a maintenance interval that is due soon or overdue."""
+
+    name = serializers.CharField(help_text="The interval's name (its retirement: ': retirement').")
+    kind = serializers.ChoiceField(choices=["hours", "flights", "days", "cycles"])
+    used = StrictFloatField(help_text="Flight hours, flights, days or battery cycles so far.")
+    limit = StrictFloatField()
+    interval = StrictIntegerField(help_text="The interval's id.")
+    battery = serializers.CharField(allow_null=True, help_text="The battery's name (cycles).")
+    retire = serializers.BooleanField(help_text="The battery's retirement limit.")
+
+
+class MaintenanceSerializer(serializers.Serializer):
+    """What is due on an RV and its battery: due soon (from 90 % of a limit) and overdue
+    (an overdue RV is grounded until someone records the maintenance)."""
+
+    due_soon = DueSerializer(many=True)
+    overdue = DueSerializer(many=True)
+
+
 class VehicleOutSerializer(serializers.ModelSerializer):
     """An RV: its configuration, its status and what its control loop last reported."""
 
@@ -189,6 +211,10 @@ class VehicleOutSerializer(serializers.ModelSerializer):
         slug_field="username",
         read_only=True,
         help_text="Its pilot in command now, or null.",
+    )
+    maintenance = serializers.SerializerMethodField(
+        help_text="What is due on it and its battery: due soon (from 90 % of a limit) and "
+        "overdue (it is grounded until someone records the maintenance)."
     )
 
     class Meta:
@@ -227,7 +253,17 @@ class VehicleOutSerializer(serializers.ModelSerializer):
             "pilots",
             "pilot_on_duty",
             "updated",
+            "maintenance",
         ]
+
+    @extend_schema_field(MaintenanceSerializer)
+    def get_maintenance(self, vehicle: Vehicle) -> dict[str, Any]:
+        # The view reads the page's RVs at once (context "maintenance", by id).
+        known = self.context.get("maintenance")
+        due = known.get(vehicle.pk) if known is not None else None
+        if due is None:
+            due = vehicle_maintenance(vehicle=vehicle, now=timezone.now())
+        return due.as_dict()
 
     def get_depot(self, vehicle: Vehicle) -> list[float]:
         return [vehicle.depot_lat, vehicle.depot_lng, vehicle.depot_alt]
@@ -300,3 +336,64 @@ class DutyGroupSerializer(serializers.Serializer):
         max_length=150,
         help_text="Handing over: the pilot who takes over; left out: nobody.",
     )
+
+
+class BatteryLogbookSerializer(serializers.Serializer):
+    """A battery's logbook. Cycles: a charge from below 50 % to above 90 % counts one (a
+    battery seen below 50 % and later above 90 %; then it must go below 50 % again)."""
+
+    id = StrictIntegerField()
+    name = serializers.CharField()
+    serial = serializers.CharField(help_text="The autopilot's serial, or empty.")
+    autopilot_id = StrictIntegerField(allow_null=True, help_text="BATTERY_STATUS.id, or null.")
+    vehicle = serializers.CharField(allow_null=True, help_text="The RV it is in now, or null.")
+    installed = serializers.DateTimeField(allow_null=True)
+    cycles = StrictIntegerField()
+    flights = StrictIntegerField()
+    flight_hours = StrictFloatField()
+    lowest_pct = StrictFloatField(allow_null=True, help_text="The lowest charge seen, %.")
+    retired = serializers.DateTimeField(allow_null=True, help_text="Retired then, or null.")
+
+
+class LogbookSerializer(serializers.Serializer):
+    """An RV's logbook, from its recorded flights."""
+
+    flights = StrictIntegerField(help_text="Flights that ended (landed, or lost).")
+    take_offs = StrictIntegerField()
+    landings = StrictIntegerField()
+    flight_hours = StrictFloatField()
+    distance_km = StrictFloatField()
+    last_flight = serializers.DateTimeField(allow_null=True, help_text="Its last take-off.")
+    in_flight = serializers.BooleanField()
+    batteries = BatteryLogbookSerializer(
+        many=True, help_text="The logbook of its battery now (none while it has none)."
+    )
+
+
+class BatteryOutSerializer(BatteryLogbookSerializer):
+    """A battery's logbook and its limits due soon or overdue."""
+
+    due = DueSerializer(many=True)
+
+
+class MaintenanceRecordInSerializer(serializers.Serializer):
+    """Maintenance done on the RV: an interval's (by its id) or what was done in words."""
+
+    interval = StrictIntegerField(
+        required=False, min_value=1, help_text="The maintenance interval's id (GET the vehicle's "
+        "maintenance for those due)."
+    )  # fmt: skip
+    what = StrictCharField(required=False, max_length=200, help_text="What was done, in words.")
+    notes = StrictCharField(required=False, allow_blank=True, max_length=5000)
+
+    def validate(self, data: dict[str, Any]) -> dict[str, Any]:
+        if "interval" not in data and not data.get("what", "").strip():
+            raise serializers.ValidationError({"what": ["give the interval's id or say what."]})
+        return data
+
+
+class BatterySwapInSerializer(serializers.Serializer):
+    """The battery put into the RV: its name (a new name makes a battery)."""
+
+    name = StrictCharField(max_length=120)
+    notes = StrictCharField(required=False, allow_blank=True, max_length=5000)

@@ -10,6 +10,7 @@ from typing import Any
 
 from django.core.exceptions import ValidationError as DjangoValidationError
 from django.db.models import QuerySet
+from django.utils import timezone
 from drf_spectacular.types import OpenApiTypes
 from drf_spectacular.utils import (
     OpenApiParameter,
@@ -29,26 +30,39 @@ from accounts.selectors import sensor_list_for_user
 from cpcc_site.api import Conflict, DetailSerializer, object_id, refusal
 from cpcc_site.permissions import StaffPermission
 from fleet.api.serializers import (
+    BatterySwapInSerializer,
     DutyGroupSerializer,
     GroundStationInSerializer,
     GroundStationOutSerializer,
     HandOverSerializer,
+    LogbookSerializer,
+    MaintenanceRecordInSerializer,
     SensorOutSerializer,
     StaffSensorOutSerializer,
     VehicleInSerializer,
     VehicleOutSerializer,
 )
-from fleet.models import GroundStation, SensorType, Vehicle, VehicleCommand, VehicleStatus
-from fleet.selectors import ground_station_list, vehicle_list
+from fleet.maintenance import fleet_maintenance, vehicle_batteries
+from fleet.models import (
+    GroundStation,
+    MaintenanceInterval,
+    SensorType,
+    Vehicle,
+    VehicleCommand,
+    VehicleStatus,
+)
+from fleet.selectors import ground_station_list, vehicle_list, vehicle_logbook
 from missions.selectors import with_active_vv_count
 from vvm_worker.platform import platform_vvm
 from vvm_worker.services import (
     DutyRefused,
     GroundStationBusy,
     VehicleRemoved,
+    battery_swap,
     ground_station_create,
     ground_station_delete,
     ground_station_update,
+    maintenance_record,
     vehicle_command,
     vehicle_create,
     vehicle_hand_over,
@@ -180,7 +194,13 @@ class VehicleViewSet(
             "take_duty_group",
             "hand_over_group",
         )
-    } | {"remove": ("fleet.delete_vehicle",)}
+    } | {
+        "remove": ("fleet.delete_vehicle",),
+        "logbook": ("fleet.view_flight",),
+        "maintenance_record": ("fleet.add_maintenancerecord",),
+        # A pilot records a swap on the RVs they are assigned (checked per RV).
+        "battery": ("fleet.swap_battery",),
+    }
 
     def get_queryset(self) -> QuerySet[Vehicle]:
         wanted = self.request.query_params.get("status")
@@ -204,6 +224,16 @@ class VehicleViewSet(
                 "listed with ?status=removed."
             )
         return vehicle
+
+    def get_serializer(self, *args: Any, **kwargs: Any) -> Any:
+        # What is due on the RVs shown, read for all of them at once.
+        shown = args[0] if args else kwargs.get("instance")
+        if isinstance(shown, Vehicle | list | QuerySet):
+            vehicles = [shown] if isinstance(shown, Vehicle) else list(shown)
+            kwargs["context"] = self.get_serializer_context() | {
+                "maintenance": fleet_maintenance(vehicles=vehicles, now=timezone.now())
+            }
+        return super().get_serializer(*args, **kwargs)
 
     @staticmethod
     def _vehicles(status: str | None = None) -> QuerySet[Vehicle]:
@@ -308,6 +338,78 @@ class VehicleViewSet(
     @action(detail=True, methods=["post"])
     def land(self, request: Request, pk: str) -> Response:
         return self._command(VehicleCommand.LAND)
+
+    @extend_schema(
+        request=None,
+        responses={200: LogbookSerializer, **STAFF_ERRORS},
+        description="The vehicle's logbook from its recorded flights: flights (landed), "
+        "take-offs, landings, flight hours, distance, its last take-off, whether it flies now.",
+    )
+    @action(detail=True, methods=["get"])
+    def logbook(self, request: Request, pk: str) -> Response:
+        vehicle: Vehicle = super().get_object()  # a removed RV's logbook stays readable
+        logbook = vehicle_logbook(vehicle=vehicle) | {
+            "batteries": vehicle_batteries(vehicle=vehicle)
+        }
+        return Response(LogbookSerializer(logbook).data)
+
+    # Maintenance: recording it (which puts an RV grounded for it back into service) and a
+    # battery swap (which lifts a grounding for a retired battery).
+
+    @extend_schema(
+        request=MaintenanceRecordInSerializer,
+        responses={200: VehicleOutSerializer, 400: OpenApiTypes.OBJECT, **STAFF_ERRORS},
+        description="Record maintenance done on the vehicle: a maintenance interval's (its id; "
+        "the interval starts again) or what was done in words, with notes; kept with who and "
+        "when, in the audit log. A vehicle grounded for it goes back into service (never one "
+        "a person put into maintenance). Fleet managers.",
+    )
+    @action(
+        detail=True, methods=["post"], url_path="maintenance-record", url_name="maintenance-record"
+    )
+    def maintenance_record(self, request: Request, pk: str) -> Response:
+        vehicle = self.get_object()
+        given = MaintenanceRecordInSerializer(data=request.data)
+        given.is_valid(raise_exception=True)
+        data = given.validated_data
+        interval = None
+        if "interval" in data:
+            interval = MaintenanceInterval.objects.filter(pk=data["interval"]).first()
+            if interval is None:
+                raise ValidationError(
+                    {"interval": [f"No maintenance interval {data['interval']}."]}
+                )
+        maintenance_record(
+            vehicle=vehicle,
+            interval=interval,
+            by=request.user,
+            what=data.get("what", ""),
+            notes=data.get("notes", ""),
+            vvm=platform_vvm(),
+        )
+        return self._shown(vehicle)
+
+    @extend_schema(
+        request=BatterySwapInSerializer,
+        responses={200: VehicleOutSerializer, 400: OpenApiTypes.OBJECT, **STAFF_ERRORS},
+        description="Record a battery swap: the battery of that name (a new name makes one) is "
+        "in the vehicle now; its cycles, flights and hours count from here. A vehicle grounded "
+        "for its retired battery goes back into service; a retired battery is refused (400). "
+        "Its pilots, and fleet managers.",
+    )
+    @action(detail=True, methods=["post"])
+    def battery(self, request: Request, pk: str) -> Response:
+        vehicle = self._operated()
+        given = BatterySwapInSerializer(data=request.data)
+        given.is_valid(raise_exception=True)
+        battery_swap(
+            vehicle=vehicle,
+            name=given.validated_data["name"],
+            by=request.user,
+            notes=given.validated_data.get("notes", ""),
+            vvm=platform_vvm(),
+        )
+        return self._shown(vehicle)
 
     # A pilot in command: taking an RV (or a group) on duty and handing it over.
 

@@ -42,6 +42,10 @@ battery, fence, radio), the driver stops commanding it: ``fly_to`` raises Vehicl
 Times ``now_s``/``t`` are platform-clock seconds; ``clock`` (injectable) is that clock, used
 to time-stamp telemetry (flight time). Link timeouts run on the monotonic clock.
 
+``flight_log`` (a ``fleet.mavlink.tlog.TlogRecorder``) records the link's messages both ways
+as a ``.tlog`` between its ``start()`` (the worker calls it at the take-off) and its
+``finish()`` (at the landing), time-stamped by the wall clock as a ground station's log is.
+
 The driver is built in parts by sub-protocol, each on the ones before it: ``driver_state``
 (the state every part shares, the constants), ``driver_telemetry`` (the link's reader thread
 and the driver API's queries), ``driver_sensors`` (readings and the camera protocol),

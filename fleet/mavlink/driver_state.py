@@ -13,6 +13,7 @@ from fleet.geo import Position
 from fleet.kinds import AERIAL, GROUND, SURFACE, UNDERWATER, limits_of
 from fleet.mavlink.link import MavlinkLink
 from fleet.mavlink.modes import Autopilot
+from fleet.mavlink.tlog import TlogRecorder
 from fleet.mavlink.wire import mavlink
 from fleet.simulation.vehicle import VehicleSpec
 
@@ -143,6 +144,10 @@ class DriverState:
         self.measures_battery = True  # SYS_STATUS, BATTERY_STATUS
         self.reports_arrival = True  # GLOBAL_POSITION_INT
         self.name = name or str(self.link.endpoint)
+        # The flight's .tlog: the worker starts it at the take-off and finishes it at the
+        # landing; the link feeds it every message both ways.
+        self.flight_log = TlogRecorder(name=self.name)
+        self.link.recorder = self.flight_log
         self._fence_request = (
             (area, min_altitude_m, max_altitude_m, exclusions, rally)
             if area is not None and max_altitude_m is not None

@@ -16,6 +16,9 @@ parameter reads and writes wait for the matching PARAM_VALUE; a mission upload f
 mission protocol's request/item exchange with timeouts. Every failure is a typed
 ``fleet.mavlink.errors`` error that says whether it is permanent.
 
+A ``recorder`` (``fleet.mavlink.tlog.TlogRecorder``), when set, gets the bytes of every message
+the reader receives and, with ``record_sent``, of every message sent: a flight's ``.tlog``.
+
 Listener callbacks and the link-loss callbacks run on the link's threads: keep them short, and
 never call a blocking request (a command) from them.
 
@@ -46,6 +49,7 @@ from fleet.mavlink.exchange import CommandAck, Heartbeat, StatusText, Waiter
 from fleet.mavlink.mission_transfer import MissionTransfer
 from fleet.mavlink.modes import Autopilot
 from fleet.mavlink.parameters import Parameters
+from fleet.mavlink.tlog import TlogRecorder
 from fleet.mavlink.wire import BAD_DATA, connect, drop_closed_tcp_client, mavlink
 
 logger = logging.getLogger("cpcc.mavlink")
@@ -129,6 +133,10 @@ class MavlinkLink(Commanding, Parameters, MissionTransfer):
         self._waiters: list[Waiter] = []
         self._listeners: dict[str, list[Callable[[Any], None]]] = {}
         self._param_types: dict[str, int] = {}
+        # The flight log (``fleet.mavlink.tlog``): every message heard, and with ``record_sent``
+        # every message sent, as a ground station's .tlog has both directions.
+        self.recorder: TlogRecorder | None = None
+        self.record_sent = True
 
     # --- life cycle -----------------------------------------------------------------------
 
@@ -156,6 +164,7 @@ class MavlinkLink(Commanding, Parameters, MissionTransfer):
             raise LinkError(f"cannot connect to {self.endpoint}: {exc}", permanent=False) from exc
         except (OSError, ValueError) as exc:
             raise LinkError(f"cannot open MAVLink connection {self.endpoint}: {exc}") from exc
+        self._conn.mav.set_send_callback(self._on_sent)
         self._stop.clear()
         for name, target in (("reader", self._read_loop), ("timer", self._timer_loop)):
             thread = threading.Thread(
@@ -307,10 +316,18 @@ class MavlinkLink(Commanding, Parameters, MissionTransfer):
                 failing = True
                 self._stop.wait(0.5)
 
+    def _on_sent(self, msg: Any) -> None:
+        recorder = self.recorder
+        if recorder is not None and self.record_sent:
+            recorder.record(msg.get_msgbuf())
+
     def _dispatch(self, msg: Any) -> None:
         kind = msg.get_type()
         if kind == BAD_DATA:
             return
+        recorder = self.recorder
+        if recorder is not None:
+            recorder.record(msg.get_msgbuf())
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         now = self.monotonic()
         if kind == "HEARTBEAT" and self._is_vehicle_heartbeat(msg, source):

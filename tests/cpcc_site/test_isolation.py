@@ -65,7 +65,16 @@ from accounts.models import (
 from accounts.roles import DEVELOPER, FLEET_MANAGER, OWNER, PILOT, SUPPORT, VIEWER, allows
 from cpcc_site.asgi import application
 from cpcc_site.websocket import SameOriginValidator
-from fleet.models import GroundStation, PilotDuty, SensorType, TakeOff, Vehicle
+from fleet.models import (
+    Battery,
+    Flight,
+    GroundStation,
+    MaintenanceInterval,
+    MaintenanceRecord,
+    PilotDuty,
+    SensorType,
+    Vehicle,
+)
 from missions.api.views import UUID_PATTERN
 from missions.consumers import MapConsumer
 from missions.events import EVENTS_STREAM, POSITIONS_STREAM, VEHICLES_HASH
@@ -369,6 +378,34 @@ ROUTES: dict[str, Route] = {
         staff_status=400,
         staff=staff(WRITES, WRITES, READS),
     ),
+    # The flights and the logbook (issue 58): every staff group reads them.
+    "api/v1/flights/": Route(Kind.STAFF, "/api/v1/flights/", staff=EVERY_GROUP),
+    "api/v1/flights/export.csv": Route(Kind.STAFF, "/api/v1/flights/export.csv", staff=EVERY_GROUP),
+    "api/v1/flights/<str:pk>/": Route(Kind.STAFF, "/api/v1/flights/{flight}/", staff=EVERY_GROUP),
+    # The world's flight keeps no log: 404 saying so.
+    "api/v1/flights/<str:pk>/log.tlog": Route(
+        Kind.STAFF, "/api/v1/flights/{flight}/log.tlog", staff_status=404, staff=EVERY_GROUP
+    ),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/logbook/$": Route(
+        Kind.STAFF, "/api/v1/vehicles/{vehicle}/logbook/", staff=EVERY_GROUP
+    ),
+    # Batteries and maintenance (issue 58): every staff group reads the batteries; fleet
+    # managers record maintenance (the body here says nothing done: 400); a pilot records a
+    # battery swap on the RVs they are assigned.
+    "api/v1/batteries/": Route(Kind.STAFF, "/api/v1/batteries/", staff=EVERY_GROUP),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/maintenance-record/$": Route(
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/maintenance-record/",
+        ("POST",),
+        staff_status=400,
+        staff=staff(WRITES, READS, READS),
+    ),
+    "api/v1/vehicles/(?P<pk>[^/.]+)/battery/$": Route(
+        Kind.STAFF,
+        "/api/v1/vehicles/{vehicle}/battery/",
+        ("POST",),
+        staff=staff(WRITES, WRITES, READS),
+    ),
     "api/v1/ground-stations/$": Route(
         Kind.STAFF, "/api/v1/ground-stations/", ("GET", "POST"), staff=staff(WRITES, READS, READS)
     ),
@@ -496,6 +533,9 @@ ROUTES: dict[str, Route] = {
     "admin/fleet/vehicle/overview/": Route(
         Kind.STAFF, "/admin/fleet/vehicle/overview/", staff=EVERY_GROUP
     ),
+    "admin/fleet/vehicle/<int:object_id>/logbook/": Route(
+        Kind.STAFF, "/admin/fleet/vehicle/{vehicle}/logbook/", staff=EVERY_GROUP
+    ),
     "admin/accounts/serviceclass/levels/": Route(
         Kind.STAFF, "/admin/accounts/serviceclass/levels/", staff=staff(READS, (), READS)
     ),
@@ -548,7 +588,11 @@ STAFF_MODEL_ACCESS: dict[str, dict[str, str]] = {
     "fleet.sensortype": _FLEET,
     "fleet.vehicle": _FLEET,
     "fleet.pilotduty": {FLEET_MANAGER: "v", PILOT: "v", SUPPORT: "v"},
-    "fleet.takeoff": {FLEET_MANAGER: "v", PILOT: "v", SUPPORT: "v"},
+    "fleet.flight": {FLEET_MANAGER: "v", PILOT: "v", SUPPORT: "v"},
+    "fleet.battery": _FLEET,
+    "fleet.maintenanceinterval": _FLEET,
+    # Added through the service, never changed or deleted.
+    "fleet.maintenancerecord": {FLEET_MANAGER: "va", PILOT: "v", SUPPORT: "v"},
     "missions.logentry": _READ,
     "missions.message": _READ,
     "missions.migration": _READ,
@@ -891,7 +935,16 @@ def _staff_ids(world: World, vehicle: Vehicle, station: GroundStation) -> dict[s
         "fleet.pilotduty": PilotDuty.objects.create(
             vehicle=vehicle, pilot=world.groups[PILOT], pilot_name="pilot", started=timezone.now()
         ),
-        "fleet.takeoff": TakeOff.objects.create(vehicle=vehicle, at=timezone.now(), at_s=0.0),
+        "fleet.flight": Flight.objects.create(
+            vehicle=vehicle, started=timezone.now(), started_s=0.0, pilot_name="pilot"
+        ),
+        "fleet.battery": (battery := Battery.objects.create(name="Pack 1", vehicle=vehicle)),
+        "fleet.maintenanceinterval": MaintenanceInterval.objects.create(
+            name="25-hour inspection", every_hours=25.0
+        ),
+        "fleet.maintenancerecord": MaintenanceRecord.objects.create(
+            vehicle=vehicle, battery=battery, what="propellers", by_name="fm", at=timezone.now()
+        ),
         "fleet.sensortype": SensorType.objects.order_by("pk").first(),
         "fleet.groundstation": station,
         "fleet.vehicle": vehicle,
@@ -908,6 +961,7 @@ def _staff_ids(world: World, vehicle: Vehicle, station: GroundStation) -> dict[s
         "user": str(a.user.pk),
         "uidb64": urlsafe_base64_encode(force_bytes(a.user.pk)),
         "vehicle": str(vehicle.pk),
+        "flight": str(objects["fleet.flight"].pk),
         "gs": str(station.pk),
         "service_class": str(gold.pk),
     }

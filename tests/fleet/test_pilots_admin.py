@@ -15,7 +15,7 @@ from django.utils import timezone
 
 import fleet.admin
 from accounts.roles import FLEET_MANAGER, PILOT, SUPPORT
-from fleet.models import PilotDuty, TakeOff, Vehicle, VehicleStatus
+from fleet.models import Flight, PilotDuty, Vehicle, VehicleStatus
 from tests.admin_forms import form_as_shown
 from tests.factories import UserFactory, VehicleFactory
 from vvm_worker.services import vehicle_take_duty
@@ -255,13 +255,13 @@ def test_a_fleet_manager_assigns_pilots_among_the_pilot_group_and_superusers(
     assert refused.status_code == 200 and list(heli.pilots.all()) == [pilot]
 
 
-@pytest.mark.parametrize("model", ["pilotduty", "takeoff"])
-def test_duties_and_take_offs_are_read_only_records(client, pilot, heli, recorded, model) -> None:
+@pytest.mark.parametrize("model", ["pilotduty", "flight"])
+def test_duties_and_flights_are_read_only_records(client, pilot, heli, recorded, model) -> None:
     vehicle_take_duty(vehicles=[heli], pilot=pilot, vvm=recorded)
-    TakeOff.objects.create(
-        vehicle=heli, at=timezone.now(), at_s=0.0, pilot=pilot, pilot_name="pilot-one"
+    Flight.objects.create(
+        vehicle=heli, started=timezone.now(), started_s=0.0, pilot=pilot, pilot_name="pilot-one"
     )
-    record = PilotDuty.objects.get() if model == "pilotduty" else TakeOff.objects.get()
+    record = PilotDuty.objects.get() if model == "pilotduty" else Flight.objects.get()
     for who in (pilot, member("helper", SUPPORT)):
         client.force_login(who)
         listed = client.get(reverse(f"admin:fleet_{model}_changelist"))

@@ -3,16 +3,18 @@ simulated copter (MavSim) on loopback, the rest of the platform as in production
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 from typing import Any
 
 import pytest
+from pymavlink import mavutil
 
 from fleet.geo import Position, distance_m
 from fleet.mavlink import MavSim
 from fleet.mavlink.sim.companion import FieldSensors
-from fleet.models import Driver, Vehicle, VehicleStatus
+from fleet.models import Driver, Flight, FlightEnd, Vehicle, VehicleStatus
 from fleet.simulation.vehicle import VehicleSpec
 from missions.models import JournalEntry, Migration, Task, TaskStatus, VirtualVehicle, VVStatus
 from tests.conftest import SCENARIOS
@@ -93,6 +95,52 @@ def test_an_rv_worker_flies_the_papers_vv_1_over_mavlink(
     assert sim.param("FENCE_ALT_MAX") == pytest.approx(heli.max_altitude_m - heli.depot_alt)
     assert sim.param("FENCE_ENABLE") == 1
     wait_until(lambda: sim.on_ground, timeout=60, what="the copter to land at its depot")
+    # Its flight (issue 58), closed with the landing's report: the copter's telemetry.
+    wait_until(
+        lambda: Flight.objects.filter(vehicle=heli, ended__isnull=False).exists(),
+        timeout=30,
+        what="the flight closed",
+        details=workers.logs,
+    )
+    flight = Flight.objects.get(vehicle=heli)
+    heli.refresh_from_db()
+    assert (flight.ended_how, flight.tasks_served) == (FlightEnd.LANDED_HOME, 4)
+    assert [c["id"] for c in flight.customers] == [vv.customer_id]
+    assert [v["id"] for v in flight.vvs] == [str(vv.pk)]
+    # Armed to disarmed, as the autopilot flew it: within its take-off and landing's reports.
+    assert 0.0 < flight.duration_s <= flight.ended_s - flight.started_s + 1.0
+    assert flight.distance_m == pytest.approx(heli.distance_m)  # its one flight
+    assert flight.distance_m >= sum(  # at least straight from task to task
+        distance_m(a.position, b.position)
+        for a, b in itertools.pairwise(sorted(done, key=lambda t: t.done_s))
+    )
+    assert 5.0 < flight.max_alt_m <= heli.max_altitude_m
+    # SYS_STATUS's battery_remaining (no endurance configured: the autopilot's word only).
+    assert flight.battery_start_pct is not None and flight.battery_end_pct is not None
+    assert 0.0 < flight.battery_end_pct <= flight.battery_start_pct <= 100.0
+    # Its MAVLink stream, kept as a .tlog through the storage: what a ground station reads.
+    wait_until(
+        lambda: bool(Flight.objects.get(pk=flight.pk).log),
+        timeout=30,
+        what="the flight's log",
+        details=workers.logs,
+    )
+    flight.refresh_from_db()
+    log = mavutil.mavlink_connection(flight.log.path)
+    track = []
+    while (message := log.recv_match(type="GLOBAL_POSITION_INT")) is not None:
+        track.append(
+            (message._timestamp, message.lat / 1e7, message.lon / 1e7, message.relative_alt / 1000)
+        )
+    assert len(track) > 20 and all(a[0] <= b[0] for a, b in itertools.pairwise(track))
+    depot = heli.depot
+    assert distance_m(Position(*track[-1][1:3], 0.0), depot.with_alt(0.0)) <= 5.0
+    assert max(alt for *_, alt in track) == pytest.approx(flight.max_alt_m, abs=3.0)
+    for task in done:  # it passed over every task it served
+        assert (
+            min(distance_m(Position(lat, lng, alt), task.position) for _, lat, lng, alt in track)
+            <= task.tolerance_m + 2.0
+        )
 
 
 def test_a_link_cut_in_flight_hands_the_vv_to_another_rv_and_nothing_is_read_twice(

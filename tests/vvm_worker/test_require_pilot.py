@@ -1,6 +1,6 @@
 """A pilot in command (issue 57): with CPCC_REQUIRE_PILOT an RV with no pilot on duty takes no
-new work, its VVs wait saying so, and they go on when a pilot comes on duty; every take-off is
-recorded with the RV's pilot on duty then. On discrete-event time with the in-process
+new work, its VVs wait saying so, and they go on when a pilot comes on duty; every flight is
+recorded with the RV's pilot on duty at its take-off. On discrete-event time with the in-process
 platform (``platform``), as the other waiting tests."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from django.contrib.auth.models import Group
 
 from accounts.roles import PILOT
-from fleet.models import TakeOff, VehicleStatus
+from fleet.models import Flight, VehicleStatus
 from missions.models import LogEntry, VirtualVehicle, VVStatus
 from missions.waiting import vv_waiting
 from tests.api_fixtures import token_client
@@ -95,7 +95,7 @@ def test_an_rv_with_no_pilot_takes_no_work_until_one_comes_on_duty(
     # It waits on the ground station: the RV, in service, has no pilot on duty.
     assert vv.status == VVStatus.RUNNING and vv.host_gs is not None and vv.host_rv is None
     assert not vv.tasks.filter(vehicle=fleet_one).exists()
-    assert not TakeOff.objects.exists(), "the RV never took off"
+    assert not Flight.objects.exists(), "the RV never took off"
     waiting = waiting_of(api_a, vv)
     assert (waiting["reason"], waiting["message"]) == ("no_pilot", NO_PILOT)
     assert waiting["since"] is not None
@@ -112,14 +112,16 @@ def test_an_rv_with_no_pilot_takes_no_work_until_one_comes_on_duty(
     assert log_of(vv) == [f"waiting: {NO_PILOT}", "continues: waited 60 s", "read"]
     assert not vv.waiting_reason and waiting_of(api_a, vv) is None
     # Its take-off is recorded with its pilot in command.
-    take_off = TakeOff.objects.get()
-    assert (take_off.vehicle, take_off.pilot, take_off.pilot_name) == (
+    flight = Flight.objects.get()
+    assert (flight.vehicle, flight.pilot, flight.pilot_name) == (
         fleet_one,
         pilot,
         "pilot-one",
     )
-    assert take_off.at_s == on_duty_s  # at once
-    assert take_off.at == dt.datetime.fromtimestamp(SIM_EPOCH_S + take_off.at_s, tz=dt.UTC)
+    assert flight.started_s == on_duty_s  # at once
+    assert flight.started == dt.datetime.fromtimestamp(SIM_EPOCH_S + flight.started_s, tz=dt.UTC)
+    # It landed at home: the flight closed with the task it served.
+    assert (flight.ended_how, flight.tasks_served) == ("landed_home", 1)
 
 
 def test_a_vv_aboard_an_rv_handed_over_to_nobody_waits_on_a_station_and_flies_on_with_a_pilot(
@@ -149,7 +151,7 @@ def test_a_vv_aboard_an_rv_handed_over_to_nobody_waits_on_a_station_and_flies_on
     assert vv.status == VVStatus.FINISHED, vv.error
     assert log_of(vv)[-1] == "both read"
     # Both take-offs name the pilot in command then.
-    assert list(TakeOff.objects.order_by("at_s").values_list("pilot_name", flat=True)) == [
+    assert list(Flight.objects.order_by("started_s").values_list("pilot_name", flat=True)) == [
         "pilot-one",
         "pilot-one",
     ]
@@ -174,8 +176,8 @@ def test_without_the_setting_an_rv_with_no_pilot_flies_and_its_take_off_names_no
     vv.refresh_from_db()
     assert vv.status == VVStatus.FINISHED and not vv.waiting_reason
     assert "waiting" not in " ".join(log_of(vv))
-    take_off = TakeOff.objects.get()
-    assert (take_off.vehicle, take_off.pilot, take_off.pilot_name) == (fleet_one, None, "")
+    flight = Flight.objects.get()
+    assert (flight.vehicle, flight.pilot, flight.pilot_name) == (fleet_one, None, "")
 
 
 def test_an_rv_workers_take_off_goes_with_its_next_report_at_the_map_tick(
@@ -199,10 +201,10 @@ def test_an_rv_workers_take_off_goes_with_its_next_report_at_the_map_tick(
     store.record_state(report(10.0, "landed"), moved=True)
     store.record_state(report(20.0, "takeoff", took_off_s=20.0), moved=False)
     store.record_state(report(20.5, "takeoff"), moved=False)
-    assert not TakeOff.objects.exists(), "not before the tick"
+    assert not Flight.objects.exists(), "not before the tick"
     store.write_waiting()
-    take_off = TakeOff.objects.get()
-    assert (take_off.vehicle, take_off.at_s, take_off.pilot) == (vehicle, 20.0, pilot)
-    assert take_off.at == dt.datetime.fromtimestamp(SIM_EPOCH_S + 20.0, tz=dt.UTC)
+    flight = Flight.objects.get()
+    assert (flight.vehicle, flight.started_s, flight.pilot) == (vehicle, 20.0, pilot)
+    assert flight.started == dt.datetime.fromtimestamp(SIM_EPOCH_S + 20.0, tz=dt.UTC)
     store.write_waiting()
-    assert TakeOff.objects.count() == 1
+    assert Flight.objects.count() == 1

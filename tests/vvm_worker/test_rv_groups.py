@@ -288,7 +288,11 @@ def test_a_worker_of_several_rvs_stopped_with_sigterm_in_the_middle_of_steps_exi
                 details=pool.logs,
             )
             assert pool.terminate("Heli One") == 0, (stop, pool.logs())
-            assert stop > 0 or not ended(*vvs), "the VVs ended before the stop: it tested nothing"
+            assert stop > 0 or not ended(*vvs), (
+                "the VVs ended before the stop: it tested nothing",
+                [(v.name, v.status, v.error) for v in VirtualVehicle.objects.all()],
+                pool.logs()[-3000:],
+            )
         pool.start("rvworker", "Heli One", "Heli Two")
         wait_until(lambda: ended(*vvs), timeout=180, what="the VVs to end", details=pool.logs)
         assert pool.terminate("Heli One") == 0

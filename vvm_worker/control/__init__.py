@@ -19,6 +19,12 @@ operator's command (``OperatorCommand``: return home now, land now), which the s
 over once, is obeyed at once; the store has the RV out of service already, so the loop sends
 it nowhere else until an operator returns it to service.
 
+The loop keeps the flights it flies, from the take-off it commands to the landing it sees
+(home, elsewhere, by an operator's command, after a failsafe took over) or to where the
+platform lost the vehicle (its link, a take-over), and reports each end (``Landing``: the
+odometers, the highest altitude, the battery) with its next report, as it reports take-offs.
+A vehicle that starts in the air flies no flight of the loop's until it takes off.
+
 The loop is built in parts, each on the one before (``state``, ``legs``, ``battery``,
 ``planning``, then ``loop``'s ``ControlLoop`` with its events); ``types`` holds what they
 share with their callers.
@@ -29,9 +35,15 @@ from vvm_worker.control.types import (
     ACTIVE,
     ARRIVAL_OVERDUE_S,
     ARRIVAL_POLL_S,
+    BY_OPERATOR,
     CHARGE_POLL_S,
     CHARGING,
+    FAILSAFE,
+    HOME_RADIUS_M,
     LAND,
+    LANDED_ELSEWHERE,
+    LANDED_HOME,
+    LINK_LOST_IN_FLIGHT,
     MAINTENANCE,
     NO_WAY,
     OFFLINE,
@@ -41,6 +53,7 @@ from vvm_worker.control.types import (
     RETURN_HOME,
     TURN_TOLERANCE_M,
     Area,
+    Landing,
     LoopConfig,
     LoopTask,
     OperatorCommand,
@@ -56,9 +69,15 @@ __all__ = [
     "ACTIVE",
     "ARRIVAL_OVERDUE_S",
     "ARRIVAL_POLL_S",
+    "BY_OPERATOR",
     "CHARGE_POLL_S",
     "CHARGING",
+    "FAILSAFE",
+    "HOME_RADIUS_M",
     "LAND",
+    "LANDED_ELSEWHERE",
+    "LANDED_HOME",
+    "LINK_LOST_IN_FLIGHT",
     "MAINTENANCE",
     "NO_WAY",
     "OFFLINE",
@@ -69,6 +88,7 @@ __all__ = [
     "TURN_TOLERANCE_M",
     "Area",
     "ControlLoop",
+    "Landing",
     "LoopConfig",
     "LoopTask",
     "OperatorCommand",

@@ -15,6 +15,8 @@ from vvm_worker.control.types import (
     ACTIVE,
     ARRIVAL_OVERDUE_S,
     ARRIVAL_POLL_S,
+    FAILSAFE,
+    LINK_LOST_IN_FLIGHT,
     OFFLINE,
     PHASE_LANDING_DOWN,
     TURN_TOLERANCE_M,
@@ -68,7 +70,7 @@ class Legs(LoopState):
         if landed and arrival > now:
             # It leaves the ground now (a real vehicle's telemetry may say so only later): the
             # next report carries the take-off, which the store keeps with its pilot then.
-            self._took_off_s = now
+            self._took_off(now)
         self._leg = (point, tolerance_m, arrival)
         self.scheduler.call_at(
             self._first_look(now, arrival), lambda: self._arrive(token, point, tolerance_m, arrival)
@@ -205,6 +207,15 @@ class Legs(LoopState):
         logger.error("vehicle %s out of service: %s", self.name, exc, extra=self._log())
         self.target = None
         reason = LINK_LOST if isinstance(exc, LinkDown) else str(exc)
+        # A flight under way ends where the platform lost the vehicle: its link, or a pilot or
+        # failsafe that took it over (the vehicle may fly on; the record is the platform's).
+        # Any other refusal leaves it open: the loop lands it once it is back in service.
+        now = self.clock()
+        self._watch_flight(now)
+        if self._flight is not None and isinstance(exc, LinkDown):
+            self._flight_over(now, LINK_LOST_IN_FLIGHT)
+        elif self._flight is not None and self._flight.taken_over:
+            self._flight_over(now, FAILSAFE)
         self.store.set_status(OFFLINE, expected=ACTIVE, reason=reason)
         self.status = self.store.status()
 

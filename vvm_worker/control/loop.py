@@ -91,6 +91,7 @@ class ControlLoop(Planning):
                 self._homing = False
                 self._plan(now)
             else:
+                self._watch_flight(now)  # (a real vehicle's altitude, between reports)
                 self.scheduler.call_at(
                     now + ARRIVAL_POLL_S, lambda: self._arrive(token, target, tolerance_m, due_s)
                 )
@@ -152,6 +153,7 @@ class ControlLoop(Planning):
         self.returning = False
         self._landing_due = None
         logger.info("%s landed", self.name, extra=self._log())
+        self._touched_down(now)  # the flight's end goes with the report below
         if self.status == CHARGING:
             self._charge(now)
         self._record(now)

@@ -141,5 +141,7 @@ class Planning(Battery):
                 self._take_off_home(now, token)
             else:
                 self._go_home(now, token)
+        if self._flight is not None:  # this flight ends as the operator commanded
+            self._flight.commanded = True
         self._record(now)
         return True

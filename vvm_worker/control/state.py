@@ -7,16 +7,26 @@ import dataclasses
 import itertools
 import logging
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 from fleet.airspace import NO_ZONES, Airspace
 from fleet.driving import Driver
-from fleet.geo import Position
+from fleet.geo import Position, ground_distance_m
 from vvm_worker.control.types import (
     ACTIVE,
+    BY_OPERATOR,
+    FAILSAFE,
+    HOME_RADIUS_M,
+    LANDED_ELSEWHERE,
+    LANDED_HOME,
+    KeepsFlightLog,
+    Landing,
     LoopConfig,
+    MeasuredBattery,
     OperatorCommand,
     PlanElsewhere,
+    ReportsTakeOver,
     Scheduler,
     Sensing,
     Store,
@@ -28,6 +38,28 @@ from vvm_worker.planning import Planner, PlanTask
 logger = logging.getLogger("cpcc.executor")
 
 DEFAULT_CONFIG = LoopConfig()  # no battery, no standby
+
+
+@dataclass
+class Flight:
+    """A flight under way, as the loop keeps it from the take-off it commanded to the end it
+    reports (``Landing``): the take-off's time and battery (percent), the highest altitude
+    seen, whether the vehicle was seen off the ground yet, whether an operator's command
+    took over the flight, and whether a pilot or a failsafe did."""
+
+    took_off_s: float
+    flight_s_start: float
+    battery_start_pct: float | None
+    max_alt: float
+    airborne: bool = False
+    commanded: bool = False
+    taken_over: bool = False
+    track: list[tuple[float, float, float, float, float | None]] = field(default_factory=list)
+
+    def keep(self, t_s: float, here: Position, battery_pct: float | None) -> None:
+        """A point of the track: where the vehicle is at a report (unless it has not moved)."""
+        if not self.track or self.track[-1][1:4] != (here.lat, here.lng, here.alt):
+            self.track.append((t_s, here.lat, here.lng, here.alt, battery_pct))
 
 
 class LoopState:
@@ -92,6 +124,11 @@ class LoopState:
         self._token = 0  # invalidates the arrival of a leg that was replaced
         # When the loop last flew the vehicle off the ground, until a report says so.
         self._took_off_s: float | None = None
+        # The flight under way since a take-off the loop commanded (None: on the ground, or
+        # in the air without one: a vehicle that started there), and the end of the last one,
+        # until a report says so.
+        self._flight: Flight | None = None
+        self._landing: Landing | None = None
 
     def _start_the_view(self) -> None:
         """What the live map and the benchmarks see of a loop that has not planned yet."""
@@ -114,8 +151,92 @@ class LoopState:
             return None
         return max(0.0, min(1.0, remaining / self.config.battery_s))
 
+    def battery_pct(self, now: float) -> float | None:
+        """The battery's charge in percent for the flight records: what the vehicle reports
+        (a MAVLink autopilot's SYS_STATUS), else the endurance left over the configured one
+        (a simulated vehicle with ``battery_s``), else None."""
+        fraction: float | None = None
+        if isinstance(self.driver, MeasuredBattery):
+            fraction = self.driver.battery_fraction()
+        if fraction is None:
+            fraction = self.battery_fraction(now)
+        return None if fraction is None else round(100 * fraction, 1)
+
+    def _took_off(self, now: float) -> None:
+        """The loop flew the vehicle off the ground now: a flight starts, reported with the
+        next report; one still open whose vehicle was seen in the air ended unseen first (it
+        landed while the loop looked elsewhere). A second take-off command before the vehicle
+        is seen in the air (a real one's telemetry lags) is the same flight."""
+        flight = self._flight
+        if flight is not None:
+            self._watch_flight(now)
+            if not flight.airborne:
+                return
+            self._touched_down(now)
+        self._took_off_s = now
+        if isinstance(self.driver, KeepsFlightLog):
+            self.driver.flight_log.start()  # (one left open by a flight never seen to end: gone)
+        here, battery_pct = self.driver.position_at(now), self.battery_pct(now)
+        self._flight = Flight(now, self.driver.flight_s(now), battery_pct, here.alt)
+        self._flight.keep(now, here, battery_pct)
+
+    def _watch_flight(self, now: float) -> None:
+        """What a look at the vehicle in flight keeps: the highest altitude, whether it is off
+        the ground yet, whether a pilot or a failsafe took it over."""
+        flight = self._flight
+        if flight is None:
+            return
+        flight.max_alt = max(flight.max_alt, self.driver.position_at(now).alt)
+        if not flight.airborne and (
+            self.driver.flight_s(now) > flight.flight_s_start or not self.driver.is_landed_at(now)
+        ):
+            flight.airborne = True  # (it flew since: a landing now is this flight's end)
+        if isinstance(self.driver, ReportsTakeOver) and self.driver.took_over is not None:
+            flight.taken_over = True
+
+    def _touched_down(self, now: float) -> None:
+        """The vehicle is on the ground: the flight under way (if any) ended, by a failsafe
+        or a pilot that took it over, by an operator's command, or at home (within
+        HOME_RADIUS_M of its depot) or elsewhere."""
+        flight = self._flight
+        if flight is None:
+            return
+        self._watch_flight(now)
+        if flight.taken_over:
+            how = FAILSAFE
+        elif flight.commanded:
+            how = BY_OPERATOR
+        elif ground_distance_m(self.driver.position_at(now), self.driver.depot) <= HOME_RADIUS_M:
+            how = LANDED_HOME
+        else:
+            how = LANDED_ELSEWHERE
+        self._flight_over(now, how)
+
+    def _flight_over(self, now: float, how: str) -> None:
+        """The flight under way ended now, ``how``: reported with the next report."""
+        flight, self._flight = self._flight, None
+        if flight is None:
+            return
+        self._watch_flight(now)
+        battery_pct = self.battery_pct(now)
+        flight.keep(now, self.driver.position_at(now), battery_pct)
+        log = self.driver.flight_log.finish() if isinstance(self.driver, KeepsFlightLog) else None
+        self._landing = Landing(
+            took_off_s=flight.took_off_s,
+            t_s=now,
+            how=how,
+            distance_m=self.driver.distance_m(now),
+            flight_s=self.driver.flight_s(now),
+            max_alt_m=max(0.0, flight.max_alt - self.driver.depot.alt),
+            battery_start_pct=flight.battery_start_pct,
+            battery_end_pct=battery_pct,
+            track=tuple(flight.track),
+            log=log,
+        )
+
     def live_state(self, now: float) -> dict[str, Any]:
         """The RV as the live map shows it now (positions as [lat, lng])."""
+        self._watch_flight(now)  # (the map's ticks sample a real vehicle's altitude)
         here = self.driver.position_at(now)
         ahead: list[Position] = []
         if not self.returning:
@@ -180,6 +301,7 @@ class LoopState:
         return self._last_state
 
     def _record(self, now: float) -> None:
+        self._watch_flight(now)
         state = VehicleState(
             t_s=now,
             position=self.driver.position_at(now),
@@ -188,6 +310,7 @@ class LoopState:
             flight_s=self.driver.flight_s(now),
             planner_state=self.planner.state(),
             took_off_s=self._took_off_s,
+            landing=self._landing,
         )
         last = self._last_state
         moved = last is None or state.position != last.position
@@ -195,13 +318,18 @@ class LoopState:
             last is not None
             and not moved
             and state.took_off_s is None
+            and state.landing is None
             and _same_report(state, last)
         ):
             return  # the store says all this already (a second look at the same moment)
+        if self._flight is not None and moved:
+            self._flight.keep(now, state.position, self.battery_pct(now))
         self.store.record_state(state, moved=moved)
-        # Only once recorded: work redone after an outage records it (and the take-off).
+        # Only once recorded: work redone after an outage records it (the take-off, the
+        # landing).
         self._last_state = state
         self._took_off_s = None
+        self._landing = None
 
 
 def _percent(fraction: float | None) -> str:

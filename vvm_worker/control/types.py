@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any, Protocol
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
 
 from shapely.geometry import Polygon
 
@@ -26,6 +26,15 @@ OFFLINE = "offline"  # in service, but it cannot be flown (its link, its autopil
 RETURN_HOME = "return_home"
 LAND = "land"
 PHASE_LANDING_DOWN = "landing"  # a driver's phase while it descends to land (Driver.phase_at)
+
+# How a flight ended (the values of fleet.models.FlightEnd).
+LANDED_HOME = "landed_home"
+LANDED_ELSEWHERE = "landed_elsewhere"
+LINK_LOST_IN_FLIGHT = "link_lost"
+FAILSAFE = "failsafe"
+BY_OPERATOR = "operator"
+# A landing this close to the depot (on the ground) is a landing at home.
+HOME_RADIUS_M = 5.0
 
 # A vehicle at its target serves every open task within the task's tolerance plus this much
 # (floating-point slack of the kinematics).
@@ -85,9 +94,35 @@ class OperatorCommand:
 
 
 @dataclass(frozen=True)
+class Landing:
+    """The end of a flight the loop flew off the ground at ``took_off_s``: at ``t_s``, and
+    ``how`` (LANDED_HOME, LANDED_ELSEWHERE, BY_OPERATOR, FAILSAFE, LINK_LOST_IN_FLIGHT: the
+    last two end it where the platform lost the vehicle, which may still fly); the vehicle's
+    odometers then (``distance_m``, ``flight_s``), the highest altitude above its depot the
+    loop saw since the take-off, the battery's charge in percent at the take-off and now
+    (None: neither measured nor estimated), and its ``track``."""
+
+    took_off_s: float
+    t_s: float
+    how: str
+    distance_m: float
+    flight_s: float
+    max_alt_m: float | None
+    battery_start_pct: float | None
+    battery_end_pct: float | None
+    # Where it flew: (t_s, lat, lng, alt, battery_pct or None) at each report of the flight
+    # that moved it, the take-off's and the end's included.
+    track: tuple[tuple[float, float, float, float, float | None], ...] = ()
+    # The flight's telemetry log the driver recorded (an open binary file of a .tlog), if
+    # it keeps one (``KeepsFlightLog``); else None: the store writes a simulated one.
+    log: Any = field(default=None, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
 class VehicleState:
     """What the loop reports of its vehicle at ``t_s``; ``took_off_s``: it left the ground
-    at that time since the last report (the loop flew it off from landed), else None."""
+    at that time since the last report (the loop flew it off from landed), else None;
+    ``landing``: a flight of its ended since the last report (``Landing``), else None."""
 
     t_s: float
     position: Position
@@ -96,6 +131,7 @@ class VehicleState:
     flight_s: float
     planner_state: Any
     took_off_s: float | None = None
+    landing: Landing | None = None
 
 
 @dataclass(frozen=True)
@@ -138,7 +174,8 @@ class Store(Protocol):
 
     def record_state(self, state: VehicleState, *, moved: bool) -> None:
         """The vehicle is here now (``moved``: somewhere else than at the last record); a
-        take-off it reports (``took_off_s``) is kept with its pilot in command then."""
+        take-off it reports (``took_off_s``) opens a flight with its pilot in command then,
+        a ``landing`` closes that flight, each written with this report or the next one."""
         ...
 
     def area(self) -> Area: ...
@@ -146,6 +183,33 @@ class Store(Protocol):
     def aboard(self) -> list[dict[str, Any]]:
         """The VVs aboard, for the live map (as of the last record)."""
         ...
+
+
+@runtime_checkable
+class MeasuredBattery(Protocol):
+    """A driver that tells the battery's charge its vehicle reports (a MAVLink autopilot's
+    SYS_STATUS), whatever endurance the loop plans with."""
+
+    def battery_fraction(self) -> float | None: ...
+
+
+@runtime_checkable
+class ReportsTakeOver(Protocol):
+    """A driver that says when a pilot or a failsafe took the vehicle over (the mode it
+    switched to; None while the driver is in control)."""
+
+    @property
+    def took_over(self) -> str | None: ...
+
+
+@runtime_checkable
+class KeepsFlightLog(Protocol):
+    """A driver that records its link's messages of a flight (a MAVLink driver's
+    ``fleet.mavlink.tlog.TlogRecorder``): started at the take-off, finished at the landing
+    (an open file of the .tlog, or None)."""
+
+    @property
+    def flight_log(self) -> Any: ...
 
 
 class Scheduler(Protocol):

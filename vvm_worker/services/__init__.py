@@ -34,6 +34,7 @@ the accounts' own (``accounts.services``).
 
 from vvm_worker.services.admission import VVQueueFull, vv_admit_queued, vv_submit
 from vvm_worker.services.base import VVM, ProgramRejected, VVAlreadyEnded
+from vvm_worker.services.batteries import battery_observe
 from vvm_worker.services.customers import (
     CustomerBusy,
     CustomerConfig,
@@ -64,9 +65,9 @@ from vvm_worker.services.fleet import (
     vehicle_hand_over,
     vehicle_heartbeat,
     vehicle_reconfigured,
+    vehicle_record_flights,
     vehicle_record_health,
     vehicle_record_state,
-    vehicle_record_take_offs,
     vehicle_record_track,
     vehicle_register,
     vehicle_set_status,
@@ -77,6 +78,12 @@ from vvm_worker.services.fleet import (
     vvs_reroute_waiting,
 )
 from vvm_worker.services.journal import JournalView
+from vvm_worker.services.maintenance import (
+    battery_swap,
+    maintenance_record,
+    vehicle_check_maintenance,
+    vehicles_check_maintenance,
+)
 from vvm_worker.services.routing import fleet_airspace, fleet_caps, vehicle_caps
 from vvm_worker.services.submissions import (
     MAX_SUBMISSIONS,
@@ -126,6 +133,8 @@ __all__ = [
     "VVQueueFull",
     "VehicleConfig",
     "VehicleRemoved",
+    "battery_observe",
+    "battery_swap",
     "copy_names",
     "customer_create",
     "customer_delete",
@@ -136,6 +145,7 @@ __all__ = [
     "ground_station_create",
     "ground_station_delete",
     "ground_station_update",
+    "maintenance_record",
     "no_fly_zone_delete",
     "no_fly_zone_save",
     "rally_point_delete",
@@ -143,21 +153,23 @@ __all__ = [
     "task_complete",
     "user_set_login",
     "vehicle_caps",
+    "vehicle_check_maintenance",
     "vehicle_command",
     "vehicle_command_take",
     "vehicle_create",
     "vehicle_hand_over",
     "vehicle_heartbeat",
     "vehicle_reconfigured",
+    "vehicle_record_flights",
     "vehicle_record_health",
     "vehicle_record_state",
-    "vehicle_record_take_offs",
     "vehicle_record_track",
     "vehicle_register",
     "vehicle_set_status",
     "vehicle_take_duty",
     "vehicle_update",
     "vehicles_check_leases",
+    "vehicles_check_maintenance",
     "vehicles_worker_stopped",
     "vv_admit_queued",
     "vv_advance",

@@ -4,7 +4,6 @@ service, their workers' leases and live state, and what each change means for th
 from __future__ import annotations
 
 import dataclasses
-import datetime as dt
 import time
 from collections.abc import Sequence
 from typing import Any, TypedDict
@@ -36,6 +35,7 @@ from missions.models import (
 )
 from vvm_worker.control import VehicleState
 from vvm_worker.services.base import VVM, logger, sensor_entries
+from vvm_worker.services.batteries import battery_observe
 from vvm_worker.services.routing import (
     fleet_caps,
     online_vehicles,
@@ -45,7 +45,13 @@ from vvm_worker.services.routing import (
     vv_record_migration,
     vv_release_tasks,
 )
-from vvm_worker.services.store import take_offs_insert, track_points_aboard, vehicle_report
+from vvm_worker.services.store import (
+    LandingRow,
+    TakeOffRow,
+    flights_write,
+    track_points_aboard,
+    vehicle_report,
+)
 
 # Changing any of these may leave tasks planned on the RV that it can no longer serve.
 REACH_FIELDS = ("area", "min_altitude_m", "max_altitude_m")
@@ -363,11 +369,20 @@ def vehicle_register(*, vehicle: Vehicle, vvm: VVM) -> None:
     vvm.dispatcher.vehicle_changed(vehicle.pk)
 
 
-def vehicle_record_health(*, vehicle_id: int, health: dict[str, Any]) -> None:
+def vehicle_record_health(*, vehicle_id: int, health: dict[str, Any]) -> bool:
     """What the RV's worker sees of the vehicle's health now (link, battery, armed, mode,
-    fence), for the operator: kept with the time it changed. Health never changes the
-    status a person set."""
+    fence), for the operator: kept with the time it changed, and its battery's charge
+    (``battery_observe``: cycles, lowest charge, a swap). Health never changes the status a
+    person set. Returns whether the RV's maintenance must be looked at again (a battery put in
+    or retired: ``vehicle_check_maintenance``)."""
     Vehicle.objects.filter(pk=vehicle_id).update(health=health, health_changed=timezone.now())
+    return battery_observe(
+        vehicle_id=vehicle_id,
+        pct=health.get("battery_pct"),
+        battery_id=health.get("battery_id"),
+        serial=health.get("battery_serial"),
+        now=timezone.now(),
+    )
 
 
 def vehicles_worker_stopped(*, vehicle_ids: Sequence[int]) -> None:
@@ -583,15 +598,16 @@ def vehicle_record_state(
     state: VehicleState,
     track_aboard: bool = False,
     tasks_done: int = 0,
-    take_offs: Sequence[tuple[float, dt.datetime]] = (),
+    take_offs: Sequence[TakeOffRow] = (),
+    landings: Sequence[LandingRow] = (),
 ) -> None:
     """What an RV's control loop reports of its vehicle (``state``): where it is at its time,
     its flight phase, its odometer and flight time, and the planner's state (kept for a
     restarted worker); ``track_aboard``: every VV aboard now gets this point on its track
     (found by the database in the same statement); ``tasks_done``: the RV served that many
-    more tasks; ``take_offs``: it took off then (platform clock, date), each recorded with
-    its pilot on duty (``vehicle_record_take_offs``), in the same commit. Inside the caller's
-    transaction when there is one."""
+    more tasks; ``take_offs`` and ``landings``: its flights began and ended then
+    (``vehicle_record_flights``), in the same commit. Inside the caller's transaction when
+    there is one."""
     here = state.position
     values = {
         "lat": here.lat,
@@ -604,16 +620,30 @@ def vehicle_record_state(
     }
     add = {"tasks_done": tasks_done} if tasks_done else None
     track_point = (state.t_s, here) if track_aboard else None
-    vehicle_report(vehicle_id, values=values, add=add, track_point=track_point, take_offs=take_offs)
+    vehicle_report(
+        vehicle_id,
+        values=values,
+        add=add,
+        track_point=track_point,
+        take_offs=take_offs,
+        landings=landings,
+    )
 
 
-def vehicle_record_take_offs(
-    *, vehicle_id: int, take_offs: Sequence[tuple[float, dt.datetime]]
+def vehicle_record_flights(
+    *,
+    vehicle_id: int,
+    take_offs: Sequence[TakeOffRow] = (),
+    landings: Sequence[LandingRow] = (),
 ) -> None:
-    """The RV took off at these times (platform clock, date): a ``TakeOff`` each, with the
-    pilot on duty for it (none: empty) as the database has it when this is written, which
-    is with the loop's next report, in the caller's transaction (or in a commit of its own)."""
-    take_offs_insert(vehicle_id, take_offs)
+    """The RV's flights as its loop reported them, written with the loop's next report, in
+    the caller's transaction (or in a commit of its own). A take-off opens a ``Flight`` with
+    the pilot on duty for it (none: empty) as the database has it then, and the RV's
+    odometers at the take-off; a landing closes the flight of its take-off (none open, a
+    vehicle that started in the air: nothing) with its end, how it ended, its duration and
+    distance (what the odometers gained), highest altitude, battery at both ends, and the
+    tasks the RV answered done during it with their customers and VVs."""
+    flights_write(vehicle_id, take_offs=take_offs, landings=landings)
 
 
 def vehicle_record_track(*, vehicle_id: int, points: Sequence[tuple[float, Position]]) -> None:

@@ -73,6 +73,11 @@ class Command(BaseCommand):
             "--json", action="store_true", help="print the summary as JSON on the last line"
         )
         parser.add_argument(
+            "--flights",
+            action="store_true",
+            help="add each RV's flights to the summary (count, flight time, distance)",
+        )
+        parser.add_argument(
             "--keep",
             action="store_true",
             help="use the configured database and keep the results there",
@@ -102,7 +107,7 @@ class Command(BaseCommand):
                 logins=options["keep"],  # nobody logs in to a database deleted at the end
             )
             try:
-                summary = self._run(simulation)
+                summary = self._run(simulation, flights=options["flights"])
             except ScenarioError as exc:
                 raise CommandError(f"scenario error: {exc}") from None
             finally:
@@ -116,9 +121,9 @@ class Command(BaseCommand):
             self._print_summary(summary)
             self.stdout.write(pace)
 
-    def _run(self, simulation: Simulation) -> dict[str, Any]:
+    def _run(self, simulation: Simulation, *, flights: bool) -> dict[str, Any]:
         if not sys.stderr.isatty():
-            return simulation.run()
+            return simulation.run(flights=flights)
         # On stderr, so that stdout keeps only the summary.
         with Bar(
             TextColumn("[bold]{task.description}"),
@@ -142,7 +147,7 @@ class Command(BaseCommand):
                     sim_s=p.time_s,
                 )
 
-            return simulation.run(progress=report)
+            return simulation.run(progress=report, flights=flights)
 
     def _print_summary(self, summary: dict[str, Any]) -> None:
         console = Console(file=self.stdout._out, highlight=False)  # type: ignore[attr-defined]
@@ -185,6 +190,18 @@ class Command(BaseCommand):
             levels = summary["service_levels"]
             console.print(service_level_table(levels["customers"]))
             console.print(service_level_table(levels["classes"], "Service levels per class"))
+        if "flights" in summary:
+            flights = Table(title="Flights")
+            for column in ("RV", "flights", "flight time (s)", "distance (m)"):
+                flights.add_column(column)
+            for row in summary["flights"]:
+                flights.add_row(
+                    row["vehicle"],
+                    str(row["flights"]),
+                    f"{row['flight_s']:.0f}",
+                    f"{row['distance_m']:.0f}",
+                )
+            console.print(flights)
 
 
 def service_level_table(rows: list[dict[str, Any]], title: str = "Service levels") -> Table:

@@ -12,9 +12,11 @@ worker that writes SQL by hand or uses ``cpcc_site.prepared`` (the import contra
 
 from vvm_worker.services.store.fleet_rows import (
     VEHICLE_TASK_COLUMNS,
+    LandingRow,
+    TakeOffRow,
+    flights_write,
     ground_stations,
     open_tasks_of_vehicles,
-    take_offs_insert,
     tasks_assigned,
     track_points_aboard,
     vehicle_report,
@@ -41,9 +43,12 @@ from vvm_worker.services.store.vv_rows import (
 
 __all__ = [
     "VEHICLE_TASK_COLUMNS",
+    "LandingRow",
     "StepBroke",
+    "TakeOffRow",
     "db_time_ago",
     "effects_write",
+    "flights_write",
     "ground_stations",
     "journal_insert",
     "journal_texts",
@@ -56,7 +61,6 @@ __all__ = [
     "request_tasks_of",
     "rows_add",
     "take_answer",
-    "take_offs_insert",
     "tasks_assigned",
     "track_points_aboard",
     "unit_of_work",
