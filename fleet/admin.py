@@ -81,6 +81,7 @@ from vvm_worker.services import (
     vehicle_update,
     vehicles_check_maintenance,
 )
+from vvm_worker.services.flight_logs import flight_log_kept
 
 
 def _config(form: Any, fields: Any, only_changed: bool) -> Any:
@@ -933,6 +934,7 @@ class FlightAdmin(_Record):
             "duration": _duration_text(flight.duration_s),
             "tasks": tasks,
             "track": bool(flight.track),
+            "log_kept": flight_log_kept(flight=flight),
             "media": map_media(),
             "page_data": {
                 "track": flight.track,

@@ -26,7 +26,6 @@ from fleet.airspace import Airspace
 from fleet.driving import Driver, Sample, SensorFailure, SensorRead
 from fleet.geo import Position, within_m
 from fleet.kinds import limits_of
-from fleet.mavlink.tlog_sim import simulated_tlog
 from fleet.models import Driver as DriverKind
 from fleet.models import Flight, SensorType, Vehicle, VehicleStatus
 from fleet.plugins import SensorPlugin, plugin_class
@@ -485,11 +484,10 @@ class DatabaseStore:
 
     def _keep_logs(self, landings: Sequence[Landing]) -> None:
         """Once the landings just written commit: the RV's maintenance looked at again
-        (``vehicle_check_maintenance``: what the flights made due grounds it), and each
-        flight's telemetry log, through
-        Django's storage (``flight_log_save``): the one the driver recorded (a MAVLink RV),
-        else the messages the simulator would have sent along the flight's track. Not in
-        ``simulate`` (``defer_reports``: its database is thrown away). A log that cannot be
+        (``vehicle_check_maintenance``: what the flights made due grounds it), and the
+        telemetry log its driver recorded of each flight (a MAVLink RV's; a simulated RV's is
+        made from the flight's track when someone asks for it), through Django's storage
+        (``flight_log_save``). Not in ``simulate`` (``defer_reports``: its database is thrown away). A log that cannot be
         kept is logged and left out; the flight stays recorded."""
         if self.defer_reports or not landings:
             return
@@ -499,21 +497,18 @@ class DatabaseStore:
     def _save_logs(self, landings: Sequence[Landing]) -> None:
         # What the flight makes due (flight hours, flights, battery cycles) may ground the RV.
         vehicle_check_maintenance(vehicle_id=self.vehicle_id, vvm=self.vvm)
-        epoch_s = self.vvm.clock.epoch_ms(0.0) / 1000.0
         for landing in landings:
+            if landing.log is None:
+                continue
             flight = Flight.objects.filter(
                 vehicle_id=self.vehicle_id, started_s=landing.took_off_s
             ).first()
             if flight is None:
-                if landing.log is not None:
-                    landing.log.close()
+                landing.log.close()
                 continue
             try:
-                if landing.log is not None:
-                    with landing.log as log:
-                        flight_log_save(flight=flight, data=log)
-                elif len(landing.track) >= 2:
-                    flight_log_save(flight=flight, data=_simulated_log(landing, epoch_s))
+                with landing.log as log:
+                    flight_log_save(flight=flight, data=log)
             except (OSError, ValueError):
                 logger.exception(
                     "flight %s: its log could not be kept", flight.pk, extra={"flight": flight.pk}
@@ -547,22 +542,6 @@ class _TakeOff:
     t_s: float
     distance_m: float
     flight_s: float
-
-
-def _simulated_log(landing: Landing, epoch_s: float) -> bytes:
-    """The .tlog a simulated RV's flight would have: the simulator's messages along its
-    track (``fleet.mavlink.tlog_sim``), its battery as measured or estimated (full when
-    neither)."""
-    track = [(t, lat, lng, alt) for t, lat, lng, alt, _ in landing.track]
-    start = landing.battery_start_pct
-    end = landing.battery_end_pct
-    return simulated_tlog(
-        track,
-        epoch_s=epoch_s,
-        system_id=1,
-        battery_start=1.0 if start is None else start / 100.0,
-        battery_end=(1.0 if start is None else start / 100.0) if end is None else end / 100.0,
-    )
 
 
 @dataclass(frozen=True)

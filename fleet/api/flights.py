@@ -21,6 +21,7 @@ from cpcc_site.permissions import StaffPermission
 from fleet.models import Flight
 from fleet.selectors import flight_list
 from missions.api.service_levels import parse_instant
+from vvm_worker.services.flight_logs import flight_log_kept, flight_log_simulated
 
 TLOG_TYPE = "application/octet-stream"
 CSV_TYPE = "text/csv"
@@ -68,7 +69,7 @@ class FlightOutSerializer(serializers.ModelSerializer):
         ]
 
     def get_log(self, flight: Flight) -> str | None:
-        if not flight.log:
+        if not flight_log_kept(flight=flight):
             return None
         return f"/api/v1/flights/{flight.pk}/log.tlog"
 
@@ -137,15 +138,20 @@ class FlightLogView(FlightDetailView):
 
     def get(self, request: Request, *args: Any, **kwargs: Any) -> Any:
         flight = self.get_object()
-        if not flight.log:
+        if not flight_log_kept(flight=flight):
             raise NotFound(
                 "No log is kept of this flight (none was recorded, or it is older than "
                 "CPCC_FLIGHT_LOG_DAYS)."
             )
         name = f"{flight.vehicle.name}-{flight.started:%Y%m%dT%H%M%SZ}.tlog".replace(" ", "_")
-        return FileResponse(
-            flight.log.open("rb"), as_attachment=True, filename=name, content_type=TLOG_TYPE
-        )
+        if flight.log:
+            return FileResponse(
+                flight.log.open("rb"), as_attachment=True, filename=name, content_type=TLOG_TYPE
+            )
+        # A simulated RV's: the simulator's messages along its track, made now.
+        response = HttpResponse(flight_log_simulated(flight=flight), content_type=TLOG_TYPE)
+        response["Content-Disposition"] = f'attachment; filename="{name}"'
+        return response
 
 
 CSV_COLUMNS = [

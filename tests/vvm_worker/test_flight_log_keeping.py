@@ -1,10 +1,11 @@
 """An RV worker keeps each flight's telemetry log once its landing commits (issue 58): the
-MAVLink driver's recording, or for a simulated RV the simulator's messages along the flight's
-track; ``simulate`` keeps none. (The MAVLink worker's log end to end:
+MAVLink driver's recording; a simulated RV's is the simulator's messages along the flight's
+track, made when asked for; ``simulate`` keeps none. (The MAVLink worker's log end to end:
 test_mavlink_worker.py.)"""
 
 from __future__ import annotations
 
+import datetime as dt
 import io
 
 import pytest
@@ -14,9 +15,9 @@ from pymavlink import mavutil
 
 from fleet.models import Flight
 from tests.factories import VehicleFactory
-from vvm_worker.clock import SIM_EPOCH_S
 from vvm_worker.control import Landing
 from vvm_worker.executor import DatabaseStore
+from vvm_worker.services.flight_logs import flight_log_kept, flight_log_simulated
 
 pytestmark = pytest.mark.django_db
 
@@ -58,21 +59,30 @@ def _read(path: str) -> list[tuple[float, float, float, float]]:
     return found
 
 
-def test_a_simulated_rvs_flight_gets_the_simulators_messages_along_its_track(
-    flight, vvm_factory, django_capture_on_commit_callbacks
+def test_a_simulated_rvs_flight_log_is_the_simulators_messages_along_its_track(
+    flight, vvm_factory, django_capture_on_commit_callbacks, tmp_path
 ) -> None:
+    """Nothing is stored at the landing (the worker spends nothing on it): the log is made
+    from the flight's track when asked for."""
     store = DatabaseStore(vehicle_id=flight.vehicle_id, vvm=vvm_factory())
     with django_capture_on_commit_callbacks(execute=True):
         store._keep_logs([_landing()])
-        flight.refresh_from_db()
-        assert not flight.log, "kept once the landing commits, not before"
     flight.refresh_from_db()
-    track = _read(flight.log.path)
-    assert track[0][0] == pytest.approx(SIM_EPOCH_S + 100.0, abs=0.5)
-    assert track[-1][0] == pytest.approx(SIM_EPOCH_S + 200.0, abs=0.5)
+    assert not flight.log
+    flight.track = [list(p) for p in TRACK]
+    flight.battery_start_pct, flight.battery_end_pct = 95.0, 87.0
+    assert flight_log_kept(flight=flight)
+    path = tmp_path / "sim.tlog"
+    path.write_bytes(flight_log_simulated(flight=flight))
+    track = _read(str(path))
+    epoch_s = flight.started.timestamp() - flight.started_s
+    assert track[0][0] == pytest.approx(epoch_s + 100.0, abs=0.5)
+    assert track[-1][0] == pytest.approx(epoch_s + 200.0, abs=0.5)
     assert track[0][1:3] == pytest.approx((48.1135, 12.86), abs=1e-6)
     assert max(alt for *_, alt in track) == pytest.approx(20.0, abs=0.1)
     assert any(abs(lat - 48.116) < 1e-5 and abs(lng - 12.864) < 1e-5 for _, lat, lng, _ in track)
+    flight.ended = timezone.now() - dt.timedelta(days=1000)
+    assert not flight_log_kept(flight=flight), "older than CPCC_FLIGHT_LOG_DAYS: none"
 
 
 def test_a_mavlink_rvs_recording_is_kept_as_it_is(
@@ -94,14 +104,14 @@ def test_a_rolled_back_landing_keeps_no_log_and_simulate_keeps_none(
 ) -> None:
     store = DatabaseStore(vehicle_id=flight.vehicle_id, vvm=vvm_factory())
     with django_capture_on_commit_callbacks(execute=True) as kept, transaction.atomic():
-        store._keep_logs([_landing()])
+        store._keep_logs([_landing(log=io.BytesIO(b"recorded"))])
         transaction.set_rollback(True)
     assert not kept
     flight.refresh_from_db()
     assert not flight.log
     deferred = DatabaseStore(vehicle_id=flight.vehicle_id, vvm=vvm_factory(), defer_reports=True)
     with django_capture_on_commit_callbacks(execute=True) as kept:
-        deferred._keep_logs([_landing()])
+        deferred._keep_logs([_landing(log=io.BytesIO(b"recorded"))])
     assert not kept
     flight.refresh_from_db()
     assert not flight.log

@@ -19,6 +19,7 @@ from django.core.files.base import ContentFile
 from django.utils import timezone
 from django.utils.text import slugify
 
+from fleet.mavlink.tlog_sim import simulated_tlog
 from fleet.models import Flight
 
 logger = logging.getLogger("cpcc.flight_logs")
@@ -79,3 +80,29 @@ def flight_logs_prune(*, now: datetime.datetime | None = None) -> int:
     if deleted:
         logger.info("flight logs pruned", extra={"deleted": deleted, "before": cutoff.isoformat()})
     return deleted
+
+
+def flight_log_kept(*, flight: Flight, now: datetime.datetime | None = None) -> bool:
+    """Whether a log of the flight can be had: the one its worker recorded (a MAVLink RV's),
+    or, for a flight with a track and no recording (a simulated RV's), the simulator's
+    messages along it, made when asked (``flight_log_simulated``) while the flight is within
+    CPCC_FLIGHT_LOG_DAYS, as a recorded one is kept."""
+    if flight.log:
+        return True
+    if len(flight.track) < 2:
+        return False
+    cutoff = (now or timezone.now()) - datetime.timedelta(days=settings.CPCC_FLIGHT_LOG_DAYS)
+    return flight.ended is None or flight.ended >= cutoff
+
+
+def flight_log_simulated(*, flight: Flight) -> bytes:
+    """The .tlog of a flight that has a track and no recording: the messages the simulator
+    would have sent along it (``fleet.mavlink.tlog_sim``), at the flight's dates, with its
+    battery as measured or estimated (full when neither). Made from the flight's row when it
+    is asked for: an RV's worker spends nothing on it. Raises ValueError for a track it cannot
+    fly."""
+    epoch_s = flight.started.timestamp() - flight.started_s
+    track = [(t, lat, lng, alt) for t, lat, lng, alt, *_ in flight.track]
+    start = 1.0 if flight.battery_start_pct is None else flight.battery_start_pct / 100.0
+    end = start if flight.battery_end_pct is None else flight.battery_end_pct / 100.0
+    return simulated_tlog(track, epoch_s=epoch_s, system_id=1, battery_start=start, battery_end=end)

@@ -9,6 +9,7 @@ import io
 
 import pytest
 from django.core.files.base import ContentFile
+from pymavlink import mavutil
 
 from fleet.models import Flight, FlightEnd
 from tests.api_fixtures import token_client
@@ -85,6 +86,19 @@ def test_one_flight_and_its_log(api_staff, flights, settings, tmp_path) -> None:
     assert b"".join(response.streaming_content) == b"\x00" * 8 + b"\xfe\x09"
     assert ".tlog" in response["Content-Disposition"]
     assert api_staff.get("/api/v1/flights/987654/").status_code == 404
+    # A simulated RV's flight: its log is the simulator's messages along its track.
+    simulated = made[0]
+    simulated.track = [[0.0, 48.11, 12.86, 0.0, 90.0], [60.0, 48.112, 12.862, 30.0, 85.0]]
+    simulated.started_s = 0.0
+    simulated.save()
+    assert api_staff.get(f"/api/v1/flights/{simulated.pk}/").json()["log"] is not None
+    tlog = api_staff.get(f"/api/v1/flights/{simulated.pk}/log.tlog")
+    path = tmp_path / "simulated.tlog"
+    path.write_bytes(tlog.content)
+    positions = mavutil.mavlink_connection(str(path))
+    first = positions.recv_match(type="GLOBAL_POSITION_INT")
+    assert (first.lat, first.lon) == (481100000, 128600000)
+    assert first._timestamp == pytest.approx(simulated.started.timestamp(), abs=0.5)
 
 
 def test_the_csv_of_a_period_opens_in_a_spreadsheet(api_staff, flights) -> None:
