@@ -70,6 +70,21 @@ def staff_refusal(user: Any, perms: tuple[str, ...]) -> str | None:
     return STAFF_REFUSAL.format(perms=" and ".join(perms))
 
 
+def change_refusal(
+    user: Any,
+    auth: Any,
+    needed: str,
+    action: str = "this",
+    staff_perms: tuple[str, ...] = (STAFF_VV_WRITE,),
+) -> str | None:
+    """Why the user may not make a change that needs ``needed`` of a customer's member (None:
+    they may): staff need ``staff_perms`` (none: any staff user), a member the role. The API
+    (``MemberRole``) and the pages ask the same."""
+    if user.is_staff:
+        return staff_refusal(user, staff_perms) if staff_perms else None
+    return member_refusal(user, auth, needed, action)
+
+
 class MemberRole(BasePermission):
     """The role a customer's request needs (``needed_role``); staff changing a customer's VV
     need STAFF_VV_WRITE unless the view says otherwise (``staff_write_perms``: () lets any
@@ -77,16 +92,15 @@ class MemberRole(BasePermission):
 
     def has_permission(self, request: Any, view: Any) -> bool:
         user = request.user
-        needed = needed_role(view, request.method)
-        if user.is_staff:
-            if request.method in SAFE_METHODS:
-                return True
-            perms = getattr(view, "staff_write_perms", (STAFF_VV_WRITE,))
-            why = staff_refusal(user, tuple(perms)) if perms else None
-            if why is not None:
-                raise PermissionDenied(why)
+        if user.is_staff and request.method in SAFE_METHODS:
             return True
-        why = member_refusal(user, request.auth, needed, _action_words(view, request))
+        why = change_refusal(
+            user,
+            request.auth,
+            needed_role(view, request.method),
+            _action_words(view, request),
+            tuple(getattr(view, "staff_write_perms", (STAFF_VV_WRITE,))),
+        )
         if why is not None:
             raise PermissionDenied(why)
         return True

@@ -172,5 +172,6 @@ def vehicle_logbook(*, vehicle: Vehicle) -> dict[str, Any]:
         "flight_hours": round((totals["flight_s"] or 0.0) / 3600.0, 3),
         "distance_km": round((totals["distance_m"] or 0.0) / 1000.0, 3),
         "last_flight": totals["last"],
-        "in_flight": flights.filter(ended__isnull=True).exists(),
+        # A take-off without its landing yet: the flight under way.
+        "in_flight": totals["take_offs"] > totals["landings"],
     }

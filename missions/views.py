@@ -39,7 +39,7 @@ from django.views.decorators.http import require_POST
 
 from accounts.roles import DEVELOPER
 from cpcc_site import json_depth
-from cpcc_site.permissions import STAFF_VV_WRITE, member_refusal, staff_refusal
+from cpcc_site.permissions import change_refusal as permission_change_refusal
 from missions.forms import NewProgramForm, ProgramForm
 from missions.models import (
     ACTIVE_STATUSES,
@@ -125,9 +125,7 @@ def customer_or_staff_required(view: View) -> View:
 def change_refusal(user: Any, action: str = "this") -> str | None:
     """Why the user may not change VVs on these pages (None: they may): a customer's member
     needs the developer role, staff the permission STAFF_VV_WRITE."""
-    if user.is_staff:
-        return staff_refusal(user, (STAFF_VV_WRITE,))
-    return member_refusal(user, None, DEVELOPER, action)
+    return permission_change_refusal(user, None, DEVELOPER, action)
 
 
 def _refuse_change(request: HttpRequest, action: str) -> None:

@@ -322,19 +322,14 @@ class HandOverSerializer(serializers.Serializer):
     )
 
 
-class DutyGroupSerializer(serializers.Serializer):
-    """Several RVs at once (all or none)."""
+class DutyGroupSerializer(HandOverSerializer):
+    """Several RVs at once (all or none); handing over, to whom (``to``)."""
 
     vehicles = serializers.ListField(
         child=serializers.IntegerField(min_value=1, max_value=2**63 - 1),
         min_length=1,
         max_length=500,
         help_text="The vehicles' ids.",
-    )
-    to = StrictCharField(
-        required=False,
-        max_length=150,
-        help_text="Handing over: the pilot who takes over; left out: nobody.",
     )
 
 

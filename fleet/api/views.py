@@ -452,7 +452,7 @@ class VehicleViewSet(
     )
     @action(detail=False, methods=["post"], url_path="take-duty", url_name="take-duty-group")
     def take_duty_group(self, request: Request) -> Response:
-        vehicles = self._group(request)
+        vehicles, _ = self._group(request)
         vehicle_take_duty(vehicles=vehicles, pilot=request.user, vvm=platform_vvm())
         return self._shown_group(vehicles)
 
@@ -464,14 +464,13 @@ class VehicleViewSet(
     )
     @action(detail=False, methods=["post"], url_path="hand-over", url_name="hand-over-group")
     def hand_over_group(self, request: Request) -> Response:
-        given = DutyGroupSerializer(data=request.data)
-        given.is_valid(raise_exception=True)
-        vehicles = self._group(request)
-        to = self._pilot(given.validated_data.get("to"))
+        vehicles, given = self._group(request)
+        to = self._pilot(given.get("to"))
         vehicle_hand_over(vehicles=vehicles, by=request.user, to=to, vvm=platform_vvm())
         return self._shown_group(vehicles)
 
-    def _group(self, request: Request) -> list[Vehicle]:
+    def _group(self, request: Request) -> tuple[list[Vehicle], dict[str, Any]]:
+        """The vehicles a group's body names (404 for one not in the fleet), and the body."""
         given = DutyGroupSerializer(data=request.data)
         given.is_valid(raise_exception=True)
         wanted = list(dict.fromkeys(given.validated_data["vehicles"]))
@@ -479,7 +478,7 @@ class VehicleViewSet(
         missing = [pk for pk in wanted if pk not in found or found[pk].status == "removed"]
         if missing:
             raise NotFound(f"No vehicle with id {missing[0]!r}.")
-        return [found[pk] for pk in wanted]
+        return [found[pk] for pk in wanted], given.validated_data
 
     def _shown_group(self, vehicles: list[Vehicle]) -> Response:
         fresh = self._vehicles().filter(pk__in=[v.pk for v in vehicles])

@@ -225,16 +225,7 @@ def vehicle_take_duty(*, vehicles: Sequence[Vehicle], pilot: Any, vvm: VVM) -> l
     one was removed. With CPCC_REQUIRE_PILOT, VVs waiting for a pilot are looked at again."""
     now = timezone.now()
     with transaction.atomic():
-        held = list(
-            Vehicle.objects.select_for_update()
-            .filter(pk__in=[v.pk for v in vehicles])
-            .order_by("pk")
-        )
-        assigned = set(
-            Vehicle.pilots.through.objects.filter(
-                vehicle_id__in=[v.pk for v in held], user_id=pilot.pk
-            ).values_list("vehicle_id", flat=True)
-        )
+        held, assigned = _held_with_pilot(vehicles, pilot)
         for vehicle in held:
             if vehicle.status == VehicleStatus.REMOVED:
                 raise DutyRefused(f"{vehicle.name} was removed from the fleet.")
@@ -276,19 +267,8 @@ def vehicle_hand_over(
     is not one of its pilots."""
     now = timezone.now()
     with transaction.atomic():
-        held = list(
-            Vehicle.objects.select_for_update()
-            .filter(pk__in=[v.pk for v in vehicles])
-            .order_by("pk")
-        )
+        held, assigned = _held_with_pilot(vehicles, to)
         manager = by.has_perm("fleet.change_vehicle")
-        assigned = set()
-        if to is not None:
-            assigned = set(
-                Vehicle.pilots.through.objects.filter(
-                    vehicle_id__in=[v.pk for v in held], user_id=to.pk
-                ).values_list("vehicle_id", flat=True)
-            )
         for vehicle in held:
             if vehicle.pilot_on_duty_id != by.pk and not manager:
                 raise DutyRefused(f"You are not on duty for {vehicle.name}.")
@@ -315,6 +295,22 @@ def vehicle_hand_over(
             )
     vvs_reroute_waiting(vvm=vvm)
     return held
+
+
+def _held_with_pilot(
+    vehicles: Sequence[Vehicle], pilot: Any | None
+) -> tuple[list[Vehicle], set[int]]:
+    """These RVs' rows, held (in id order, as every taker of several holds them), and the ids
+    of those ``pilot`` is one of the pilots of (none for no pilot)."""
+    held = list(
+        Vehicle.objects.select_for_update().filter(pk__in=[v.pk for v in vehicles]).order_by("pk")
+    )
+    if pilot is None:
+        return held, set()
+    assigned = Vehicle.pilots.through.objects.filter(
+        vehicle_id__in=[v.pk for v in held], user_id=pilot.pk
+    ).values_list("vehicle_id", flat=True)
+    return held, set(assigned)
 
 
 def vvs_reroute_waiting(*, vvm: VVM) -> None:
